@@ -1,0 +1,281 @@
+//! NumPy `.npy` files (format 1.0/2.0): float32 images are written little-endian, C order; reading accepts the
+//! common numeric dtypes and converts to `f32`, so users can hand us arrays from numpy without our code.
+
+use std::path::{Path, PathBuf};
+
+use crate::image::Image;
+
+/// Errors reading or writing `.npy` files; each names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum NpyError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: not a valid .npy file: {message}")]
+    Format { path: PathBuf, message: String },
+    #[error(
+        "{path}: unsupported dtype '{descr}' (use float32, float64, uint8, uint16, int16 or int32)"
+    )]
+    Dtype { path: PathBuf, descr: String },
+    #[error("{path}: expected a 2-D array (H, W) or (1, H, W), found shape {shape:?}")]
+    Shape { path: PathBuf, shape: Vec<usize> },
+    #[error("{path}: array contains {count} NaN or infinite values (first at flat index {first})")]
+    NonFinite {
+        path: PathBuf,
+        count: usize,
+        first: usize,
+    },
+}
+
+/// An n-dimensional array read from a `.npy` file, converted to `f32`, C order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NpyArray {
+    pub shape: Vec<usize>,
+    pub data: Vec<f32>,
+}
+
+/// Encode a float32 array of the given shape as `.npy` bytes.
+pub fn encode_f32(shape: &[usize], data: &[f32]) -> Vec<u8> {
+    let shape_str = match shape {
+        [n] => format!("({n},)"),
+        _ => format!(
+            "({})",
+            shape
+                .iter()
+                .map(|s| s.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    };
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_str}, }}");
+    // Pad so that magic(6) + version(2) + len(2) + header is a multiple of 64, ending with '\n'.
+    let unpadded = 10 + header.len() + 1;
+    header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
+    header.push('\n');
+    let mut out = Vec::with_capacity(10 + header.len() + data.len() * 4);
+    out.extend_from_slice(b"\x93NUMPY\x01\x00");
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    for x in data {
+        out.extend_from_slice(&x.to_le_bytes());
+    }
+    out
+}
+
+/// Write an image as a float32 `(H, W)` `.npy` file, atomically.
+pub fn write_image(path: &Path, image: &Image) -> Result<(), NpyError> {
+    let bytes = encode_f32(&[image.height, image.width], &image.data);
+    crate::io::write_atomic(path, &bytes).map_err(|source| NpyError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Read any numeric `.npy` file as `f32`.
+pub fn read(path: &Path) -> Result<NpyArray, NpyError> {
+    let bytes = std::fs::read(path).map_err(|source| NpyError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    decode(&bytes).map_err(|e| e.with_path(path))
+}
+
+/// Read a 2-D (or `(1, H, W)`) `.npy` file as an image, rejecting NaN/inf values.
+pub fn read_image(path: &Path) -> Result<Image, NpyError> {
+    let a = read(path)?;
+    let (h, w) = match a.shape.as_slice() {
+        [h, w] => (*h, *w),
+        [1, h, w] => (*h, *w),
+        _ => {
+            return Err(NpyError::Shape {
+                path: path.to_path_buf(),
+                shape: a.shape,
+            })
+        }
+    };
+    let bad: Vec<usize> = a
+        .data
+        .iter()
+        .enumerate()
+        .filter(|(_, x)| !x.is_finite())
+        .map(|(i, _)| i)
+        .collect();
+    if let Some(&first) = bad.first() {
+        return Err(NpyError::NonFinite {
+            path: path.to_path_buf(),
+            count: bad.len(),
+            first,
+        });
+    }
+    Image::from_vec(w, h, a.data).ok_or_else(|| NpyError::Format {
+        path: path.to_path_buf(),
+        message: "data length does not match shape".into(),
+    })
+}
+
+impl NpyError {
+    fn with_path(self, path: &Path) -> Self {
+        let path = path.to_path_buf();
+        match self {
+            Self::Format { message, .. } => Self::Format { path, message },
+            Self::Dtype { descr, .. } => Self::Dtype { path, descr },
+            Self::Shape { shape, .. } => Self::Shape { path, shape },
+            other => other,
+        }
+    }
+}
+
+/// Decode `.npy` bytes (the path in errors is empty; [`read`] fills it in).
+pub fn decode(bytes: &[u8]) -> Result<NpyArray, NpyError> {
+    let fmt = |m: &str| NpyError::Format {
+        path: PathBuf::new(),
+        message: m.to_string(),
+    };
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+        return Err(fmt("missing \\x93NUMPY magic"));
+    }
+    let (header_len, start) = match bytes[6] {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
+        2 | 3 if bytes.len() >= 12 => (
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+            12,
+        ),
+        v => return Err(fmt(&format!("unsupported format version {v}"))),
+    };
+    let header = bytes
+        .get(start..start + header_len)
+        .ok_or_else(|| fmt("truncated header"))?;
+    let header = std::str::from_utf8(header).map_err(|_| fmt("header is not text"))?;
+    let descr = dict_value(header, "descr").ok_or_else(|| fmt("header has no 'descr'"))?;
+    let descr = descr.trim_matches(|c| c == '\'' || c == '"').to_string();
+    if dict_value(header, "fortran_order").is_some_and(|v| v.starts_with("True")) {
+        return Err(fmt(
+            "Fortran-order arrays are not supported; save with np.ascontiguousarray",
+        ));
+    }
+    let shape_s = dict_value(header, "shape").ok_or_else(|| fmt("header has no 'shape'"))?;
+    let shape: Vec<usize> = shape_s
+        .trim_matches(|c| c == '(' || c == ')')
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| s.parse::<usize>().map_err(|_| fmt("bad shape")))
+        .collect::<Result<_, _>>()?;
+    let count: usize = shape.iter().product();
+    let body = &bytes[start + header_len..];
+    let (size, conv): (usize, fn(&[u8]) -> f32) = match descr.as_str() {
+        "<f4" => (4, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+        "<f8" => (8, |b| {
+            f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) as f32
+        }),
+        "|u1" | "<u1" => (1, |b| f32::from(b[0])),
+        "<u2" => (2, |b| f32::from(u16::from_le_bytes([b[0], b[1]]))),
+        "<i2" => (2, |b| f32::from(i16::from_le_bytes([b[0], b[1]]))),
+        "<i4" => (4, |b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f32),
+        _ => {
+            return Err(NpyError::Dtype {
+                path: PathBuf::new(),
+                descr,
+            })
+        }
+    };
+    if body.len() != count * size {
+        return Err(fmt(&format!(
+            "data holds {} bytes, shape {:?} of {descr} needs {} (truncated file?)",
+            body.len(),
+            shape,
+            count * size
+        )));
+    }
+    let data = body.chunks_exact(size).map(conv).collect();
+    Ok(NpyArray { shape, data })
+}
+
+/// The text after `'key':` in a numpy header dict, up to the next top-level comma.
+fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
+    let pat_single = format!("'{key}':");
+    let pat_double = format!("\"{key}\":");
+    let pos = header
+        .find(&pat_single)
+        .map(|p| p + pat_single.len())
+        .or_else(|| header.find(&pat_double).map(|p| p + pat_double.len()))?;
+    let rest = header[pos..].trim_start();
+    let mut depth = 0i32;
+    for (i, c) in rest.char_indices() {
+        match c {
+            '(' => depth += 1,
+            ')' => depth -= 1,
+            ',' | '}' if depth == 0 => return Some(rest[..i].trim()),
+            _ => {}
+        }
+    }
+    Some(rest.trim())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_alignment() {
+        let bytes = encode_f32(&[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, -6.5]);
+        let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+        assert_eq!((10 + header_len) % 64, 0);
+        let a = decode(&bytes).unwrap();
+        assert_eq!(a.shape, vec![2, 3]);
+        assert_eq!(a.data, vec![1.0, 2.0, 3.0, 4.0, 5.0, -6.5]);
+    }
+
+    #[test]
+    fn reads_numpy_written_float64_and_uint16() {
+        // Headers exactly as numpy 1.26 writes them (np.save of np.arange(3, dtype=...)).
+        let mut f8 =
+            b"\x93NUMPY\x01\x00v\x00{'descr': '<f8', 'fortran_order': False, 'shape': (3,), }"
+                .to_vec();
+        f8.resize(10 + 0x76 - 1, b' ');
+        f8.push(b'\n');
+        for x in [0.0f64, 1.0, 2.0] {
+            f8.extend_from_slice(&x.to_le_bytes());
+        }
+        assert_eq!(decode(&f8).unwrap().data, vec![0.0, 1.0, 2.0]);
+        let mut u2 =
+            b"\x93NUMPY\x01\x00v\x00{'descr': '<u2', 'fortran_order': False, 'shape': (1, 2), }"
+                .to_vec();
+        u2.resize(10 + 0x76 - 1, b' ');
+        u2.push(b'\n');
+        for x in [7u16, 65535] {
+            u2.extend_from_slice(&x.to_le_bytes());
+        }
+        let a = decode(&u2).unwrap();
+        assert_eq!((a.shape, a.data), (vec![1, 2], vec![7.0, 65535.0]));
+    }
+
+    #[test]
+    fn truncated_and_bad_dtype_are_errors() {
+        let bytes = encode_f32(&[4, 4], &[0.0; 16]);
+        let err = decode(&bytes[..bytes.len() - 3]).unwrap_err();
+        assert!(err.to_string().contains("truncated"), "{err}");
+        let mut bad = bytes.clone();
+        let at = bad.windows(3).position(|w| w == b"<f4").unwrap();
+        bad[at..at + 3].copy_from_slice(b"<c8");
+        assert!(matches!(
+            decode(&bad),
+            Err(NpyError::Dtype { .. })
+        ));
+        assert!(decode(b"hello").is_err());
+    }
+
+    #[test]
+    fn read_image_rejects_nan_and_names_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("depth.npy");
+        std::fs::write(&p, encode_f32(&[1, 2], &[1.0, f32::NAN])).unwrap();
+        let err = read_image(&p).unwrap_err().to_string();
+        assert!(err.contains("depth.npy") && err.contains("NaN"), "{err}");
+        std::fs::write(&p, encode_f32(&[2, 2, 2], &[0.0; 8])).unwrap();
+        assert!(matches!(read_image(&p), Err(NpyError::Shape { .. })));
+    }
+}
