@@ -1,0 +1,309 @@
+//! [`ObjectSet`]: the built-in object catalogue or a directory with an `objects.json` manifest, validated on load,
+//! handing out meshes in their resting pose (object library, paper V.A).
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+
+use glam::{Affine3A, DQuat};
+
+use super::builtin::{catalogue, ShapeSpec};
+use super::{ObjectEntry, ObjectError, ObjectManifest, MANIFEST_VERSION};
+use crate::mesh::{self, LoadOptions, Mesh, Units};
+
+/// File name of the manifest inside a set directory.
+pub const MANIFEST_FILE: &str = "objects.json";
+
+/// Tolerance on the norm of manifest quaternions and translation axes (quaternions are normalised before use).
+const UNIT_NORM_TOLERANCE: f64 = 1e-3;
+
+/// A validated set of objects: the built-in catalogue or a directory holding `objects.json` and mesh files.
+#[derive(Clone, Debug)]
+pub struct ObjectSet {
+    source: Source,
+    entries: Vec<ObjectEntry>,
+}
+
+#[derive(Clone, Debug)]
+enum Source {
+    /// Generated in memory; one spec per entry, in the same order.
+    Builtin(Vec<ShapeSpec>),
+    /// The directory holding `objects.json`; mesh paths are relative to it.
+    Dir(PathBuf),
+}
+
+impl ObjectSet {
+    /// The built-in procedural set (28 objects over 7 families, about a quarter unseen). No files are involved.
+    pub fn builtin() -> Self {
+        let (specs, entries) = catalogue()
+            .into_iter()
+            .map(|(spec, split)| (spec, spec.entry(split)))
+            .unzip();
+        Self {
+            source: Source::Builtin(specs),
+            entries,
+        }
+    }
+
+    /// Read and validate `dir/objects.json`: supported version, non-empty unique names, mesh files that exist with a
+    /// supported extension, positive finite `scale_to_m`, unit quaternions and valid symmetries. Meshes are not read
+    /// until [`ObjectSet::mesh`].
+    pub fn load_dir(dir: &Path) -> Result<Self, ObjectError> {
+        let path = dir.join(MANIFEST_FILE);
+        let text = std::fs::read_to_string(&path).map_err(|source| ObjectError::ManifestIo {
+            path: path.clone(),
+            source,
+        })?;
+        let manifest: ObjectManifest =
+            serde_json::from_str(&text).map_err(|source| ObjectError::ManifestParse {
+                path: path.clone(),
+                source,
+            })?;
+        if manifest.version != MANIFEST_VERSION {
+            return Err(ObjectError::UnsupportedVersion {
+                path,
+                version: manifest.version,
+            });
+        }
+        let mut names = HashSet::new();
+        for entry in &manifest.objects {
+            if !names.insert(entry.name.as_str()) {
+                return Err(ObjectError::DuplicateName {
+                    path,
+                    name: entry.name.clone(),
+                });
+            }
+            validate_entry(dir, &path, entry)?;
+        }
+        Ok(Self {
+            source: Source::Dir(dir.to_path_buf()),
+            entries: manifest.objects,
+        })
+    }
+
+    /// Open a set from a user-facing spec: `"builtin"` (or an empty string) for the built-in set, otherwise the path
+    /// of a directory holding `objects.json`.
+    pub fn open(spec: &str) -> Result<Self, ObjectError> {
+        let spec = spec.trim();
+        if spec.is_empty() || spec.eq_ignore_ascii_case("builtin") {
+            Ok(Self::builtin())
+        } else {
+            Self::load_dir(Path::new(spec))
+        }
+    }
+
+    /// `"builtin"` or the set directory's path, for display and provenance.
+    pub fn spec(&self) -> String {
+        match &self.source {
+            Source::Builtin(_) => "builtin".to_string(),
+            Source::Dir(dir) => dir.display().to_string(),
+        }
+    }
+
+    /// The set directory, `None` for the built-in set.
+    pub fn dir(&self) -> Option<&Path> {
+        match &self.source {
+            Source::Builtin(_) => None,
+            Source::Dir(dir) => Some(dir),
+        }
+    }
+
+    /// All objects, in manifest order.
+    pub fn entries(&self) -> &[ObjectEntry] {
+        &self.entries
+    }
+
+    /// The objects of one split, in manifest order.
+    pub fn entries_in(&self, split: super::Split) -> impl Iterator<Item = &ObjectEntry> {
+        self.entries.iter().filter(move |e| e.split == split)
+    }
+
+    /// The object called `name`, if any.
+    pub fn find(&self, name: &str) -> Option<&ObjectEntry> {
+        self.entries.iter().find(|e| e.name == name)
+    }
+
+    /// The mesh of object `name` in metres, in its resting pose (lowest point at z = 0, bounding box centred on the z
+    /// axis). Built-in objects are generated; directory objects are loaded with `scale_to_m`, rotated by `rotation`
+    /// and then rested on the table.
+    pub fn mesh(&self, name: &str) -> Result<Mesh, ObjectError> {
+        let index = self
+            .entries
+            .iter()
+            .position(|e| e.name == name)
+            .ok_or_else(|| self.unknown(name))?;
+        let entry = &self.entries[index];
+        match &self.source {
+            Source::Builtin(specs) => specs.get(index).ok_or_else(|| self.unknown(name))?.build(),
+            Source::Dir(dir) => {
+                let options = LoadOptions {
+                    units: Units::Scale(entry.scale_to_m),
+                    fit_to_size: None,
+                };
+                let mesh = mesh::load(&dir.join(&entry.mesh), &options).map_err(|source| {
+                    ObjectError::Mesh {
+                        name: entry.name.clone(),
+                        source,
+                    }
+                })?;
+                let mesh = match entry.rotation {
+                    Some([x, y, z, w]) => {
+                        let q = DQuat::from_xyzw(x, y, z, w).normalize().as_quat();
+                        mesh.transformed(&Affine3A::from_quat(q))
+                    }
+                    None => mesh,
+                };
+                Ok(mesh.rest_on_table())
+            }
+        }
+    }
+
+    /// The set as a manifest (entries as they are, e.g. for display or saving alongside the original meshes).
+    pub fn manifest(&self) -> ObjectManifest {
+        ObjectManifest {
+            version: MANIFEST_VERSION,
+            objects: self.entries.clone(),
+        }
+    }
+
+    /// Write every mesh as `<name>.obj` in metres, in its resting pose, plus `objects.json` (pretty JSON) into `dir`
+    /// (created if needed). Exported entries have `scale_to_m = 1` and no rotation; names with characters unsafe in
+    /// file names get a sanitised file name. All meshes are built before anything is written, and each file is
+    /// written atomically with the manifest last, so exporting a directory set onto itself is safe.
+    pub fn export(&self, dir: &Path) -> Result<(), ObjectError> {
+        let mut used = HashSet::new();
+        let mut files = Vec::with_capacity(self.entries.len());
+        let mut objects = Vec::with_capacity(self.entries.len());
+        for entry in &self.entries {
+            let file = unique_file_name(&entry.name, &mut used);
+            files.push((dir.join(&file), self.mesh(&entry.name)?));
+            objects.push(ObjectEntry {
+                mesh: file,
+                scale_to_m: 1.0,
+                rotation: None,
+                ..entry.clone()
+            });
+        }
+        for (path, mesh) in &files {
+            write(path, mesh.to_obj_string().as_bytes())?;
+        }
+        let manifest = ObjectManifest {
+            version: MANIFEST_VERSION,
+            objects,
+        };
+        let mut json = serde_json::to_string_pretty(&manifest).map_err(ObjectError::Serialize)?;
+        json.push('\n');
+        write(&dir.join(MANIFEST_FILE), json.as_bytes())
+    }
+
+    fn unknown(&self, name: &str) -> ObjectError {
+        let names: Vec<&str> = self.entries.iter().map(|e| e.name.as_str()).collect();
+        ObjectError::UnknownObject {
+            name: name.to_string(),
+            set: self.spec(),
+            available: names.join(", "),
+        }
+    }
+}
+
+/// Check one manifest record (the manifest at `path` in `dir`).
+fn validate_entry(dir: &Path, path: &Path, entry: &ObjectEntry) -> Result<(), ObjectError> {
+    let bad = |message: String| ObjectError::BadEntry {
+        path: path.to_path_buf(),
+        name: entry.name.clone(),
+        message,
+    };
+    if entry.name.trim().is_empty() {
+        return Err(bad(
+            "the name is empty; give every object a unique non-empty name".into(),
+        ));
+    }
+    let mesh_path = dir.join(&entry.mesh);
+    if !mesh_path.is_file() {
+        return Err(ObjectError::MissingMesh {
+            path: path.to_path_buf(),
+            name: entry.name.clone(),
+            mesh: mesh_path,
+        });
+    }
+    let extension = mesh_path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !matches!(extension.as_deref(), Some("obj" | "stl")) {
+        return Err(bad(format!(
+            "mesh file '{}' is not .obj or .stl; convert it",
+            entry.mesh
+        )));
+    }
+    if !(entry.scale_to_m.is_finite() && entry.scale_to_m > 0.0) {
+        return Err(bad(format!(
+            "scale_to_m = {} must be positive (metres per file unit: 1 for m, 0.001 for mm)",
+            entry.scale_to_m
+        )));
+    }
+    if let Some(q) = entry.rotation {
+        let norm = q.iter().map(|c| c * c).sum::<f64>().sqrt();
+        if !norm.is_finite() || (norm - 1.0).abs() > UNIT_NORM_TOLERANCE {
+            return Err(bad(format!(
+                "rotation {q:?} has norm {norm}; give a unit quaternion [x, y, z, w] (identity is [0, 0, 0, 1])"
+            )));
+        }
+    }
+    if let super::RotationSymmetry::NFold(0) = entry.symmetry.rotation {
+        return Err(bad(
+            "symmetry n_fold must be at least 1 (1 means no symmetry)".into(),
+        ));
+    }
+    if let Some([x, y]) = entry.symmetry.translation_axis {
+        let norm = x.hypot(y);
+        if !norm.is_finite() || (norm - 1.0).abs() > UNIT_NORM_TOLERANCE {
+            return Err(bad(format!(
+                "translation_axis [{x}, {y}] must be a unit vector in the object's xy plane, e.g. [1, 0]"
+            )));
+        }
+    }
+    if let Some((key, value)) = entry.dimensions.iter().find(|(_, v)| !v.is_finite()) {
+        return Err(bad(format!(
+            "dimension '{key}' = {value} is not a finite number of metres"
+        )));
+    }
+    Ok(())
+}
+
+/// `<name>.obj` with characters other than ASCII letters, digits, `-`, `_` and `.` replaced by `_`, made unique
+/// (case-insensitively, for case-insensitive file systems) by a numeric suffix.
+fn unique_file_name(name: &str, used: &mut HashSet<String>) -> String {
+    let stem: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let stem = if stem.trim_matches('.').is_empty() {
+        "object".to_string()
+    } else {
+        stem
+    };
+    let mut file = format!("{stem}.obj");
+    let mut k = 1;
+    while !used.insert(file.to_ascii_lowercase()) {
+        k += 1;
+        file = format!("{stem}_{k}.obj");
+    }
+    file
+}
+
+fn write(path: &Path, bytes: &[u8]) -> Result<(), ObjectError> {
+    crate::io::write_atomic(path, bytes).map_err(|source| ObjectError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+#[cfg(test)]
+#[path = "set_tests.rs"]
+mod tests;
