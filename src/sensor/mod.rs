@@ -1,0 +1,11 @@
+//! The Soft Bubble sensor: its depth camera ([`camera`]), its membrane ([`elastomer`]) and where both are in the world
+//! ([`pose`]). Frames: `world` (table at z = 0, z up), `sensor` (membrane base at z = 0, dome towards +z, i.e. towards
+//! the object), `camera` (OpenCV: x right, y down, z forward), `object` (resting pose, lowest point at z = 0).
+
+pub mod camera;
+pub mod elastomer;
+pub mod pose;
+
+pub use camera::{CameraConfig, Intrinsics};
+pub use elastomer::{ElastomerConfig, ElastomerError};
+pub use pose::{Scene, Se2, SensorPose};

@@ -1,0 +1,228 @@
+//! The contact-depth **simulator** (paper IV.A) and synthetic tactile signatures (V.A).
+//!
+//! Stages, one module each: [`render`] (1. object depth rendering, and the elastomer's nominal depth E),
+//! [`contact`] (2. depth projection to 3D, 3. signed distance to the elastomer, 4. contact mask and in-contact depth),
+//! [`shadows`] (tactile-shadow cloak) and [`signature`] (noise, reference, imprint). [`Simulator`] runs them in order
+//! for one scene; everything that depends only on the sensor (membrane BVH and SDF, E) is built once.
+
+pub mod contact;
+pub mod render;
+pub mod shadows;
+pub mod signature;
+
+use std::time::Instant;
+
+use glam::DAffine3;
+use serde::{Deserialize, Serialize};
+
+use crate::image::Image;
+use crate::mesh::{Mesh, MeshError, RayCaster, SignedDistance};
+use crate::sensor::pose::CameraMount;
+use crate::sensor::{CameraConfig, ElastomerConfig, ElastomerError, Intrinsics, Scene, SensorPose};
+pub use signature::SignatureConfig;
+
+/// Errors setting up or running the simulator.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    #[error("camera: {0}")]
+    Camera(String),
+    #[error("signature: {0}")]
+    Signature(String),
+    #[error(transparent)]
+    Elastomer(#[from] ElastomerError),
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+}
+
+/// Everything that defines the simulated sensor.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SimConfig {
+    pub camera: CameraConfig,
+    pub mount: CameraMount,
+    pub elastomer: ElastomerConfig,
+    pub signature: SignatureConfig,
+}
+
+/// An object mesh prepared for rendering (BVH built once; reuse it across poses).
+pub struct PreparedObject {
+    pub mesh: Mesh,
+    caster: RayCaster,
+    /// Height of the object's highest point above the table in its resting pose, metres.
+    pub top_z: f64,
+}
+
+impl PreparedObject {
+    /// Prepare a mesh in its resting pose (object frame, lowest point at z = 0).
+    pub fn new(mesh: Mesh) -> Result<Self, MeshError> {
+        let caster = RayCaster::new(&mesh)?;
+        let top_z = f64::from(mesh.aabb().1.z);
+        Ok(Self {
+            mesh,
+            caster,
+            top_z,
+        })
+    }
+}
+
+/// All images of one simulated contact, row-major at the model resolution, metres.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimOutput {
+    /// D: z-depth of the object from the sensor camera (0 = miss).
+    pub depth: Image,
+    /// E: nominal (undeformed) elastomer depth (0 = membrane not seen).
+    pub elastomer: Image,
+    /// M: contact mask (1 where the object point lies inside the membrane).
+    pub mask: Image,
+    /// X0 = M ⊙ D: in-contact depth, the model's target.
+    pub target: Image,
+    /// S: synthetic signature (with shadows and noise).
+    pub signature: Image,
+    /// R: reference (E with its own noise).
+    pub reference: Image,
+    /// Y = R − S: the imprint, the model's condition.
+    pub imprint: Image,
+    /// Number of pixels in contact.
+    pub contact_pixels: usize,
+}
+
+/// The simulator for one sensor configuration.
+pub struct Simulator {
+    config: SimConfig,
+    intrinsics: Intrinsics,
+    t_sensor_camera: DAffine3,
+    elastomer_mesh: Mesh,
+    elastomer_sdf: contact::ElastomerSdf,
+    nominal: Image,
+    apex_height: f64,
+    spacing: (f64, f64),
+}
+
+impl Simulator {
+    /// Validate the configuration, build the membrane and its SDF, and render E.
+    pub fn new(config: SimConfig) -> Result<Self, SimError> {
+        config.camera.validate().map_err(SimError::Camera)?;
+        config.signature.validate().map_err(SimError::Signature)?;
+        let intrinsics = config.camera.intrinsics();
+        let t_sensor_camera = config.mount.t_sensor_camera();
+        let elastomer_mesh = config.elastomer.build()?;
+        let caster = RayCaster::new(&elastomer_mesh)?;
+        let nominal = render::render_far_depth(&caster, &intrinsics, &t_sensor_camera);
+        let elastomer_sdf = contact::ElastomerSdf::new(
+            SignedDistance::new(&elastomer_mesh)?,
+            elastomer_mesh.aabb(),
+        );
+        let apex_height = config.elastomer.apex_height(&elastomer_mesh);
+        let spacing = intrinsics.pixel_size_in(&config.camera.native);
+        Ok(Self {
+            config,
+            intrinsics,
+            t_sensor_camera,
+            elastomer_mesh,
+            elastomer_sdf,
+            nominal,
+            apex_height,
+            spacing,
+        })
+    }
+
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// Intrinsics of the rendered images.
+    pub fn intrinsics(&self) -> &Intrinsics {
+        &self.intrinsics
+    }
+
+    /// `t_sensor_camera`.
+    pub fn t_sensor_camera(&self) -> DAffine3 {
+        self.t_sensor_camera
+    }
+
+    /// The membrane mesh in the sensor frame.
+    pub fn elastomer_mesh(&self) -> &Mesh {
+        &self.elastomer_mesh
+    }
+
+    /// E: the nominal elastomer depth image.
+    pub fn nominal_depth(&self) -> &Image {
+        &self.nominal
+    }
+
+    /// Height of the membrane apex above its base, metres.
+    pub fn apex_height(&self) -> f64 {
+        self.apex_height
+    }
+
+    /// Sensor pose above the sensor-frame origin `(x, y)` pressing the apex `press` metres into the object's top.
+    pub fn pressing_pose(
+        &self,
+        object: &PreparedObject,
+        x: f64,
+        y: f64,
+        yaw: f64,
+        press: f64,
+    ) -> SensorPose {
+        SensorPose::pressing(x, y, yaw, [0.0, 0.0], self.apex_height, object.top_z, press)
+    }
+
+    /// `t_world_camera` for a sensor pose.
+    pub fn t_world_camera(&self, sensor: &SensorPose) -> DAffine3 {
+        sensor.t_world_sensor() * self.t_sensor_camera
+    }
+
+    /// Step 1: D for the object at `scene.object` seen from `scene.sensor`.
+    pub fn render_depth(&self, object: &PreparedObject, scene: &Scene) -> Image {
+        let t_object_camera =
+            scene.object.to_affine().inverse() * self.t_world_camera(&scene.sensor);
+        render::render_depth(&object.caster, &self.intrinsics, &t_object_camera)
+    }
+
+    /// Steps 2–4 on a depth image: contact mask M and in-contact depth X0.
+    pub fn contact(&self, depth: &Image) -> (Image, Image) {
+        contact::contact(
+            depth,
+            &self.intrinsics,
+            &self.t_sensor_camera,
+            &self.elastomer_sdf,
+        )
+    }
+
+    /// The whole pipeline for one scene; `seed` drives the signature noise.
+    pub fn simulate(&self, object: &PreparedObject, scene: &Scene, seed: u64) -> SimOutput {
+        let depth = self.render_depth(object, scene);
+        let (mask, target) = self.contact(&depth);
+        let sig = signature::synthesize(
+            &depth,
+            &self.nominal,
+            &mask,
+            &self.config.signature,
+            self.spacing,
+            seed,
+        );
+        let contact_pixels = mask.count_nonzero();
+        SimOutput {
+            depth,
+            elastomer: self.nominal.clone(),
+            mask,
+            target,
+            signature: sig.signature,
+            reference: sig.reference,
+            imprint: sig.imprint,
+            contact_pixels,
+        }
+    }
+
+    /// [`Self::simulate`] with its wall time in seconds.
+    pub fn simulate_timed(
+        &self,
+        object: &PreparedObject,
+        scene: &Scene,
+        seed: u64,
+    ) -> (SimOutput, f64) {
+        let t0 = Instant::now();
+        let out = self.simulate(object, scene, seed);
+        (out, t0.elapsed().as_secs_f64())
+    }
+}
