@@ -1,1 +1,42 @@
-fn main() {}
+//! `tnd`: the command-line face of tactile-derender. Runs the same pipeline as the workbench, headless.
+
+mod args;
+mod bench;
+mod objects_cmd;
+mod sim_cmd;
+
+use clap::{Parser, Subcommand};
+
+/// Tactile Neural De-rendering for Soft Bubble sensors: simulate, generate data, train, de-render, estimate poses.
+#[derive(Parser)]
+#[command(name = "tnd", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate one contact: depth, elastomer, contact mask, target, signature, reference and imprint.
+    Sim(Box<sim_cmd::SimArgs>),
+    /// The object library: list the built-in set or a directory set, export the built-in set.
+    Objects(objects_cmd::ObjectsArgs),
+    /// Benchmarks printing JSON lines.
+    Bench(bench::BenchArgs),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Sim(a) => sim_cmd::run(*a),
+        Command::Objects(a) => objects_cmd::run(a),
+        Command::Bench(a) => bench::run(a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,121 @@
+//! Command-line options shared by several commands, mapped onto the library's config structs.
+
+use std::path::PathBuf;
+
+use anyhow::{anyhow, Context, Result};
+use clap::Args;
+use tactile_derender::mesh::{self, LoadOptions, Mesh, Units};
+use tactile_derender::objects::ObjectSet;
+use tactile_derender::sensor::camera::parse_resolution;
+use tactile_derender::sim::SimConfig;
+
+/// Sensor, elastomer and signature options (defaults: the Soft Bubble of the paper).
+#[derive(Args, Clone, Debug)]
+pub struct SensorArgs {
+    /// Rendered (model) resolution WxH, multiples of 8.
+    #[arg(long, default_value = "64x64")]
+    pub resolution: String,
+    /// Elastomer inflation height, metres.
+    #[arg(long)]
+    pub inflation: Option<f64>,
+    /// Elastomer footprint LENGTHxWIDTH in metres (e.g. 0.12x0.08).
+    #[arg(long)]
+    pub footprint: Option<String>,
+    /// Elastomer mesh file (OBJ/STL, sensor frame) instead of the parametric membrane.
+    #[arg(long)]
+    pub elastomer_mesh: Option<PathBuf>,
+    /// Units of --elastomer-mesh (m, cm, mm or metres per unit).
+    #[arg(long, default_value = "m")]
+    pub elastomer_units: String,
+    /// Camera distance behind the membrane base, metres.
+    #[arg(long)]
+    pub camera_offset: Option<f64>,
+    /// Tactile-shadow width in native sensor pixels.
+    #[arg(long)]
+    pub shadow_px: Option<f64>,
+    /// Standard deviation of the depth noise, metres (0 disables).
+    #[arg(long)]
+    pub noise_std: Option<f64>,
+}
+
+impl SensorArgs {
+    /// The simulator configuration these options describe.
+    pub fn sim_config(&self) -> Result<SimConfig> {
+        let mut cfg = SimConfig::default();
+        cfg.camera.resolution = parse_resolution(&self.resolution).map_err(|e| anyhow!(e))?;
+        if let Some(h) = self.inflation {
+            cfg.elastomer.inflation = h;
+        }
+        if let Some(fp) = &self.footprint {
+            let (a, b) = fp
+                .split_once(['x', 'X'])
+                .and_then(|(a, b)| Some((a.trim().parse().ok()?, b.trim().parse().ok()?)))
+                .ok_or_else(|| anyhow!("--footprint '{fp}' must look like 0.12x0.08 (metres)"))?;
+            cfg.elastomer.footprint_x = a;
+            cfg.elastomer.footprint_y = b;
+        }
+        if let Some(p) = &self.elastomer_mesh {
+            cfg.elastomer.mesh_file = Some(p.clone());
+            cfg.elastomer.mesh_units = self.elastomer_units.parse::<Units>()?;
+        }
+        if let Some(c) = self.camera_offset {
+            cfg.mount.position = [0.0, 0.0, -c];
+        }
+        if let Some(s) = self.shadow_px {
+            cfg.signature.shadow_px = s;
+        }
+        if let Some(n) = self.noise_std {
+            cfg.signature.noise_std = n;
+        }
+        Ok(cfg)
+    }
+}
+
+/// Which object to use: a name from an object set, or a mesh file.
+#[derive(Args, Clone, Debug)]
+pub struct ObjectArgs {
+    /// Object name from the object set, or a path to an OBJ/STL mesh.
+    #[arg(long)]
+    pub object: String,
+    /// Object set: "builtin" or a directory with objects.json.
+    #[arg(long, default_value = "builtin")]
+    pub objects: String,
+    /// Units of a mesh file given by path (m, cm, mm or metres per unit).
+    #[arg(long, default_value = "m")]
+    pub units: String,
+    /// Scale a mesh file so that its largest extent is this many metres.
+    #[arg(long)]
+    pub fit_size: Option<f64>,
+}
+
+impl ObjectArgs {
+    /// The object's name and its mesh in the resting pose.
+    pub fn load(&self) -> Result<(String, Mesh)> {
+        let set = ObjectSet::open(&self.objects)?;
+        if set.find(&self.object).is_some() {
+            let mesh = set.mesh(&self.object)?;
+            return Ok((self.object.clone(), mesh));
+        }
+        let path = PathBuf::from(&self.object);
+        if path.extension().is_some() || path.exists() {
+            let options = LoadOptions {
+                units: self.units.parse::<Units>()?,
+                fit_to_size: self.fit_size,
+            };
+            let mesh = mesh::load(&path, &options)?.rest_on_table();
+            let name = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| self.object.clone());
+            return Ok((name, mesh));
+        }
+        let names: Vec<&str> = set.entries().iter().map(|e| e.name.as_str()).collect();
+        Err(anyhow!(
+            "unknown object '{}': not in the {} set ({}) and not a mesh file",
+            self.object,
+            self.objects,
+            names.join(", ")
+        ))
+        .context("--object")
+    }
+}
