@@ -261,10 +261,7 @@ mod tests {
         let mut bad = bytes.clone();
         let at = bad.windows(3).position(|w| w == b"<f4").unwrap();
         bad[at..at + 3].copy_from_slice(b"<c8");
-        assert!(matches!(
-            decode(&bad),
-            Err(NpyError::Dtype { .. })
-        ));
+        assert!(matches!(decode(&bad), Err(NpyError::Dtype { .. })));
         assert!(decode(b"hello").is_err());
     }
 

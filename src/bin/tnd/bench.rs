@@ -126,7 +126,7 @@ fn bench_sim(a: &SimBenchArgs) -> Result<()> {
         let caster = RayCaster::new(&mesh)?;
         let build_s = t0.elapsed().as_secs_f64();
         emit(
-            json!({"bench": "raycast_build", "backend": "parry3d", "mesh": name,
+            json!({"bench": "raycast_build", "backend": "tnd BVH4 (binned SAH)", "mesh": name,
             "triangles": mesh.triangles().len(), "median_s": build_s}),
         );
         for size in [64usize, 256] {
@@ -149,7 +149,7 @@ fn bench_sim(a: &SimBenchArgs) -> Result<()> {
                 let depth = depth.ok_or_else(|| anyhow!("no run"))?;
                 let hits = depth.data.iter().filter(|&&d| d > 0.0).count();
                 let depth_sum_mm: f64 = depth.data.iter().map(|&d| f64::from(d) * 1e3).sum();
-                let mut rec = json!({"bench": "raycast", "backend": "tnd render_depth (parry3d BVH)",
+                let mut rec = json!({"bench": "raycast", "backend": "tnd render_depth (BVH4)",
                     "mesh": name, "triangles": mesh.triangles().len(), "width": size, "height": size,
                     "rays": size * size, "nthreads": threads, "median_s": median_s, "runs": runs,
                     "rays_per_s": (size * size) as f64 / median_s, "hits": hits, "depth_sum": depth_sum_mm});
