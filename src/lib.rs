@@ -11,6 +11,7 @@
 pub mod image;
 pub mod io;
 pub mod mesh;
+pub mod model;
 pub mod objects;
 pub mod sensor;
 pub mod sim;
