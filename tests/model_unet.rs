@@ -223,3 +223,38 @@ fn checkpoint_round_trip_and_errors() {
     }
     assert!(e.to_string().contains("wrong.safetensors"));
 }
+
+#[test]
+fn fused_group_norm_silu_matches_candle_nn() {
+    use tactile_derender::model::group_norm::GroupNorm;
+    let x = Var::from_tensor(&(rand_t(&[3, 6, 5, 4], 1) * 3.0).unwrap()).unwrap();
+    let w = Var::from_tensor(&(rand_t(&[6], 2) + 1.0).unwrap()).unwrap();
+    let b = Var::from_tensor(&rand_t(&[6], 3)).unwrap();
+    for silu in [false, true] {
+        let ours = GroupNorm {
+            weight: w.as_tensor().clone(),
+            bias: b.as_tensor().clone(),
+            groups: 3,
+            eps: 1e-5,
+        };
+        let theirs =
+            candle_nn::GroupNorm::new(w.as_tensor().clone(), b.as_tensor().clone(), 6, 3, 1e-5)
+                .unwrap();
+        let y1 = if silu {
+            ours.forward_silu(x.as_tensor())
+        } else {
+            ours.forward(x.as_tensor())
+        }
+        .unwrap();
+        let y2 = candle_core::Module::forward(&theirs, x.as_tensor()).unwrap();
+        let y2 = if silu { y2.silu().unwrap() } else { y2 };
+        assert!(max_abs(&y1, &y2) < 1e-5, "forward silu={silu}");
+        let r = rand_t(y1.dims(), 9);
+        let g1 = (&y1 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+        let g2 = (&y2 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+        for v in [&x, &w, &b] {
+            let d = max_abs(g1.get(v).unwrap(), g2.get(v).unwrap());
+            assert!(d < 1e-4, "gradient silu={silu}: {d}");
+        }
+    }
+}

@@ -3,7 +3,9 @@
 //! `AttnProcessor2_0` (`diffusers/models/attention_processor.py`).
 
 use candle_core::{Module, Result, Tensor, D};
-use candle_nn::{group_norm, linear, GroupNorm, Linear, VarBuilder};
+use candle_nn::{linear, Linear, VarBuilder};
+
+use super::group_norm::{group_norm, GroupNorm};
 
 /// Keys `group_norm`, `to_q`, `to_k`, `to_v`, `to_out.0`:
 /// `out = (x + to_out(softmax(q kᵀ / √d) v)) / rescale_output_factor` over the H·W tokens, `heads` heads of `d`.

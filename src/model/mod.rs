@@ -8,18 +8,21 @@
 //! files interchangeable with diffusers, [`diffusion`] is the sampling API ([`DiffusionModel`]) and [`train`] the
 //! ε-prediction training loop (Adam, EMA, resumable).
 
+pub mod adam;
+pub mod alloc;
 pub mod attention;
 pub mod checkpoint;
 pub mod config;
 pub mod conv;
 pub mod diffusion;
 pub mod embeddings;
+pub mod group_norm;
 pub mod init;
 pub mod normalise;
 pub mod resnet;
 pub mod sampler;
 pub mod schedule;
-// pub mod train;
+pub mod train;
 pub mod unet;
 pub mod unet_blocks;
 

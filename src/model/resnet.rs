@@ -2,7 +2,9 @@
 //! `Upsample2D` (`diffusers/models/resnet.py`, `downsampling.py`, `upsampling.py`).
 
 use candle_core::{Module, Result, Tensor};
-use candle_nn::{group_norm, linear, GroupNorm, Linear, VarBuilder};
+use candle_nn::{linear, Linear, VarBuilder};
+
+use super::group_norm::{group_norm, GroupNorm};
 
 use super::conv::{Conv2d, ConvGeom};
 
@@ -61,13 +63,13 @@ impl ResnetBlock2D {
 
     /// `x` `[B, Cin, H, W]`, `temb` `[B, T]` -> `[B, Cout, H, W]`; dropout only when `train`.
     pub fn forward(&self, x: &Tensor, temb: &Tensor, train: bool) -> Result<Tensor> {
-        let h = self.conv1.forward(&self.norm1.forward(x)?.silu()?)?;
+        let h = self.conv1.forward(&self.norm1.forward_silu(x)?)?;
         let t = self
             .time_emb_proj
             .forward(&temb.silu()?)?
             .unsqueeze(2)?
             .unsqueeze(3)?;
-        let h = self.norm2.forward(&h.broadcast_add(&t)?)?.silu()?;
+        let h = self.norm2.forward_silu(&h.broadcast_add(&t)?)?;
         let h = if train && self.dropout > 0.0 {
             candle_nn::ops::dropout(&h, self.dropout)?
         } else {

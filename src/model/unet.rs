@@ -3,11 +3,12 @@
 //! state-dict keys, so diffusers checkpoints load unchanged.
 
 use candle_core::{Module, Result, Tensor};
-use candle_nn::{group_norm, GroupNorm, VarBuilder};
+use candle_nn::VarBuilder;
 
 use super::config::UNet2DConfig;
 use super::conv::Conv2d;
 use super::embeddings::{timestep_embedding, TimestepEmbedding};
+use super::group_norm::{group_norm, GroupNorm};
 use super::resnet::ResnetCfg;
 use super::unet_blocks::{AttnCfg, DownBlock2D, UNetMidBlock2D, UpBlock2D};
 
@@ -157,7 +158,7 @@ impl UNet2DModel {
             let these = skips.split_off(skips.len() - k);
             h = block.forward(&h, &these, &emb, train)?;
         }
-        let h = self.conv_norm_out.forward(&h)?.silu()?;
+        let h = self.conv_norm_out.forward_silu(&h)?;
         self.conv_out.forward(&h)
     }
 }

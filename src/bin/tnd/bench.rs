@@ -27,6 +27,8 @@ pub struct BenchArgs {
 pub enum BenchCommand {
     /// Ray casting (rays/s) and full synthetic pairs (pairs/s).
     Sim(SimBenchArgs),
+    /// U-Net forward and training step against `../shared/peers/unet_torch.py`.
+    Unet(crate::bench_unet::UnetBenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -51,6 +53,7 @@ pub struct SimBenchArgs {
 pub fn run(a: BenchArgs) -> Result<()> {
     match a.command {
         BenchCommand::Sim(s) => bench_sim(&s),
+        BenchCommand::Unet(u) => crate::bench_unet::run(&u),
     }
 }
 

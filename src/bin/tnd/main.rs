@@ -2,6 +2,7 @@
 
 mod args;
 mod bench;
+mod bench_unet;
 mod objects_cmd;
 mod sim_cmd;
 
@@ -27,6 +28,7 @@ enum Command {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    tactile_derender::model::alloc::keep_freed_memory();
     let result = match cli.command {
         Command::Sim(a) => sim_cmd::run(*a),
         Command::Objects(a) => objects_cmd::run(a),
