@@ -139,7 +139,11 @@ fn im2col_conv_matches_candle_forward_and_backward() {
             Var::from_tensor(&rand_t(&[co, ci, geom.kernel, geom.kernel], 100 + i as u64)).unwrap();
         let bias = Var::from_tensor(&rand_t(&[co], 200 + i as u64)).unwrap();
         let mut outs = Vec::new();
-        for backend in [ConvBackend::Candle, ConvBackend::Im2colGemm] {
+        for backend in [
+            ConvBackend::Candle,
+            ConvBackend::Im2colGemm,
+            ConvBackend::Tiled,
+        ] {
             let y = conv2d(
                 x.as_tensor(),
                 k.as_tensor(),
@@ -158,12 +162,14 @@ fn im2col_conv_matches_candle_forward_and_backward() {
                 g.get(&bias).unwrap().clone(),
             ));
         }
-        let (a, b2) = (&outs[0], &outs[1]);
-        assert_eq!(a.0.dims(), b2.0.dims(), "case {i}");
-        assert!(max_abs(&a.0, &b2.0) < 1e-5, "forward case {i}");
-        assert!(max_abs(&a.1, &b2.1) < 1e-5, "grad x case {i}");
-        assert!(max_abs(&a.2, &b2.2) < 1e-5, "grad w case {i}");
-        assert!(max_abs(&a.3, &b2.3) < 1e-5, "grad b case {i}");
+        let a = &outs[0];
+        for (n, b2) in outs.iter().enumerate().skip(1) {
+            assert_eq!(a.0.dims(), b2.0.dims(), "case {i}");
+            assert!(max_abs(&a.0, &b2.0) < 1e-5, "forward case {i} backend {n}");
+            assert!(max_abs(&a.1, &b2.1) < 1e-5, "grad x case {i} backend {n}");
+            assert!(max_abs(&a.2, &b2.2) < 1e-5, "grad w case {i} backend {n}");
+            assert!(max_abs(&a.3, &b2.3) < 1e-5, "grad b case {i} backend {n}");
+        }
     }
 }
 

@@ -17,11 +17,13 @@ use rayon::prelude::*;
 pub enum ConvBackend {
     /// candle's `Tensor::conv2d` (and its `conv_transpose2d`-based backward).
     Candle,
-    /// Our im2col + GEMM path (default).
+    /// Our im2col + GEMM path through candle's matmul (full im2col buffer).
     Im2colGemm,
+    /// Our cache-tiled im2col + GEMM custom op ([`super::conv_tiled`], default).
+    Tiled,
 }
 
-static BACKEND: AtomicU8 = AtomicU8::new(1);
+static BACKEND: AtomicU8 = AtomicU8::new(2);
 
 /// Select the convolution implementation for all convolutions run afterwards (process-wide; for benchmarks).
 pub fn set_conv_backend(b: ConvBackend) {
@@ -32,7 +34,8 @@ pub fn set_conv_backend(b: ConvBackend) {
 pub fn conv_backend() -> ConvBackend {
     match BACKEND.load(Ordering::Relaxed) {
         0 => ConvBackend::Candle,
-        _ => ConvBackend::Im2colGemm,
+        1 => ConvBackend::Im2colGemm,
+        _ => ConvBackend::Tiled,
     }
 }
 
@@ -112,6 +115,17 @@ pub fn conv2d(
     let (b, _c_in, h, wd) = x.dims4()?;
     let c_out = w.dim(0)?;
     let y = match backend {
+        ConvBackend::Tiled => {
+            let zeros;
+            let bias = match bias {
+                Some(b) => b,
+                None => {
+                    zeros = Tensor::zeros(c_out, x.dtype(), x.device())?;
+                    &zeros
+                }
+            };
+            super::conv_tiled::conv2d_tiled(x, w, bias, geom)?
+        }
         ConvBackend::Candle => {
             let x = if geom.pad_begin == geom.pad_end {
                 x.clone()

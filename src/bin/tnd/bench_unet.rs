@@ -43,8 +43,8 @@ pub struct UnetBenchArgs {
     /// Training batch size.
     #[arg(long, default_value_t = 16)]
     pub train_batch: usize,
-    /// Convolution implementation: im2col (ours, default) or candle.
-    #[arg(long, default_value = "im2col")]
+    /// Convolution implementation: tiled (ours, default), im2col (ours, full buffer) or candle.
+    #[arg(long, default_value = "tiled")]
     pub conv: String,
     /// Parts to skip: forward, train.
     #[arg(long, value_delimiter = ',')]
@@ -92,7 +92,12 @@ pub fn run(a: &UnetBenchArgs) -> Result<()> {
     set_conv_backend(match a.conv.as_str() {
         "candle" => ConvBackend::Candle,
         "im2col" => ConvBackend::Im2colGemm,
-        other => return Err(anyhow!("--conv must be im2col or candle, not '{other}'")),
+        "tiled" => ConvBackend::Tiled,
+        other => {
+            return Err(anyhow!(
+                "--conv must be tiled, im2col or candle, not '{other}'"
+            ))
+        }
     });
     let cfg = peer_config(a.config.as_deref())?;
     let vars = build(&cfg, &Device::Cpu)?;
