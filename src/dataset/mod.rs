@@ -12,7 +12,7 @@
 //!
 //! Files, one per concern: [`config`] (generation parameters), [`split`] (pair seeds, object choice and the split
 //! rule, all pure functions of the seed and the pair index), [`sample`] (random contacts with the rejection rule),
-//! [`gen`] (parallel, resumable generation), [`npz`] (the shard format), [`manifest`] (`manifest.json` and its
+//! [`gen`] (parallel, resumable generation), [`npz`] (uncompressed `.npz` files), [`shard`] (the arrays of a shard), [`manifest`] (`manifest.json` and its
 //! validation), [`reader`] ([`Dataset`]: random access and shuffled mini-batches), [`import`] and [`resample`] (real
 //! sensor data), [`stats`] (summaries for `tnd dataset stats`).
 
@@ -70,7 +70,7 @@ impl SplitName {
         }
     }
 
-    /// Position in [`SplitName::ALL`] (also the code stored in older tools; not written to shards).
+    /// Position in [`SplitName::ALL`].
     pub fn code(self) -> usize {
         match self {
             SplitName::Train => 0,
