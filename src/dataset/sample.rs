@@ -161,3 +161,47 @@ impl<'a> Sampler<'a> {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::sensor::SensorPose;
+    use crate::sim::SimConfig;
+
+    #[test]
+    fn offset_box_at_full_fraction_projects_onto_the_image_edges() {
+        let sim = Simulator::new(SimConfig::default()).unwrap();
+        let k = *sim.intrinsics();
+        let sensor = SensorPose::default(); // x = y = 0, yaw 0, looking down
+        let t_camera_world = sim.t_world_camera(&sensor).inverse();
+        // The apex plane in the world: sensor z = apex height, i.e. world z = position.z - apex height.
+        let z = sensor.position[2] - sim.apex_height();
+        let b = OffsetBox::new(&sim, 1.0);
+        let project = |x: f64, y: f64| {
+            k.project(t_camera_world.transform_point3(DVec3::new(x, y, z)))
+                .unwrap()
+        };
+        let (w, h) = (k.width as f64, k.height as f64);
+        let corners = [
+            (b.x[0], b.y[0]),
+            (b.x[1], b.y[0]),
+            (b.x[0], b.y[1]),
+            (b.x[1], b.y[1]),
+        ];
+        for (x, y) in corners {
+            let (u, v, _) = project(x, y);
+            let on_edge = |p: f64, n: f64| (p + 0.5).abs() < 1e-6 || (p - (n - 0.5)).abs() < 1e-6;
+            assert!(
+                on_edge(u, w) && on_edge(v, h),
+                "corner ({x}, {y}) -> ({u}, {v})"
+            );
+        }
+        // Shrinking keeps the centre and scales the extent.
+        let s = OffsetBox::new(&sim, 0.4);
+        for (a, c) in [(s.x, b.x), (s.y, b.y)] {
+            assert!(((a[0] + a[1]) - (c[0] + c[1])).abs() < 1e-12);
+            assert!(((a[1] - a[0]) - 0.4 * (c[1] - c[0])).abs() < 1e-12);
+        }
+    }
+}
