@@ -111,7 +111,8 @@ pub struct PairMeta {
     pub sensor: SensorPose,
     /// Press depth of the membrane apex below the object's top, metres (NaN = unknown, imported data).
     pub press: f64,
-    /// The pair seed: with the dataset's configuration it reproduces the pair (see [`split::pair_seed`]).
+    /// The pair seed: with the dataset's configuration it reproduces the pair (see [`split::pair_seed`]); 0 for
+    /// imported real pairs.
     pub seed: u64,
     /// The split this pair belongs to.
     pub split: SplitName,

@@ -47,7 +47,10 @@ pub struct Dataset {
 /// A verified shard: where its images are and its metadata.
 struct LoadedShard {
     path: PathBuf,
-    file: Mutex<File>,
+    file: File,
+    /// Serialises seek + read where positioned reads are not available.
+    #[cfg_attr(unix, allow(dead_code))]
+    seek_lock: Mutex<()>,
     images: Vec<MemberInfo>,
     index: Vec<u64>,
     seed: Vec<u64>,
@@ -258,10 +261,7 @@ impl Dataset {
         let (w, h) = self.resolution();
         let bytes = w * h * 4;
         let offset = shard.images[k].data_offset + (row * bytes) as u64;
-        let raw = {
-            let mut f = shard.file.lock().map_err(|_| poisoned(&shard.path))?;
-            npz::read_at(&mut *f, offset, bytes).map_err(|e| DatasetError::io(&shard.path, e))?
-        };
+        let raw = shard.read(offset, bytes)?;
         let data = npz::decode_f32(&raw);
         if let Some(bad) = data.iter().position(|x| !x.is_finite()) {
             return Err(DatasetError::BadValue {
@@ -292,6 +292,26 @@ impl Dataset {
 
 fn poisoned(path: &Path) -> DatasetError {
     DatasetError::Config(format!("{}: a reader thread panicked", path.display()))
+}
+
+impl LoadedShard {
+    /// `len` bytes at `offset`: a positioned read on Unix (parallel readers need no lock), seek + read under a lock
+    /// elsewhere.
+    fn read(&self, offset: u64, len: usize) -> Result<Vec<u8>, DatasetError> {
+        let io = |e| DatasetError::io(&self.path, e);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::FileExt;
+            let mut buf = vec![0u8; len];
+            self.file.read_exact_at(&mut buf, offset).map_err(io)?;
+            Ok(buf)
+        }
+        #[cfg(not(unix))]
+        {
+            let _guard = self.seek_lock.lock().map_err(|_| poisoned(&self.path))?;
+            npz::read_at(&mut &self.file, offset, len).map_err(io)
+        }
+    }
 }
 
 /// Verify a shard (size, sha256) and index its arrays (dtype, shape).
@@ -329,7 +349,8 @@ fn load_shard(
     let contact_pixels = npz::decode_i32(&read("contact_pixels", Dtype::I32, &[n])?);
     Ok(LoadedShard {
         path,
-        file: Mutex::new(file),
+        file,
+        seek_lock: Mutex::new(()),
         images,
         index: pair_index,
         seed,

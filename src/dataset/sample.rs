@@ -101,7 +101,10 @@ impl<'a> Sampler<'a> {
     /// number of draws it took (1 = the first draw was accepted).
     pub fn sample(&self, plan: &PlannedPair) -> Result<(Record, usize), DatasetError> {
         let (mut rng, object_index) = pair_stream(plan.seed, self.objects.len());
-        let object = &self.objects[object_index.min(self.objects.len().saturating_sub(1))];
+        let object = self
+            .objects
+            .get(object_index)
+            .ok_or_else(|| DatasetError::Config("the object set is empty".into()))?;
         let [p0, p1] = self.config.press_range;
         let sim_cfg = self.sim.config();
         let spacing = self.sim.intrinsics().pixel_size_in(&sim_cfg.camera.native);
