@@ -97,13 +97,26 @@ fn im2col_tile(x: &[f32], d: &Dims, g: ConvGeom, p0: usize, t: usize, cols: &mut
                         dst.fill(0.0);
                     } else {
                         let src = &plane[iy as usize * d.w..(iy as usize + 1) * d.w];
-                        for (o, v) in dst.iter_mut().enumerate() {
-                            let ix = ((ox0 + o) * s + j) as isize - p;
-                            *v = if ix >= 0 && ix < d.w as isize {
-                                src[ix as usize]
-                            } else {
-                                0.0
-                            };
+                        if s == 1 {
+                            // ix = ox + shift: zeros, one contiguous copy, zeros.
+                            let shift = j as isize - p;
+                            let lo = ((-shift - ox0 as isize).max(0) as usize).min(run);
+                            let hi = ((d.w as isize - shift - ox0 as isize).max(0) as usize)
+                                .min(run)
+                                .max(lo);
+                            dst[..lo].fill(0.0);
+                            let a = (ox0 as isize + lo as isize + shift) as usize;
+                            dst[lo..hi].copy_from_slice(&src[a..a + (hi - lo)]);
+                            dst[hi..].fill(0.0);
+                        } else {
+                            for (o, v) in dst.iter_mut().enumerate() {
+                                let ix = ((ox0 + o) * s + j) as isize - p;
+                                *v = if ix >= 0 && ix < d.w as isize {
+                                    src[ix as usize]
+                                } else {
+                                    0.0
+                                };
+                            }
                         }
                     }
                     q += run;
@@ -129,10 +142,23 @@ fn col2im_tile(cols: &[f32], d: &Dims, g: ConvGeom, p0: usize, t: usize, dx: &mu
                     let iy = (oy * s + i) as isize - p;
                     if iy >= 0 && iy < d.h as isize {
                         let dst = &mut plane[iy as usize * d.w..(iy as usize + 1) * d.w];
-                        for (o, v) in row[q..q + run].iter().enumerate() {
-                            let ix = ((ox0 + o) * s + j) as isize - p;
-                            if ix >= 0 && ix < d.w as isize {
-                                dst[ix as usize] += v;
+                        let src = &row[q..q + run];
+                        if s == 1 {
+                            let shift = j as isize - p;
+                            let lo = ((-shift - ox0 as isize).max(0) as usize).min(run);
+                            let hi = ((d.w as isize - shift - ox0 as isize).max(0) as usize)
+                                .min(run)
+                                .max(lo);
+                            let a = (ox0 as isize + lo as isize + shift) as usize;
+                            for (o, v) in dst[a..a + (hi - lo)].iter_mut().zip(&src[lo..hi]) {
+                                *o += v;
+                            }
+                        } else {
+                            for (o, v) in src.iter().enumerate() {
+                                let ix = ((ox0 + o) * s + j) as isize - p;
+                                if ix >= 0 && ix < d.w as isize {
+                                    dst[ix as usize] += v;
+                                }
                             }
                         }
                     }
@@ -178,10 +204,10 @@ impl CustomOp3 for TiledConv {
             );
         }
         let hw = d.ho * d.wo;
-        let mut y = vec![0f32; d.b * co * hw];
         // Pre-fill with the bias; the GEMM accumulates onto it.
-        for (i, plane) in y.chunks_mut(hw).enumerate() {
-            plane.fill(bias[i % co]);
+        let mut y = Vec::with_capacity(d.b * co * hw);
+        for i in 0..d.b * co {
+            y.resize(y.len() + hw, bias[i % co]);
         }
         let yp = SendPtr(y.as_mut_ptr());
         let items: Vec<(usize, usize)> = (0..d.b)

@@ -3,8 +3,12 @@
 mod args;
 mod bench;
 mod bench_unet;
+mod dataset_cmd;
+mod model_cmd;
 mod objects_cmd;
+mod sample_cmd;
 mod sim_cmd;
+mod train_cmd;
 
 use clap::{Parser, Subcommand};
 
@@ -22,8 +26,16 @@ enum Command {
     Sim(Box<sim_cmd::SimArgs>),
     /// The object library: list the built-in set or a directory set, export the built-in set.
     Objects(objects_cmd::ObjectsArgs),
+    /// Synthetic and real datasets: generate, import, statistics, preview.
+    Dataset(dataset_cmd::DatasetArgs),
     /// Benchmarks printing JSON lines.
     Bench(bench::BenchArgs),
+    /// Diffusion model checkpoints: verify against a diffusers reference.
+    Model(model_cmd::ModelArgs),
+    /// De-render: draw N samples of the in-contact depth for one imprint (DDPM or DDIM).
+    Sample(sample_cmd::SampleArgs),
+    /// Train (or resume, or fine-tune) the conditional DDPM on a dataset.
+    Train(Box<train_cmd::TrainArgs>),
 }
 
 fn main() -> std::process::ExitCode {
@@ -32,7 +44,11 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Sim(a) => sim_cmd::run(*a),
         Command::Objects(a) => objects_cmd::run(a),
+        Command::Dataset(a) => dataset_cmd::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Model(a) => model_cmd::run(a),
+        Command::Sample(a) => sample_cmd::run(a),
+        Command::Train(a) => train_cmd::run(*a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
