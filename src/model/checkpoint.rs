@@ -29,7 +29,7 @@ pub struct TensorFile {
 pub fn read_tensors(path: &Path) -> Result<TensorFile, ModelError> {
     let bytes = std::fs::read(path).map_err(|source| ModelError::MissingWeights {
         path: path.to_path_buf(),
-        source,
+        error: source,
     })?;
     let bad = |message: String| ModelError::BadFile {
         path: path.to_path_buf(),
@@ -83,7 +83,7 @@ pub fn write_tensors(
     })?;
     write_atomic(path, &bytes).map_err(|source| ModelError::Io {
         path: path.to_path_buf(),
-        source,
+        error: source,
     })
 }
 
@@ -114,7 +114,7 @@ pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
         if candidate.is_file() {
             let text = std::fs::read_to_string(&candidate).map_err(|source| ModelError::Io {
                 path: candidate.clone(),
-                source,
+                error: source,
             })?;
             let cfg = UNet2DConfig::from_json(&text, &candidate.display().to_string())?;
             return Ok((file, cfg));

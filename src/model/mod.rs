@@ -40,11 +40,10 @@ pub use unet::UNet2DModel;
 /// Errors of the diffusion model stage; each says what to fix and names the file where there is one.
 #[derive(Debug, thiserror::Error)]
 pub enum ModelError {
-    #[error("{}: cannot read model weights: {source}", path.display())]
+    #[error("{}: cannot read model weights: {error}", path.display())]
     MissingWeights {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{}: not a valid safetensors file: {message}", path.display())]
     BadFile { path: PathBuf, message: String },
@@ -70,11 +69,10 @@ pub enum ModelError {
     Input(String),
     #[error("cancelled")]
     Cancelled,
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {error}", path.display())]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("training data: {0}")]
     Data(String),

@@ -183,6 +183,10 @@ pub fn train(
         (None, Some(e)) => e * steps_per_epoch,
         (None, None) => steps_per_epoch,
     };
+    std::fs::create_dir_all(run_dir).map_err(|error| ModelError::Io {
+        path: run_dir.to_path_buf(),
+        error,
+    })?;
     let mut run = open_run(run_dir, tc, model_cfg, init)?;
     let resumed_from = (run.step > 0).then_some(run.step);
     truncate_log(run_dir, run.step)?;
@@ -488,7 +492,7 @@ fn append_log(
     let path = log_path(run_dir);
     let io = |source| ModelError::Io {
         path: path.clone(),
-        source,
+        error: source,
     };
     let line = serde_json::to_string(&LogLine {
         step,
@@ -520,8 +524,10 @@ fn truncate_log(run_dir: &Path, step: u64) -> Result<(), ModelError> {
         if !out.is_empty() {
             out.push('\n');
         }
-        crate::io::write_atomic(&path, out.as_bytes())
-            .map_err(|source| ModelError::Io { path, source })?;
+        crate::io::write_atomic(&path, out.as_bytes()).map_err(|source| ModelError::Io {
+            path,
+            error: source,
+        })?;
     }
     Ok(())
 }
