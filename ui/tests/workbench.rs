@@ -1,0 +1,150 @@
+//! The workbench driven by egui_kittest through its widget labels (no GPU: the 3D view uses its CPU fallback).
+
+use std::time::{Duration, Instant};
+
+use egui::accesskit::Role;
+use egui_kittest::kittest::Queryable;
+use egui_kittest::Harness;
+use tnd_workbench::app::WorkbenchApp;
+use tnd_workbench::state::State;
+
+fn harness(app: WorkbenchApp) -> Harness<'static, WorkbenchApp> {
+    Harness::builder()
+        .with_size([1500.0, 950.0])
+        .build_ui_state(|ui, app: &mut WorkbenchApp| app.show(ui), app)
+}
+
+/// Step until the background simulation has answered the latest request.
+fn settle(h: &mut Harness<'_, WorkbenchApp>) {
+    let t0 = Instant::now();
+    loop {
+        h.step();
+        if !h.state().busy() {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the worker did not answer"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    h.run_ok();
+}
+
+fn shown_contact_pixels(h: &Harness<'_, WorkbenchApp>) -> usize {
+    let n = h.state().contact_pixels().expect("a simulation result");
+    // The count the test reads from the app is the one on screen.
+    assert!(
+        h.query_by_label(&format!("contact pixels: {n}")).is_some(),
+        "status bar does not show {n} contact pixels"
+    );
+    n
+}
+
+#[test]
+fn starts_on_the_default_scene_with_contact() {
+    let mut h = harness(WorkbenchApp::default());
+    settle(&mut h);
+    assert_eq!(h.state().state, State::default());
+    assert!(h.query_by_label_contains("scene: cross_w12_s50").is_some());
+    let n = shown_contact_pixels(&h);
+    assert!(
+        n > 50,
+        "default scene should press the object visibly, got {n} contact pixels"
+    );
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    for title in [
+        "D object depth",
+        "E elastomer",
+        "M contact mask",
+        "S signature",
+        "Y imprint",
+    ] {
+        assert!(h.query_by_label(title).is_some(), "missing image {title}");
+    }
+}
+
+#[test]
+fn inflation_slider_changes_the_contact_pixel_count() {
+    let mut h = harness(WorkbenchApp::default());
+    settle(&mut h);
+    let before = shown_contact_pixels(&h);
+    // The press depth is measured from the apex, so a taller (30 -> 45 mm), pointier dome pressed the same 6 mm
+    // cuts a smaller cap: pi a b (2p/h - p^2/h^2) shrinks as h grows.
+    h.get_by_role_and_label(Role::Slider, "inflation (mm)")
+        .set_value_accesskit(45.0);
+    settle(&mut h);
+    assert!((h.state().state.sim.elastomer.inflation - 0.045).abs() < 1e-9);
+    let after = shown_contact_pixels(&h);
+    assert!(
+        after < before,
+        "contact pixels {before} -> {after}: a taller dome should touch less"
+    );
+}
+
+#[test]
+fn saving_then_opening_a_session_restores_the_state() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("sessions/mine.json");
+    let mut h = harness(WorkbenchApp::default());
+    settle(&mut h);
+    h.get_by_role_and_label(Role::Slider, "press (mm)")
+        .set_value_accesskit(4.5);
+    h.get_by_role_and_label(Role::Slider, "noise σ (mm)")
+        .set_value_accesskit(0.5);
+    settle(&mut h);
+    let saved = h.state().state.clone();
+    assert!((saved.scene.press - 0.0045).abs() < 1e-9);
+
+    let field = h.get_by_role_and_label(Role::TextInput, "Session file");
+    field.click();
+    h.run_ok();
+    h.get_by_role_and_label(Role::TextInput, "Session file")
+        .type_text(&path.display().to_string());
+    h.run_ok();
+    h.get_by_label("Save").click();
+    h.run_ok();
+    assert!(path.exists(), "no session written: {:?}", h.state().errors);
+
+    h.get_by_label("New").click();
+    settle(&mut h);
+    assert_eq!(h.state().state, State::default());
+
+    h.get_by_role_and_label(Role::TextInput, "Session file")
+        .click();
+    h.run_ok();
+    h.get_by_role_and_label(Role::TextInput, "Session file")
+        .type_text(&path.display().to_string());
+    h.run_ok();
+    h.get_by_label("Open").click();
+    settle(&mut h);
+    assert_eq!(h.state().state, saved);
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+}
+
+#[test]
+fn opening_a_corrupt_session_shows_an_error_and_changes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("broken.json");
+    std::fs::write(&path, "{ \"scene\": { \"press\": ").unwrap();
+    let mut h = harness(WorkbenchApp::default());
+    settle(&mut h);
+    let before = h.state().state.clone();
+    let pixels = shown_contact_pixels(&h);
+    h.get_by_role_and_label(Role::TextInput, "Session file")
+        .click();
+    h.run_ok();
+    h.get_by_role_and_label(Role::TextInput, "Session file")
+        .type_text(&path.display().to_string());
+    h.run_ok();
+    h.get_by_label("Open").click();
+    settle(&mut h);
+    assert!(
+        h.query_by_label_contains("broken.json: not a valid session file")
+            .is_some(),
+        "no error shown: {:?}",
+        h.state().errors
+    );
+    assert_eq!(h.state().state, before);
+    assert_eq!(shown_contact_pixels(&h), pixels);
+}
