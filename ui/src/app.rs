@@ -14,7 +14,7 @@ use tactile_derender::sim::calibration::SweepPoint;
 use crate::command::Command;
 use crate::images::ImageTextures;
 use crate::panels;
-use crate::state::{ObjectSource, State};
+use crate::state::State;
 use crate::view3d::gpu;
 use crate::worker::{JobKind, SimRequest, SimResult, Worker, WorkerMsg};
 
@@ -72,6 +72,17 @@ pub struct Timings {
 /// Where `--screenshot` reports: `None` until the PNG was written (or failed).
 pub type ScreenshotSlot = Arc<Mutex<Option<Result<(), String>>>>;
 
+/// How the binary starts the app (command-line options).
+#[derive(Default)]
+pub struct Launch {
+    /// Open this session instead of the last one.
+    pub session: Option<PathBuf>,
+    /// Render the window once into this PNG, report into the slot, and close.
+    pub screenshot: Option<(PathBuf, ScreenshotSlot)>,
+    /// Draw the 3D view with the CPU fallback even when wgpu is available.
+    pub cpu_3d: bool,
+}
+
 /// A pending `--screenshot`.
 struct ScreenshotJob {
     out: PathBuf,
@@ -120,18 +131,10 @@ impl Default for WorkbenchApp {
 impl WorkbenchApp {
     /// An app on `state` without GPU, persistence or screenshot (tests use this).
     pub fn with_state(state: State) -> Self {
-        let mut inputs = PathInputs::default();
-        if let ObjectSource::File { path, units } = &state.scene.object {
-            inputs.object_path = path.display().to_string();
-            inputs.object_units = *units;
-        }
-        if let Some(p) = &state.sim.elastomer.mesh_file {
-            inputs.elastomer_path = p.display().to_string();
-        }
-        Self {
-            state,
+        let mut app = Self {
+            state: State::default(),
             session_path: None,
-            inputs,
+            inputs: PathInputs::default(),
             worker: None,
             generation: 0,
             sim: None,
@@ -148,24 +151,21 @@ impl WorkbenchApp {
             persist: false,
             last_frame: None,
             frames: 0,
-        }
+        };
+        app.replace_state(state);
+        app
     }
 
-    /// The app as eframe starts it: `session` (from `--session`) wins over the persisted last session; `screenshot`
+    /// The app as eframe starts it: `launch.session` wins over the persisted last session; `launch.screenshot`
     /// renders the window once into that PNG, reports into the slot and closes the window.
-    pub fn new(
-        cc: &eframe::CreationContext<'_>,
-        session: Option<PathBuf>,
-        screenshot: Option<(PathBuf, ScreenshotSlot)>,
-    ) -> Self {
+    pub fn new(cc: &eframe::CreationContext<'_>, launch: Launch) -> Self {
         let persisted: Option<Persisted> =
             cc.storage.and_then(|s| eframe::get_value(s, STORAGE_KEY));
         let mut app = Self::default();
-        if let Some(p) = persisted.filter(|_| session.is_none()) {
-            let valid = crate::session::validate(&p.state);
-            match valid {
+        if let Some(p) = persisted.filter(|_| launch.session.is_none()) {
+            match crate::session::validate(&p.state) {
                 Ok(()) => {
-                    app = Self::with_state(p.state);
+                    app.replace_state(p.state);
                     app.inputs.session_path = p
                         .session_path
                         .as_ref()
@@ -176,16 +176,16 @@ impl WorkbenchApp {
                 Err(e) => app.error(format!("last session not restored: {e}")),
             }
         }
-        if let Some(path) = session {
+        if let Some(path) = launch.session {
             app.apply(Command::OpenSession(path));
         }
-        if let Some(rs) = &cc.wgpu_render_state {
+        if let Some(rs) = cc.wgpu_render_state.as_ref().filter(|_| !launch.cpu_3d) {
             gpu::GpuResources::install(rs);
             app.adapter_name = Some(rs.adapter.get_info().name);
             app.render_state = Some(rs.clone());
         }
-        app.persist = screenshot.is_none();
-        app.screenshot = screenshot.map(|(out, result)| ScreenshotJob {
+        app.persist = launch.screenshot.is_none();
+        app.screenshot = launch.screenshot.map(|(out, result)| ScreenshotJob {
             out,
             requested: false,
             started: Instant::now(),

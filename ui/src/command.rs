@@ -132,20 +132,22 @@ impl WorkbenchApp {
     }
 
     /// Replace the whole state (new or opened session) and recompute what depends on it.
-    fn replace_state(&mut self, state: State) {
+    pub(crate) fn replace_state(&mut self, state: State) {
         self.state = state;
         self.calibration = Default::default();
         self.measured = None;
         self.inputs.measured_path.clear();
-        if let ObjectSource::File { path, .. } = &self.state.scene.object {
+        if let ObjectSource::File { path, units } = &self.state.scene.object {
             self.inputs.object_path = path.display().to_string();
+            self.inputs.object_units = *units;
+        }
+        if let Some(p) = &self.state.sim.elastomer.mesh_file {
+            self.inputs.elastomer_path = p.display().to_string();
         }
         if let Some(p) = self.state.calibration.measured.clone() {
+            self.inputs.measured_path = p.display().to_string();
             match npy::read_image(&p) {
-                Ok(img) => {
-                    self.inputs.measured_path = p.display().to_string();
-                    self.measured = Some((p, img));
-                }
+                Ok(img) => self.measured = Some((p, img)),
                 Err(e) => self.error(format!("measured imprint: {e}")),
             }
         }

@@ -36,7 +36,7 @@ impl ImageKind {
             Self::Depth => "D object depth",
             Self::Elastomer => "E elastomer",
             Self::Mask => "M contact mask",
-            Self::Target => "X0 = M·D in-contact depth",
+            Self::Target => "X0 = M·D contact depth",
             Self::Signature => "S signature",
             Self::Imprint => "Y imprint",
         }

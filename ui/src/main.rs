@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{anyhow, Result};
 use clap::Parser;
-use tnd_workbench::app::{ScreenshotSlot, WorkbenchApp};
+use tnd_workbench::app::{Launch, ScreenshotSlot, WorkbenchApp};
 use tnd_workbench::view3d::gpu::DEPTH_BITS;
 
 /// Open the workbench (on the last session, or the bundled default scene).
@@ -17,6 +17,9 @@ struct Args {
     /// Render the window once into this PNG and exit (documentation, bug reports, tests).
     #[arg(long)]
     screenshot: Option<PathBuf>,
+    /// Draw the 3D view on the CPU instead of with wgpu (the fallback used where wgpu is missing).
+    #[arg(long)]
+    cpu_3d: bool,
 }
 
 fn main() -> Result<()> {
@@ -36,7 +39,14 @@ fn main() -> Result<()> {
     eframe::run_native(
         "tnd-workbench",
         options,
-        Box::new(move |cc| Ok(Box::new(WorkbenchApp::new(cc, args.session, screenshot)))),
+        Box::new(move |cc| {
+            let launch = Launch {
+                session: args.session,
+                screenshot,
+                cpu_3d: args.cpu_3d,
+            };
+            Ok(Box::new(WorkbenchApp::new(cc, launch)))
+        }),
     )
     .map_err(|e| {
         anyhow!("cannot open the workbench window (is there a display and a GPU/Mesa driver?): {e}")

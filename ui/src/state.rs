@@ -180,7 +180,7 @@ impl Default for OrbitCamera {
         Self {
             yaw: -0.9,
             pitch: 0.45,
-            distance: 0.30,
+            distance: 0.17,
             pan: [0.0, 0.0, 0.0],
         }
     }

@@ -33,8 +33,9 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         });
     });
     ui.horizontal(|ui| {
-        ui.label("or a membrane mesh (sensor frame)");
-        units_combo(ui, "membrane units", &mut e.mesh_units);
+        ui.label("or membrane mesh")
+            .on_hover_text("an OBJ/STL in the sensor frame");
+        units_combo(ui, "membrane_units", &mut e.mesh_units);
         if ui.button("Browse…").clicked() {
             cmds.push(Command::Browse(DialogPurpose::OpenElastomerMesh));
         }

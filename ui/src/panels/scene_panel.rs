@@ -38,8 +38,8 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         });
 
     ui.horizontal(|ui| {
-        ui.label("or a mesh file");
-        units_combo(ui, "mesh units", &mut app.inputs.object_units);
+        ui.label("or mesh file");
+        units_combo(ui, "object_units", &mut app.inputs.object_units);
         if ui.button("Browse…").clicked() {
             cmds.push(Command::Browse(DialogPurpose::OpenObjectMesh));
         }

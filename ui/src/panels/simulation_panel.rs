@@ -12,6 +12,8 @@ use crate::worker::DialogPurpose;
 
 const BAR_W: f32 = 12.0;
 const LABEL_W: f32 = 58.0;
+/// Height of a card's title and button rows, points.
+const CARD_TEXT_H: f32 = 48.0;
 
 pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     toolbar(app, ui, cmds);
@@ -20,27 +22,26 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         return;
     };
     let out = &result.output;
-    let n = app.textures.shown.len().max(1) as f32;
-    let spacing = ui.spacing().item_spacing.x;
-    let card_extra = BAR_W + LABEL_W + 3.0 * spacing;
-    let per_row = if ui.available_width() / n - card_extra >= 110.0 {
-        n
+    let avail = ui.available_size();
+    let spacing = ui.spacing().item_spacing;
+    let card_extra = BAR_W + LABEL_W + 3.0 * spacing.x;
+    // Six in a row when they fit at a useful size, else two rows of three; half the height is for the 3D view.
+    let cols = if avail.x / 6.0 - card_extra >= 120.0 {
+        6
     } else {
-        3.0
+        3
     };
-    let side = ((ui.available_width() / per_row) - card_extra).clamp(96.0, 300.0);
-    ui.horizontal_wrapped(|ui| {
-        for shown in &app.textures.shown {
-            ui.vertical(|ui| card(ui, shown, kind_image(out, shown.kind), side, cmds));
-        }
-    });
-}
-
-fn kind_image(
-    out: &tactile_derender::sim::SimOutput,
-    kind: ImageKind,
-) -> &tactile_derender::image::Image {
-    kind.image(out)
+    let rows = ImageKind::ALL.len().div_ceil(cols);
+    let by_width = avail.x / cols as f32 - card_extra;
+    let by_height = avail.y * 0.5 / rows as f32 - CARD_TEXT_H;
+    let side = by_width.min(by_height).clamp(64.0, 320.0);
+    for row in app.textures.shown.chunks(cols) {
+        ui.horizontal(|ui| {
+            for shown in row {
+                ui.vertical(|ui| card(ui, shown, shown.kind.image(out), side, cmds));
+            }
+        });
+    }
 }
 
 fn toolbar(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
@@ -108,7 +109,6 @@ fn card(
         }
         colour_bar(ui, shown, size.y);
     });
-    ui.label(readout);
     ui.horizontal(|ui| {
         if ui
             .small_button("PNG")
@@ -130,6 +130,7 @@ fn card(
                 png: false,
             });
         }
+        ui.label(readout);
     });
 }
 

@@ -64,14 +64,10 @@ pub fn path_field(ui: &mut egui::Ui, label: &str, text: &mut String, hint: &str)
 }
 
 /// A units chooser (m, cm, mm), labelled on its right.
-pub fn units_combo(
-    ui: &mut egui::Ui,
-    label: &str,
-    units: &mut tactile_derender::mesh::Units,
-) -> bool {
+pub fn units_combo(ui: &mut egui::Ui, id: &str, units: &mut tactile_derender::mesh::Units) -> bool {
     use tactile_derender::mesh::Units;
     let before = *units;
-    egui::ComboBox::from_label(label)
+    egui::ComboBox::new(id, "units")
         .selected_text(units.to_string())
         .width(60.0)
         .show_ui(ui, |ui| {
