@@ -101,11 +101,14 @@ pub struct ShownImage {
     pub range: (f32, f32),
 }
 
+/// What the textures were made from: simulation generation, range mode, fixed depth and imprint ranges.
+type TextureKey = (u64, RangeMode, (f32, f32), (f32, f32));
+
 /// Textures of the current simulation, rebuilt when the result or the colour ranges change.
 #[derive(Default)]
 pub struct ImageTextures {
     pub shown: Vec<ShownImage>,
-    key: Option<(u64, RangeMode, (f32, f32), (f32, f32))>,
+    key: Option<TextureKey>,
 }
 
 impl ImageTextures {

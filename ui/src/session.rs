@@ -67,8 +67,10 @@ mod tests {
     fn round_trip_and_errors_name_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("s.json");
-        let mut state = State::default();
-        state.seed = 77;
+        let mut state = State {
+            seed: 77,
+            ..Default::default()
+        };
         state.scene.press = 0.0042;
         write(&p, &state).unwrap();
         assert_eq!(read(&p).unwrap(), state);

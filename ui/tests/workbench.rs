@@ -32,7 +32,9 @@ fn settle(h: &mut Harness<'_, WorkbenchApp>) {
 }
 
 fn shown_contact_pixels(h: &Harness<'_, WorkbenchApp>) -> usize {
-    let n = h.state().contact_pixels().expect("a simulation result");
+    let Some(n) = h.state().contact_pixels() else {
+        panic!("no simulation result: {:?}", h.state().errors);
+    };
     // The count the test reads from the app is the one on screen.
     assert!(
         h.query_by_label(&format!("contact pixels: {n}")).is_some(),
@@ -147,4 +149,75 @@ fn opening_a_corrupt_session_shows_an_error_and_changes_nothing() {
     );
     assert_eq!(h.state().state, before);
     assert_eq!(shown_contact_pixels(&h), pixels);
+}
+
+#[test]
+fn exports_the_depth_image_as_png_and_npy() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut state = State::default();
+    state.view.export_dir = dir.path().join("out");
+    let mut h = harness(WorkbenchApp::with_state(state));
+    settle(&mut h);
+    // The first card is D.
+    h.get_all_by_label("PNG").next().unwrap().click();
+    h.run_ok();
+    h.get_all_by_label("npy").next().unwrap().click();
+    h.run_ok();
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    let png = image::open(dir.path().join("out/depth.png")).unwrap();
+    assert!(
+        png.width() > 4 * 64 && png.height() > 4 * 64,
+        "{}x{}",
+        png.width(),
+        png.height()
+    );
+    let npy = tactile_derender::io::npy::read_image(&dir.path().join("out/depth.npy")).unwrap();
+    assert_eq!(npy, h.state().sim.as_ref().unwrap().output.depth);
+}
+
+#[test]
+fn inflation_sweep_finds_the_inflation_of_a_measured_imprint_and_picks_it() {
+    use tactile_derender::objects::ObjectSet;
+    use tactile_derender::sensor::Scene;
+    use tactile_derender::sim::{PreparedObject, Simulator};
+
+    // A "measurement": the default scene's object under a 26 mm membrane whose base is where the default 30 mm
+    // membrane pressing 6 mm puts it (apex 2 mm into the object), without noise.
+    let dir = tempfile::tempdir().unwrap();
+    let measured_path = dir.path().join("measured.npy");
+    let mut state = State::default();
+    let mut truth = state.sim.clone();
+    truth.elastomer.inflation = 0.026;
+    truth.signature.noise_std = 0.0;
+    let sim = Simulator::new(truth).unwrap();
+    let object = PreparedObject::new(ObjectSet::builtin().mesh("cross_w12_s50").unwrap()).unwrap();
+    let scene = Scene {
+        object: state.scene.object_pose,
+        sensor: sim.pressing_pose(&object, 0.0, 0.0, 0.0, 0.002),
+    };
+    let measured = sim.simulate(&object, &scene, 0).imprint;
+    tactile_derender::io::npy::write_image(&measured_path, &measured).unwrap();
+
+    state.calibration.lo = 0.022;
+    state.calibration.hi = 0.030;
+    state.calibration.steps = 5;
+    state.calibration.threshold = 0.0005;
+    state.calibration.measured = Some(measured_path);
+    let mut h = harness(WorkbenchApp::with_state(state));
+    settle(&mut h);
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    h.get_all_by_label("Run sweep").next().unwrap().click();
+    settle(&mut h);
+    let points = &h.state().calibration.points;
+    assert_eq!(points.len(), 5, "{:?}", h.state().errors);
+    // No contact below 24 mm (the apex stays above the object's top), growing area above.
+    assert_eq!(points[0].contact_pixels, 0);
+    assert!(points[2].contact_area_m2 < points[4].contact_area_m2);
+    h.get_all_by_label_contains("Use best: 26.0 mm")
+        .next()
+        .unwrap()
+        .click();
+    settle(&mut h);
+    assert!((h.state().state.sim.elastomer.inflation - 0.026).abs() < 1e-9);
+    shown_contact_pixels(&h);
 }
