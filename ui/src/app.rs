@@ -15,6 +15,7 @@ use crate::command::Command;
 use crate::images::ImageTextures;
 use crate::panels;
 use crate::state::State;
+use crate::timings::Timings;
 use crate::view3d::gpu;
 use crate::worker::{JobKind, SimRequest, SimResult, Worker, WorkerMsg};
 
@@ -60,15 +61,6 @@ pub struct CalibrationView {
     pub points: Vec<SweepPoint>,
 }
 
-/// Timings shown in the status bar.
-#[derive(Default, Clone, Copy)]
-pub struct Timings {
-    /// CPU time to build the last frame's UI, milliseconds (exponentially smoothed).
-    pub ui_ms: f64,
-    /// Time between frames while frames are being produced, milliseconds (smoothed).
-    pub frame_ms: f64,
-}
-
 /// Where `--screenshot` reports: `None` until the PNG was written (or failed).
 pub type ScreenshotSlot = Arc<Mutex<Option<Result<(), String>>>>;
 
@@ -81,6 +73,8 @@ pub struct Launch {
     pub screenshot: Option<(PathBuf, ScreenshotSlot)>,
     /// Draw the 3D view with the CPU fallback even when wgpu is available.
     pub cpu_3d: bool,
+    /// Print the timings as one JSON line when the window closes.
+    pub print_timings: bool,
 }
 
 /// A pending `--screenshot`.
@@ -105,6 +99,8 @@ pub struct WorkbenchApp {
     pub sim: Option<Box<SimResult>>,
     /// Generation of the last simulation that failed.
     failed_generation: Option<u64>,
+    /// When each outstanding simulation generation was requested.
+    requested_at: std::collections::BTreeMap<u64, Instant>,
     pub(crate) textures: ImageTextures,
     pub calibration: CalibrationView,
     pub(crate) measured: Option<(PathBuf, Image)>,
@@ -118,6 +114,9 @@ pub struct WorkbenchApp {
     pub(crate) adapter_name: Option<String>,
     screenshot: Option<ScreenshotJob>,
     persist: bool,
+    print_timings: bool,
+    /// When the timings were last printed, and the update-sample count then.
+    printed: Option<(Instant, usize)>,
     last_frame: Option<Instant>,
     frames: u64,
 }
@@ -139,6 +138,7 @@ impl WorkbenchApp {
             generation: 0,
             sim: None,
             failed_generation: None,
+            requested_at: Default::default(),
             textures: ImageTextures::default(),
             calibration: CalibrationView::default(),
             measured: None,
@@ -149,6 +149,8 @@ impl WorkbenchApp {
             adapter_name: None,
             screenshot: None,
             persist: false,
+            print_timings: false,
+            printed: None,
             last_frame: None,
             frames: 0,
         };
@@ -185,6 +187,7 @@ impl WorkbenchApp {
             app.render_state = Some(rs.clone());
         }
         app.persist = launch.screenshot.is_none();
+        app.print_timings = launch.print_timings;
         app.screenshot = launch.screenshot.map(|(out, result)| ScreenshotJob {
             out,
             requested: false,
@@ -230,6 +233,7 @@ impl WorkbenchApp {
     /// Ask the worker to simulate the current state.
     pub(crate) fn request_simulation(&mut self) {
         self.generation += 1;
+        self.requested_at.insert(self.generation, Instant::now());
         let req = self.sim_request();
         if let Some(w) = &self.worker {
             if let Err(e) = w.simulate(req) {
@@ -256,6 +260,11 @@ impl WorkbenchApp {
         for msg in worker.drain() {
             match msg {
                 WorkerMsg::Simulated(result) => {
+                    if let Some(t) = self.requested_at.get(&result.generation) {
+                        self.timings.update.push(t.elapsed().as_secs_f64() * 1e3);
+                    }
+                    self.requested_at = self.requested_at.split_off(&(result.generation + 1));
+                    self.timings.simulate.push(result.simulate_ms);
                     if self
                         .sim
                         .as_ref()
@@ -322,23 +331,26 @@ impl WorkbenchApp {
     }
 
     fn update_timings(&mut self, t0: Instant) {
-        let smooth = |old: f64, new: f64| {
-            if old == 0.0 {
-                new
-            } else {
-                0.9 * old + 0.1 * new
-            }
-        };
-        self.timings.ui_ms = smooth(self.timings.ui_ms, t0.elapsed().as_secs_f64() * 1e3);
+        self.timings.ui.push(t0.elapsed().as_secs_f64() * 1e3);
         if let Some(last) = self.last_frame {
             let dt = last.elapsed().as_secs_f64() * 1e3;
             // Idle gaps (no repaint requested) are not frame times.
             if dt < 250.0 {
-                self.timings.frame_ms = smooth(self.timings.frame_ms, dt);
+                self.timings.frame.push(dt);
             }
         }
         self.last_frame = Some(Instant::now());
         self.frames += 1;
+        if self.print_timings {
+            let n = self.timings.update.len() + self.timings.frame.len();
+            let due = self
+                .printed
+                .is_none_or(|(t, count)| t.elapsed().as_secs_f64() > 2.0 && count != n);
+            if due {
+                println!("{}", self.timings.summary_json());
+                self.printed = Some((Instant::now(), n));
+            }
+        }
     }
 
     fn drive_screenshot(&mut self, ctx: &egui::Context) {
@@ -403,6 +415,12 @@ impl eframe::App for WorkbenchApp {
                 session_path: self.session_path.clone(),
             };
             eframe::set_value(storage, STORAGE_KEY, &p);
+        }
+    }
+
+    fn on_exit(&mut self) {
+        if self.print_timings {
+            println!("{}", self.timings.summary_json());
         }
     }
 }

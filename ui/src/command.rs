@@ -234,7 +234,7 @@ impl WorkbenchApp {
         if png {
             let range = crate::images::range_for(kind, img, &self.state.view);
             let style = preview::PanelStyle {
-                title: kind.title().to_string(),
+                title: kind.title().replace('·', "*"),
                 range_m: Some(range),
                 zero_is_missing: kind.zero_is_missing(),
                 scale: 4,

@@ -12,5 +12,6 @@ pub mod images;
 pub mod panels;
 pub mod session;
 pub mod state;
+pub mod timings;
 pub mod view3d;
 pub mod worker;

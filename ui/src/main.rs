@@ -20,6 +20,9 @@ struct Args {
     /// Draw the 3D view on the CPU instead of with wgpu (the fallback used where wgpu is missing).
     #[arg(long)]
     cpu_3d: bool,
+    /// Print the update, simulation, UI and frame timings (median, p90) as one JSON line on exit.
+    #[arg(long)]
+    timings: bool,
 }
 
 fn main() -> Result<()> {
@@ -44,6 +47,7 @@ fn main() -> Result<()> {
                 session: args.session,
                 screenshot,
                 cpu_3d: args.cpu_3d,
+                print_timings: args.timings,
             };
             Ok(Box::new(WorkbenchApp::new(cc, launch)))
         }),

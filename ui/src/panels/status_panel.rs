@@ -35,10 +35,15 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             ui.spinner();
         }
         ui.separator();
+        let t = &app.timings;
         ui.label(format!(
-            "UI {:.1} ms/frame, frame interval {:.1} ms",
-            app.timings.ui_ms, app.timings.frame_ms
-        ));
+            "update {:.0} ms (p90 {:.0}), frame {:.0} ms, UI {:.1} ms",
+            t.update.median(),
+            t.update.quantile(0.9),
+            t.frame.median(),
+            t.ui.median()
+        ))
+        .on_hover_text("medians over the last frames: parameter change to image, frame interval, UI build time");
         ui.separator();
         match &app.adapter_name {
             Some(name) => ui.weak(format!("3D: wgpu on {name}")),
