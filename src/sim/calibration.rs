@@ -240,7 +240,7 @@ mod tests {
             let exact = std::f64::consts::PI * a * b * (1.0 - (z0 / p.inflation).powi(2));
             let rel = (p.contact_area_m2 - exact).abs() / exact;
             assert!(
-                rel < 0.06,
+                rel < 0.03,
                 "h = {}: area {} vs {exact} ({rel})",
                 p.inflation,
                 p.contact_area_m2
