@@ -51,15 +51,16 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         ui.add(egui::DragValue::new(&mut n.cy).speed(0.5))
             .labelled_by(l.id);
         ui.end_row();
-        ui.label("native");
-        ui.label(format!("{} x {} px", n.width, n.height));
-        ui.label("crop");
-        ui.label(format!(
-            "rows {}..{}, cols {}..{}",
-            cam.crop_rows.0, cam.crop_rows.1, cam.crop_cols.0, cam.crop_cols.1
-        ));
-        ui.end_row();
     });
+    ui.label(format!(
+        "native {} x {} px, crop rows {}..{}, cols {}..{}",
+        cam.native.width,
+        cam.native.height,
+        cam.crop_rows.0,
+        cam.crop_rows.1,
+        cam.crop_cols.0,
+        cam.crop_cols.1
+    ));
     let mut offset = -sim.mount.position[2];
     if mm_slider(ui, &mut offset, 20.0..=120.0, "camera behind base (mm)") {
         sim.mount.position[2] = -offset;
