@@ -56,7 +56,7 @@ pub fn path_field(ui: &mut egui::Ui, label: &str, text: &mut String, hint: &str)
         ui.add(
             egui::TextEdit::singleline(text)
                 .hint_text(hint)
-                .desired_width(ui.available_width().max(60.0)),
+                .desired_width(220.0),
         )
         .labelled_by(l.id)
     })
