@@ -260,7 +260,12 @@ impl WorkbenchApp {
         for msg in worker.drain() {
             match msg {
                 WorkerMsg::Simulated(result) => {
-                    if let Some(t) = self.requested_at.get(&result.generation) {
+                    // The first result includes starting the worker and building every cache: not an update.
+                    if let Some(t) = self
+                        .requested_at
+                        .get(&result.generation)
+                        .filter(|_| self.sim.is_some())
+                    {
                         self.timings.update.push(t.elapsed().as_secs_f64() * 1e3);
                     }
                     self.requested_at = self.requested_at.split_off(&(result.generation + 1));

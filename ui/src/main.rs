@@ -20,15 +20,18 @@ struct Args {
     /// Draw the 3D view on the CPU instead of with wgpu (the fallback used where wgpu is missing).
     #[arg(long)]
     cpu_3d: bool,
-    /// Print the update, simulation, UI and frame timings (median, p90) as one JSON line on exit.
+    /// Print the update, simulation, UI and frame timings (median, p90) as JSON lines.
     #[arg(long)]
     timings: bool,
+    /// Present frames without waiting for vertical sync (frame-time measurements).
+    #[arg(long)]
+    no_vsync: bool,
 }
 
 fn main() -> Result<()> {
     let args = Args::parse();
     let shooting = args.screenshot.is_some();
-    let options = eframe::NativeOptions {
+    let mut options = eframe::NativeOptions {
         renderer: eframe::Renderer::Wgpu,
         depth_buffer: DEPTH_BITS,
         viewport: egui::ViewportBuilder::default()
@@ -37,6 +40,9 @@ fn main() -> Result<()> {
         persist_window: !shooting,
         ..Default::default()
     };
+    if args.no_vsync {
+        options.wgpu_options.surface.present_mode = eframe::wgpu::PresentMode::AutoNoVsync;
+    }
     let slot: ScreenshotSlot = Default::default();
     let screenshot = args.screenshot.clone().map(|out| (out, slot.clone()));
     eframe::run_native(
