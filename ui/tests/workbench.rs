@@ -221,3 +221,68 @@ fn inflation_sweep_finds_the_inflation_of_a_measured_imprint_and_picks_it() {
     assert!((h.state().state.sim.elastomer.inflation - 0.026).abs() < 1e-9);
     shown_contact_pixels(&h);
 }
+
+#[test]
+fn a_typed_mesh_path_in_millimetres_replaces_the_object_and_a_missing_one_shows_an_error() {
+    use tactile_derender::mesh::Units;
+    use tnd_workbench::state::ObjectSource;
+
+    // The library's sphere (metres) rewritten in millimetres.
+    let dir = tempfile::tempdir().unwrap();
+    let src =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/objects/sphere_r20.obj");
+    let obj: String = std::fs::read_to_string(src)
+        .unwrap()
+        .lines()
+        .map(|l| match l.strip_prefix("v ") {
+            Some(v) => {
+                let mm: Vec<String> = v
+                    .split_whitespace()
+                    .map(|x| format!("{}", x.parse::<f64>().unwrap() * 1000.0))
+                    .collect();
+                format!("v {}\n", mm.join(" "))
+            }
+            None => format!("{l}\n"),
+        })
+        .collect();
+    let path = dir.path().join("ball_mm.obj");
+    std::fs::write(&path, obj).unwrap();
+
+    let mut h = harness(WorkbenchApp::default());
+    settle(&mut h);
+    let type_mesh_path = |h: &mut Harness<'_, WorkbenchApp>, p: &std::path::Path| {
+        h.get_by_role_and_label(Role::TextInput, "Mesh").click();
+        h.run_ok();
+        h.get_by_role_and_label(Role::TextInput, "Mesh")
+            .type_text(&p.display().to_string());
+        h.run_ok();
+        h.get_by_label("Load mesh file").click();
+        settle(h);
+    };
+    type_mesh_path(&mut h, &path);
+    assert_eq!(
+        h.state().state.scene.object,
+        ObjectSource::File {
+            path: path.clone(),
+            units: Units::Mm
+        }
+    );
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    // A 20 mm sphere pressed 6 mm: a cap of radius sqrt(2 r p - p^2) = 14.3 mm, hundreds of pixels.
+    let n = shown_contact_pixels(&h);
+    assert!(n > 100, "{n}");
+
+    // Clear the field, then a file that does not exist.
+    h.get_by_role_and_label(Role::TextInput, "Mesh").click();
+    h.run_ok();
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+    h.key_press(egui::Key::Backspace);
+    h.run_ok();
+    type_mesh_path(&mut h, &dir.path().join("nope.stl"));
+    assert!(
+        h.query_by_label_contains("Error: simulation: object nope.stl")
+            .is_some(),
+        "no error naming the file: {:?}",
+        h.state().errors
+    );
+}
