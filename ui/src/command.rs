@@ -1,5 +1,5 @@
 //! User intent as one [`Command`] enum, applied in one function ([`WorkbenchApp::apply`]): panels only push commands,
-//! so sessions, tests and (later) undo have a single door into the [`State`](crate::state::State).
+//! so sessions, tests and (later) undo have a single door into the [`State`].
 
 use std::path::PathBuf;
 

@@ -1,7 +1,14 @@
 //! The workbench's panels, one file each (`*_panel.rs`). The layout: a session bar on top, a status bar at the bottom,
 //! the parameter panels (scene, elastomer, sensor) on the left and the central view with one tab per [`Tab`]. Panels
 //! read the app and push [`Command`]s; they change nothing else than the text typed into path fields. The analysis
-//! panels (dataset inspector, de-rendering, pose) slot in as more tabs.
+//! panels (dataset inspector, de-rendering, pose) slot in as more tabs:
+//!
+//! 1. a [`Tab`] variant and a `*_panel.rs` file whose `show(app, ui, cmds)` draws it (matched below);
+//! 2. its settings (paths, sampler, seeds; e.g. [`crate::state::ModelSettings`]) in [`crate::state::State`] with
+//!    `#[serde(default)]`, so old sessions still open;
+//! 3. one [`Command`] variant per user intent, applied in [`WorkbenchApp::apply`];
+//! 4. background work as a [`crate::worker::JobKind`] reporting through [`crate::worker::WorkerMsg`] (progress,
+//!    result, error) with a cancel flag, like the inflation sweep.
 
 pub mod calibration_panel;
 pub mod elastomer_panel;
