@@ -7,12 +7,12 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use egui::Color32;
-use tactile_derender::image::Image;
 use tactile_derender::mesh::Units;
 use tactile_derender::sim::calibration::SweepPoint;
 
 use crate::command::Command;
 use crate::images::ImageTextures;
+use crate::measured::Measured;
 use crate::panels;
 use crate::state::State;
 use crate::timings::Timings;
@@ -103,7 +103,7 @@ pub struct WorkbenchApp {
     requested_at: std::collections::BTreeMap<u64, Instant>,
     pub(crate) textures: ImageTextures,
     pub calibration: CalibrationView,
-    pub(crate) measured: Option<(PathBuf, Image)>,
+    pub(crate) measured: Option<Measured>,
     /// Errors shown in the window until dismissed.
     pub errors: Vec<String>,
     /// The last informational message.

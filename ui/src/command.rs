@@ -9,6 +9,7 @@ use tactile_derender::sim::SimConfig;
 
 use crate::app::WorkbenchApp;
 use crate::images::ImageKind;
+use crate::measured;
 use crate::session;
 use crate::state::{CalibrationSettings, ObjectSource, SceneState, State, Tab, ViewState};
 use crate::worker::DialogPurpose;
@@ -34,8 +35,10 @@ pub enum Command {
     SaveSession(PathBuf),
     /// Show a native file dialog; its answer becomes another command.
     Browse(DialogPurpose),
-    /// Load a measured imprint (`.npy`, metres) for the calibration.
+    /// Load a measured imprint (`.npy`, metres, or a dataset directory's pair) for the calibration.
     LoadMeasured(PathBuf),
+    /// Place the scene where the measured dataset pair was taken (object, poses; the sensor base at its height).
+    UseMeasuredScene,
     /// Forget the measured imprint.
     ClearMeasured,
     /// Run the inflation sweep in the background.
@@ -72,7 +75,19 @@ impl WorkbenchApp {
                     self.request_simulation();
                 }
             }
-            Command::SetCalibration(c) => self.state.calibration = c,
+            Command::SetCalibration(c) => {
+                let pair_changed = (c.measured_split, c.measured_index)
+                    != (
+                        self.state.calibration.measured_split,
+                        self.state.calibration.measured_index,
+                    );
+                self.state.calibration = c;
+                let dataset = self.measured.as_ref().filter(|m| m.scene.is_some());
+                if let (true, Some(m)) = (pair_changed, dataset) {
+                    let path = m.path.clone();
+                    self.apply(Command::LoadMeasured(path));
+                }
+            }
             Command::SetView(v) => self.state.view = v,
             Command::NewSession => {
                 self.replace_state(State::default());
@@ -98,14 +113,22 @@ impl WorkbenchApp {
                 Err(e) => self.error(format!("{e:#}")),
             },
             Command::Browse(purpose) => self.browse(purpose),
-            Command::LoadMeasured(path) => match npy::read_image(&path) {
-                Ok(img) => {
-                    self.inputs.measured_path = path.display().to_string();
-                    self.state.calibration.measured = Some(path.clone());
-                    self.measured = Some((path, img));
+            Command::LoadMeasured(path) => {
+                let c = &self.state.calibration;
+                match measured::load(&path, c.measured_split, c.measured_index) {
+                    Ok(m) => {
+                        self.inputs.measured_path = path.display().to_string();
+                        self.state.calibration.measured = Some(path);
+                        self.measured = Some(m);
+                    }
+                    Err(e) => self.error(format!("measured imprint: {e:#}")),
                 }
-                Err(e) => self.error(format!("measured imprint: {e}")),
-            },
+            }
+            Command::UseMeasuredScene => {
+                if let Err(e) = self.use_measured_scene() {
+                    self.error(format!("measured scene: {e:#}"));
+                }
+            }
             Command::ClearMeasured => {
                 self.state.calibration.measured = None;
                 self.measured = None;
@@ -146,9 +169,10 @@ impl WorkbenchApp {
         }
         if let Some(p) = self.state.calibration.measured.clone() {
             self.inputs.measured_path = p.display().to_string();
-            match npy::read_image(&p) {
-                Ok(img) => self.measured = Some((p, img)),
-                Err(e) => self.error(format!("measured imprint: {e}")),
+            let c = &self.state.calibration;
+            match measured::load(&p, c.measured_split, c.measured_index) {
+                Ok(m) => self.measured = Some(m),
+                Err(e) => self.error(format!("measured imprint: {e:#}")),
             }
         }
         self.request_simulation();
@@ -198,10 +222,30 @@ impl WorkbenchApp {
         }
     }
 
+    fn use_measured_scene(&mut self) -> Result<()> {
+        let pair = self
+            .measured
+            .as_ref()
+            .and_then(|m| m.scene.clone())
+            .ok_or_else(|| anyhow!("load a dataset pair as the measured imprint first"))?;
+        let elastomer = &self.state.sim.elastomer;
+        let apex = if elastomer.mesh_file.is_none() {
+            elastomer.inflation
+        } else {
+            return Err(anyhow!(
+                "placing the sensor needs the parametric membrane's inflation; switch to the parametric dome"
+            ));
+        };
+        let object = crate::worker::load_object(&pair.object)?;
+        let scene = measured::scene_for(&pair, &self.state.scene, apex, object.top_z)?;
+        self.apply(Command::SetScene(scene));
+        Ok(())
+    }
+
     fn run_calibration(&mut self) {
         let req = self.sim_request();
         let settings = self.state.calibration.clone();
-        let measured = self.measured.as_ref().map(|(_, img)| img.clone());
+        let measured = self.measured.as_ref().map(|m| m.imprint.clone());
         self.calibration.generation += 1;
         self.calibration.running = true;
         self.calibration.progress = None;

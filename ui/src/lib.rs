@@ -9,6 +9,7 @@ pub mod colormap;
 pub mod command;
 pub mod dialogs;
 pub mod images;
+pub mod measured;
 pub mod panels;
 pub mod session;
 pub mod state;

@@ -6,6 +6,7 @@
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
+use tactile_derender::dataset::SplitName;
 use tactile_derender::mesh::Units;
 use tactile_derender::sensor::Se2;
 use tactile_derender::sim::SimConfig;
@@ -114,8 +115,13 @@ pub struct CalibrationSettings {
     pub hi: f64,
     /// Number of inflation values.
     pub steps: usize,
-    /// A measured imprint Y (`.npy`, metres, at the sensor resolution) to compare against.
+    /// A measured imprint Y to compare against: a `.npy` file (metres, at the sensor resolution) or a dataset
+    /// directory (`tnd dataset gen` / `import`), of which pair `measured_index` of `measured_split` is used.
     pub measured: Option<PathBuf>,
+    /// Split of the dataset pair used as the measurement.
+    pub measured_split: SplitName,
+    /// Index of the dataset pair within its split.
+    pub measured_index: usize,
     /// Pixels of the measured imprint above this depth count as contact, metres.
     pub threshold: f64,
 }
@@ -127,6 +133,8 @@ impl Default for CalibrationSettings {
             hi: 0.040,
             steps: 21,
             measured: None,
+            measured_split: SplitName::Train,
+            measured_index: 0,
             threshold: 0.003,
         }
     }

@@ -286,3 +286,69 @@ fn a_typed_mesh_path_in_millimetres_replaces_the_object_and_a_missing_one_shows_
         h.state().errors
     );
 }
+
+#[test]
+fn a_dataset_pair_as_measurement_places_the_scene_and_calibrates_the_inflation() {
+    use tactile_derender::dataset::{generate, GenConfig};
+    use tactile_derender::objects::ObjectSet;
+    use tnd_workbench::state::ObjectSource;
+
+    // A tiny synthetic dataset made with a 26 mm membrane, no noise and no shadow cloak.
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("synth");
+    let mut sim = State::default().sim;
+    sim.elastomer.inflation = 0.026;
+    sim.signature.noise_std = 0.0;
+    sim.signature.shadow_px = 0.0;
+    let cfg = GenConfig {
+        pairs: 4,
+        seed: 5,
+        shard_pairs: 4,
+        ..GenConfig::default()
+    };
+    generate(&data, &sim, &ObjectSet::builtin(), &cfg, &|_| {}).unwrap();
+
+    let mut state = State::default();
+    state.calibration.lo = 0.022;
+    state.calibration.hi = 0.030;
+    state.calibration.steps = 9;
+    state.calibration.threshold = 0.0002;
+    let mut h = harness(WorkbenchApp::with_state(state));
+    settle(&mut h);
+    h.get_by_role_and_label(Role::TextInput, "Imprint").click();
+    h.run_ok();
+    h.get_by_role_and_label(Role::TextInput, "Imprint")
+        .type_text(&data.display().to_string());
+    h.run_ok();
+    h.get_by_label("Load imprint").click();
+    h.run_ok();
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    assert!(h
+        .query_by_label_contains("loaded train pair 0 of")
+        .is_some());
+
+    h.get_by_label("Use the pair's object and poses").click();
+    settle(&mut h);
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    assert!(
+        matches!(&h.state().state.scene.object, ObjectSource::Library { set, .. } if set != "builtin")
+    );
+
+    h.get_all_by_label("Run sweep").next().unwrap().click();
+    settle(&mut h);
+    let points = &h.state().calibration.points;
+    assert_eq!(points.len(), 9, "{:?}", h.state().errors);
+    // The sensor base is where the pair's was, so the 26 mm membrane reproduces its contact (up to the contact
+    // pixels whose imprint is below the 0.2 mm threshold, at the rim).
+    let best = tactile_derender::sim::calibration::best_by_iou(points).unwrap();
+    assert!(
+        (best.inflation - 0.026).abs() < 1e-9 && best.iou.unwrap() > 0.95,
+        "{points:?}"
+    );
+    h.get_all_by_label_contains("Use best: 26.0 mm")
+        .next()
+        .unwrap()
+        .click();
+    settle(&mut h);
+    assert!((h.state().state.sim.elastomer.inflation - 0.026).abs() < 1e-9);
+}

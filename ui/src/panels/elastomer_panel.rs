@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use tactile_derender::dataset::SplitName;
 use tactile_derender::sim::calibration::best_by_iou;
 
 use super::widgets::{mm_slider, path_field, units_combo};
@@ -95,7 +96,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         );
     });
     ui.horizontal(|ui| {
-        ui.label("measured imprint (.npy)");
+        ui.label("measured imprint (.npy or dataset)");
         if ui.button("Browse…").clicked() {
             cmds.push(Command::Browse(DialogPurpose::OpenMeasured));
         }
@@ -104,8 +105,23 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         ui,
         "Imprint",
         &mut app.inputs.measured_path,
-        "measured_imprint.npy",
+        "imprint.npy or data/synth",
     );
+    let typed_dir = std::path::Path::new(app.inputs.measured_path.trim()).is_dir();
+    if typed_dir {
+        ui.horizontal(|ui| {
+            egui::ComboBox::new("measured_split", "split")
+                .selected_text(cal.measured_split.as_str())
+                .show_ui(ui, |ui| {
+                    for split in SplitName::ALL {
+                        ui.selectable_value(&mut cal.measured_split, split, split.as_str());
+                    }
+                });
+            let l = ui.label("pair");
+            ui.add(egui::DragValue::new(&mut cal.measured_index))
+                .labelled_by(l.id);
+        });
+    }
     ui.horizontal(|ui| {
         let typed = app.inputs.measured_path.trim().to_string();
         if ui
@@ -121,13 +137,16 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             cmds.push(Command::ClearMeasured);
         }
     });
-    if let Some((path, img)) = &app.measured {
-        ui.weak(format!(
-            "loaded {} ({}x{})",
-            path.display(),
-            img.width,
-            img.height
-        ));
+    if let Some(m) = &app.measured {
+        ui.weak(format!("loaded {}", m.description));
+        if m.scene.is_some()
+            && ui
+                .button("Use the pair's object and poses")
+                .on_hover_text("object, object pose and sensor position of the measurement; the press keeps the sensor base where it was")
+                .clicked()
+        {
+            cmds.push(Command::UseMeasuredScene);
+        }
     }
     mm_slider(ui, &mut cal.threshold, 0.0..=10.0, "contact threshold (mm)");
     if cal != app.state.calibration {
