@@ -36,11 +36,18 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         }
         ui.separator();
         let t = &app.timings;
+        let ms = |s: &crate::timings::Samples, q: f64| {
+            if s.is_empty() {
+                "–".to_string()
+            } else {
+                format!("{:.0} ms", s.quantile(q))
+            }
+        };
         ui.label(format!(
-            "update {:.0} ms (p90 {:.0}), frame {:.0} ms, UI {:.1} ms",
-            t.update.median(),
-            t.update.quantile(0.9),
-            t.frame.median(),
+            "update {} (p90 {}), frame {}, UI {:.1} ms",
+            ms(&t.update, 0.5),
+            ms(&t.update, 0.9),
+            ms(&t.frame, 0.5),
             t.ui.median()
         ))
         .on_hover_text("medians over the last frames: parameter change to image, frame interval, UI build time");
