@@ -96,3 +96,57 @@ pub fn paint(
         lines(&geom.frustum_lines);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::state::OrbitCamera;
+    use crate::view3d::camera;
+    use tactile_derender::objects::ObjectSet;
+    use tactile_derender::sensor::Scene;
+    use tactile_derender::sim::{PreparedObject, SimConfig, Simulator};
+
+    #[test]
+    fn fallback_draws_the_visible_triangles_inside_the_view() {
+        let sim = Simulator::new(SimConfig::default()).unwrap();
+        let object = PreparedObject::new(ObjectSet::builtin().mesh("sphere_r20").unwrap()).unwrap();
+        let scene = Scene {
+            object: Default::default(),
+            sensor: sim.pressing_pose(&object, 0.0, 0.0, 0.0, 0.005),
+        };
+        let out = sim.simulate(&object, &scene, 0);
+        let geom = SceneGeometry::build(1, &sim, &object, &scene, &out);
+        let rect = Rect::from_min_size(Pos2::new(10.0, 20.0), egui::vec2(400.0, 300.0));
+        let flags = DrawFlags {
+            membrane: MembraneStyle::Hidden,
+            frustum: false,
+            contacts: false,
+        };
+        let (eye, m) = camera::view_proj(&OrbitCamera::default(), rect.width() / rect.height());
+        let mut h =
+            egui_kittest::Harness::new_ui(|ui| paint(ui.painter(), rect, &geom, &flags, eye, m));
+        h.run_ok();
+        let meshes: Vec<&egui::Mesh> = h
+            .output()
+            .shapes
+            .iter()
+            .filter_map(|c| match &c.shape {
+                egui::Shape::Mesh(mesh) => Some(&**mesh),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(meshes.len(), 1);
+        let tris = meshes[0].indices.len() / 3;
+        // A closed sphere seen from outside: back-face culling keeps about half of its triangles.
+        let total = geom.object.len() / 3;
+        assert!(
+            tris > total / 3 && tris < 2 * total / 3,
+            "{tris} of {total}"
+        );
+        // The default camera looks at the apex: the sphere is in front and within the view.
+        assert!(meshes[0]
+            .vertices
+            .iter()
+            .all(|v| rect.expand(1.0).contains(v.pos)));
+    }
+}
