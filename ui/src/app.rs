@@ -38,6 +38,9 @@ pub struct PathInputs {
     pub object_units: Units,
     pub elastomer_path: String,
     pub measured_path: String,
+    pub dataset_path: String,
+    pub model_path: String,
+    pub imprint_path: String,
 }
 
 impl Default for PathInputs {
@@ -48,6 +51,9 @@ impl Default for PathInputs {
             object_units: Units::Mm,
             elastomer_path: String::new(),
             measured_path: String::new(),
+            dataset_path: String::new(),
+            model_path: String::new(),
+            imprint_path: String::new(),
         }
     }
 }
@@ -104,6 +110,8 @@ pub struct WorkbenchApp {
     pub(crate) textures: ImageTextures,
     pub calibration: CalibrationView,
     pub(crate) measured: Option<Measured>,
+    /// Dataset inspector and de-rendering runs (live side).
+    pub analysis: crate::analysis::AnalysisViews,
     /// Errors shown in the window until dismissed.
     pub errors: Vec<String>,
     /// The last informational message.
@@ -142,6 +150,7 @@ impl WorkbenchApp {
             textures: ImageTextures::default(),
             calibration: CalibrationView::default(),
             measured: None,
+            analysis: Default::default(),
             errors: Vec::new(),
             notice: None,
             timings: Timings::default(),
@@ -205,6 +214,7 @@ impl WorkbenchApp {
     /// True while a simulation or sweep has not reported back.
     pub fn busy(&self) -> bool {
         self.calibration.running
+            || self.analysis.derender.running
             || self.worker.is_some()
                 && self.sim.as_ref().map(|s| s.generation) != Some(self.generation)
                 && !self.sim_failed_for_latest()
@@ -250,12 +260,15 @@ impl WorkbenchApp {
             Ok(w) => {
                 self.worker = Some(w);
                 self.request_simulation();
+                if let Some(p) = self.state.dataset.path.clone() {
+                    self.open_dataset(p);
+                }
             }
             Err(e) => self.error(format!("{e:#}")),
         }
     }
 
-    fn handle_messages(&mut self) {
+    fn handle_messages(&mut self, ctx: &egui::Context) {
         let Some(worker) = &self.worker else { return };
         for msg in worker.drain() {
             match msg {
@@ -279,11 +292,13 @@ impl WorkbenchApp {
                         self.sim = Some(result);
                     }
                 }
-                WorkerMsg::Progress { job, done, total } => {
-                    if job == JobKind::Calibration {
-                        self.calibration.progress = Some((done, total));
-                    }
-                }
+                WorkerMsg::Progress { job, done, total } => match job {
+                    JobKind::Calibration => self.calibration.progress = Some((done, total)),
+                    JobKind::Derender => self.analysis.derender.progress = Some((done, total)),
+                    _ => {}
+                },
+                WorkerMsg::Dataset(msg) => self.dataset_message(ctx, msg),
+                WorkerMsg::Derendered(result) => self.derendered(ctx, result),
                 WorkerMsg::Calibrated { generation, points } => {
                     if generation == self.calibration.generation {
                         self.calibration.running = false;
@@ -301,6 +316,10 @@ impl WorkbenchApp {
                         JobKind::Calibration if generation == self.calibration.generation => {
                             self.calibration.running = false;
                         }
+                        JobKind::Derender => {
+                            self.derender_failed(generation, message);
+                            continue;
+                        }
                         _ => {}
                     }
                     self.error(message);
@@ -315,7 +334,7 @@ impl WorkbenchApp {
         let t0 = Instant::now();
         let ctx = ui.ctx().clone();
         self.ensure_worker(&ctx);
-        self.handle_messages();
+        self.handle_messages(&ctx);
         if let Some(result) = &self.sim {
             self.textures
                 .update(&ctx, result.generation, &result.output, &self.state.view);

@@ -11,7 +11,10 @@ use crate::app::WorkbenchApp;
 use crate::images::ImageKind;
 use crate::measured;
 use crate::session;
-use crate::state::{CalibrationSettings, ObjectSource, SceneState, State, Tab, ViewState};
+use crate::state::{
+    CalibrationSettings, DatasetSettings, DerenderInput, DerenderSettings, ModelSettings,
+    ObjectSource, SceneState, State, Tab, ViewState,
+};
 use crate::worker::DialogPurpose;
 
 /// What the user asked for.
@@ -51,6 +54,22 @@ pub enum Command {
     Export { image: ImageKind, png: bool },
     /// Clear the error list.
     DismissErrors,
+    /// Open a dataset directory in the inspector.
+    OpenDataset(PathBuf),
+    /// Replace the inspector's settings (split, object filter, selection, thumbnail size).
+    SetDataset(DatasetSettings),
+    /// Use the selected dataset pair as the de-rendering input.
+    SendPairToDerender,
+    /// Place the simulated scene where the selected dataset pair was taken.
+    PlacePairScene,
+    /// Replace the de-rendering settings (sampler, samples, seed, input).
+    SetDerender(DerenderSettings),
+    /// Choose the model checkpoint (`None`: the bundled default).
+    SetModel(ModelSettings),
+    /// Sample the current input in the background.
+    RunDerender,
+    /// Cancel the running de-rendering.
+    CancelDerender,
 }
 
 impl WorkbenchApp {
@@ -151,6 +170,14 @@ impl WorkbenchApp {
                 }
             }
             Command::DismissErrors => self.errors.clear(),
+            cmd @ (Command::OpenDataset(_)
+            | Command::SetDataset(_)
+            | Command::SendPairToDerender
+            | Command::PlacePairScene
+            | Command::SetDerender(_)
+            | Command::SetModel(_)
+            | Command::RunDerender
+            | Command::CancelDerender) => self.apply_analysis(cmd),
         }
     }
 
@@ -174,6 +201,17 @@ impl WorkbenchApp {
                 Ok(m) => self.measured = Some(m),
                 Err(e) => self.error(format!("measured imprint: {e:#}")),
             }
+        }
+        self.analysis = Default::default();
+        self.inputs.model_path = self
+            .state
+            .model
+            .path
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_default();
+        if let Some(p) = self.state.dataset.path.clone() {
+            self.open_dataset(p);
         }
         self.request_simulation();
     }
@@ -206,6 +244,16 @@ impl WorkbenchApp {
                 view.export_dir = path;
                 self.apply(Command::SetView(view));
             }
+            DialogPurpose::OpenDataset => self.apply(Command::OpenDataset(path)),
+            DialogPurpose::OpenCheckpoint => {
+                self.apply(Command::SetModel(ModelSettings { path: Some(path) }))
+            }
+            DialogPurpose::OpenDerenderImprint => {
+                self.inputs.imprint_path = path.display().to_string();
+                let mut d = self.state.derender.clone();
+                d.input = DerenderInput::Measurement { path };
+                self.apply(Command::SetDerender(d));
+            }
         }
     }
 
@@ -228,6 +276,11 @@ impl WorkbenchApp {
             .as_ref()
             .and_then(|m| m.scene.clone())
             .ok_or_else(|| anyhow!("load a dataset pair as the measured imprint first"))?;
+        self.place_scene(&pair)
+    }
+
+    /// Put the sensor and object where a dataset pair was taken (the sensor base at its height).
+    pub(crate) fn place_scene(&mut self, pair: &measured::PairScene) -> Result<()> {
         let elastomer = &self.state.sim.elastomer;
         let apex = if elastomer.mesh_file.is_none() {
             elastomer.inflation
@@ -237,7 +290,7 @@ impl WorkbenchApp {
             ));
         };
         let object = crate::worker::load_object(&pair.object)?;
-        let scene = measured::scene_for(&pair, &self.state.scene, apex, object.top_z)?;
+        let scene = measured::scene_for(pair, &self.state.scene, apex, object.top_z)?;
         self.apply(Command::SetScene(scene));
         Ok(())
     }

@@ -30,5 +30,14 @@ pub fn run(purpose: DialogPurpose, start_dir: Option<PathBuf>) -> Option<PathBuf
             .add_filter("numpy", &["npy"])
             .pick_file(),
         DialogPurpose::ExportDir => d.set_title("Export folder").pick_folder(),
+        DialogPurpose::OpenDataset => d.set_title("Open dataset directory").pick_folder(),
+        DialogPurpose::OpenCheckpoint => d
+            .set_title("Open model checkpoint")
+            .add_filter("safetensors", &["safetensors"])
+            .pick_file(),
+        DialogPurpose::OpenDerenderImprint => d
+            .set_title("Open measured imprint (metres)")
+            .add_filter("numpy", &["npy"])
+            .pick_file(),
     }
 }

@@ -4,13 +4,18 @@
 //! function, heavy work on [`worker`] threads reporting through one message enum, one file per panel under
 //! [`panels`], and a [`view3d`] drawn by a wgpu paint callback or, without wgpu, on the CPU.
 
+pub mod analysis;
+pub mod analysis_state;
 pub mod app;
 pub mod colormap;
 pub mod command;
+pub mod dataset_view;
+pub mod derender;
 pub mod dialogs;
 pub mod images;
 pub mod measured;
 pub mod panels;
+pub mod scores;
 pub mod session;
 pub mod state;
 pub mod timings;

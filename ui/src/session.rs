@@ -56,6 +56,7 @@ pub fn validate(state: &State) -> Result<(), String> {
     let c = &state.calibration;
     tactile_derender::sim::calibration::inflation_values(c.lo, c.hi, c.steps)
         .map_err(|e| e.to_string())?;
+    state.derender.validate()?;
     Ok(())
 }
 

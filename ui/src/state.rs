@@ -11,6 +11,8 @@ use tactile_derender::mesh::Units;
 use tactile_derender::sensor::Se2;
 use tactile_derender::sim::SimConfig;
 
+pub use crate::analysis_state::{DatasetSettings, DerenderInput, DerenderSettings, SamplerChoice};
+
 /// Version of the session format written by this build.
 pub const SESSION_VERSION: u32 = 1;
 
@@ -32,6 +34,10 @@ pub struct State {
     pub view: ViewState,
     /// The diffusion model used by the de-rendering panels.
     pub model: ModelSettings,
+    /// Dataset inspector: the open dataset, filters and selection.
+    pub dataset: DatasetSettings,
+    /// De-rendering runs: sampler, sample count, seed, input.
+    pub derender: DerenderSettings,
 }
 
 impl Default for State {
@@ -44,6 +50,8 @@ impl Default for State {
             calibration: CalibrationSettings::default(),
             view: ViewState::default(),
             model: ModelSettings::default(),
+            dataset: DatasetSettings::default(),
+            derender: DerenderSettings::default(),
         }
     }
 }
@@ -159,7 +167,7 @@ pub enum MembraneStyle {
     Hidden,
 }
 
-/// The central view's tabs. Analysis panels (dataset inspector, de-rendering, pose) add variants here.
+/// The central view's tabs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Tab {
@@ -167,6 +175,12 @@ pub enum Tab {
     Scene,
     /// Inflation calibration plot.
     Calibration,
+    /// Dataset inspector (thumbnail grid, one pair at full size).
+    Dataset,
+    /// De-rendering runs (samples, mean and std maps, metrics).
+    Derender,
+    /// Pose registration of the samples and KDE uncertainty.
+    Pose,
 }
 
 /// Orbit camera of the 3D view, around a target point.

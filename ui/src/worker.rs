@@ -26,6 +26,8 @@ pub enum JobKind {
     Simulation,
     Calibration,
     Dialog,
+    Dataset,
+    Derender,
 }
 
 /// What a file dialog was opened for; its answer comes back with it.
@@ -37,6 +39,9 @@ pub enum DialogPurpose {
     OpenElastomerMesh,
     OpenMeasured,
     ExportDir,
+    OpenDataset,
+    OpenCheckpoint,
+    OpenDerenderImprint,
 }
 
 /// Everything background threads report.
@@ -54,6 +59,10 @@ pub enum WorkerMsg {
         generation: u64,
         points: Vec<SweepPoint>,
     },
+    /// The dataset inspector's loader (thumbnails, the selected pair, object index).
+    Dataset(crate::dataset_view::DatasetMsg),
+    /// A finished de-rendering run.
+    Derendered(Box<crate::derender::RunResult>),
     /// A file dialog's answer (`None`: cancelled, or no dialog available on this system).
     Dialog {
         purpose: DialogPurpose,
@@ -195,6 +204,16 @@ impl Worker {
         self.sim_tx
             .send(req)
             .map_err(|_| anyhow!("the simulation thread has stopped"))
+    }
+
+    /// A sender for threads started elsewhere (dataset loader, de-rendering runs).
+    pub fn sender(&self) -> Sender<WorkerMsg> {
+        self.msg_tx.clone()
+    }
+
+    /// The context the threads wake.
+    pub fn context(&self) -> egui::Context {
+        self.ctx.clone()
     }
 
     /// Messages that arrived since the last call.

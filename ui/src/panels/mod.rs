@@ -1,7 +1,7 @@
 //! The workbench's panels, one file each (`*_panel.rs`). The layout: a session bar on top, a status bar at the bottom,
 //! the parameter panels (scene, elastomer, sensor) on the left and the central view with one tab per [`Tab`]. Panels
 //! read the app and push [`Command`]s; they change nothing else than the text typed into path fields. The analysis
-//! panels (dataset inspector, de-rendering, pose) slot in as more tabs:
+//! panels (dataset inspector, de-rendering, pose) are more tabs, added like this:
 //!
 //! 1. a [`Tab`] variant and a `*_panel.rs` file whose `show(app, ui, cmds)` draws it (matched below);
 //! 2. its settings (paths, sampler, seeds; e.g. [`crate::state::ModelSettings`]) in [`crate::state::State`] with
@@ -11,7 +11,11 @@
 //!    result, error) with a cancel flag, like the inflation sweep.
 
 pub mod calibration_panel;
+pub mod dataset_panel;
+pub mod derender_panel;
 pub mod elastomer_panel;
+pub mod image_card;
+pub mod pose_panel;
 pub mod scene_panel;
 pub mod sensor_panel;
 pub mod session_panel;
@@ -49,6 +53,9 @@ pub fn show_all(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Comman
         ui.horizontal(|ui| {
             ui.selectable_value(&mut view.tab, Tab::Scene, "Scene view");
             ui.selectable_value(&mut view.tab, Tab::Calibration, "Inflation calibration");
+            ui.selectable_value(&mut view.tab, Tab::Dataset, "Dataset");
+            ui.selectable_value(&mut view.tab, Tab::Derender, "De-render");
+            ui.selectable_value(&mut view.tab, Tab::Pose, "Pose");
         });
         if view != app.state.view {
             cmds.push(Command::SetView(view));
@@ -61,6 +68,9 @@ pub fn show_all(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Comman
                 view3d_panel::show(app, ui, cmds);
             }
             Tab::Calibration => calibration_panel::show(app, ui, cmds),
+            Tab::Dataset => dataset_panel::show(app, ui, cmds),
+            Tab::Derender => derender_panel::show(app, ui, cmds),
+            Tab::Pose => pose_panel::show(app, ui, cmds),
         }
     });
 }

@@ -1,0 +1,426 @@
+//! The analysis tabs' live side (dataset inspector, de-rendering runs; paper V.A, IV.B): the open dataset browser,
+//! the running or finished run with its textures and the cached model, and how their [`Command`]s and worker
+//! messages change them. Nothing here is saved; the settings are in [`crate::state::State`].
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{anyhow, Result};
+use egui::{TextureHandle, TextureOptions};
+use tactile_derender::image::Image;
+use tactile_derender::io::preview::{self, PanelStyle};
+use tactile_derender::model::DiffusionModel;
+
+use crate::app::WorkbenchApp;
+use crate::colormap::to_color_image;
+use crate::command::Command;
+use crate::dataset_view::{DatasetBrowser, DatasetMsg};
+use crate::derender::{self, InputSource, RunInput, RunRequest, RunResult};
+use crate::measured::PairScene;
+use crate::state::{DerenderInput, ObjectSource, Tab};
+
+/// One shown image of a run.
+pub struct RunImage {
+    pub title: String,
+    pub texture: TextureHandle,
+    /// Colour range, metres.
+    pub range: (f32, f32),
+    pub zero_is_missing: bool,
+}
+
+/// A de-rendering run as the UI sees it.
+#[derive(Default)]
+pub struct DerenderView {
+    pub generation: u64,
+    pub running: bool,
+    pub progress: Option<(usize, usize)>,
+    pub started: Option<Instant>,
+    cancel: Option<Arc<AtomicBool>>,
+    /// The loaded model and the checkpoint it came from.
+    pub model: Option<(PathBuf, Arc<DiffusionModel>)>,
+    pub result: Option<Box<RunResult>>,
+    /// Input Y, truth X0 (if known), mean, std, then the samples.
+    pub images: Vec<RunImage>,
+    /// A dataset pair (or scene) made the current input; shown until a run replaces it.
+    pub pending_input: Option<RunInput>,
+}
+
+/// Live state of the analysis tabs.
+#[derive(Default)]
+pub struct AnalysisViews {
+    pub dataset: Option<DatasetBrowser>,
+    dataset_generation: u64,
+    pub derender: DerenderView,
+}
+
+fn texture(
+    ctx: &egui::Context,
+    name: &str,
+    img: &Image,
+    range: (f32, f32),
+    zim: bool,
+) -> TextureHandle {
+    ctx.load_texture(
+        name,
+        to_color_image(img, range, zim),
+        TextureOptions::NEAREST,
+    )
+}
+
+fn depth_range(images: &[&Image]) -> (f32, f32) {
+    let mut lo = f32::INFINITY;
+    let mut hi = f32::NEG_INFINITY;
+    for img in images {
+        if let Some((a, b)) = img.range_where(|v| v != 0.0 && v.is_finite()) {
+            lo = lo.min(a);
+            hi = hi.max(b);
+        }
+    }
+    if lo.is_finite() && hi > lo {
+        (lo, hi)
+    } else if lo.is_finite() {
+        (lo - 1e-3, lo + 1e-3)
+    } else {
+        (0.0, 0.1)
+    }
+}
+
+/// Textures of a finished run: a common depth range for truth, mean and samples so they compare by colour.
+fn run_images(ctx: &egui::Context, r: &RunResult) -> Vec<RunImage> {
+    let mut depths: Vec<&Image> = r.samples.iter().collect();
+    depths.push(&r.mean);
+    if let Some(t) = &r.input.truth {
+        depths.push(t);
+    }
+    let range = depth_range(&depths);
+    let own = |img: &Image, zim: bool| {
+        preview::display_range(
+            img,
+            &PanelStyle {
+                zero_is_missing: zim,
+                ..Default::default()
+            },
+        )
+    };
+    let mut out = Vec::new();
+    let mut add = |title: String, img: &Image, range: (f32, f32), zim: bool| {
+        out.push(RunImage {
+            texture: texture(ctx, &format!("run-{title}"), img, range, zim),
+            title,
+            range,
+            zero_is_missing: zim,
+        });
+    };
+    add(
+        "Y imprint".into(),
+        &r.input.imprint,
+        own(&r.input.imprint, false),
+        false,
+    );
+    if let Some(t) = &r.input.truth {
+        add("X0 ground truth".into(), t, range, true);
+    }
+    add("mean X̂0".into(), &r.mean, range, true);
+    add("std X̂0".into(), &r.std, own(&r.std, false), false);
+    for (i, s) in r.samples.iter().enumerate() {
+        add(format!("sample {i}"), s, range, true);
+    }
+    out
+}
+
+impl WorkbenchApp {
+    /// Take in a dataset loader message.
+    pub(crate) fn dataset_message(&mut self, ctx: &egui::Context, msg: DatasetMsg) {
+        let generation = match &msg {
+            DatasetMsg::Thumbnail { generation, .. }
+            | DatasetMsg::Pair { generation, .. }
+            | DatasetMsg::Objects { generation, .. }
+            | DatasetMsg::Error { generation, .. } => *generation,
+        };
+        let Some(b) = self
+            .analysis
+            .dataset
+            .as_mut()
+            .filter(|b| b.generation == generation)
+        else {
+            return;
+        };
+        if let Some(e) = b.handle(ctx, msg) {
+            self.error(e);
+        }
+    }
+
+    /// Take in a finished run.
+    pub(crate) fn derendered(&mut self, ctx: &egui::Context, r: Box<RunResult>) {
+        let view = &mut self.analysis.derender;
+        if r.generation != view.generation {
+            return;
+        }
+        view.running = false;
+        view.cancel = None;
+        view.model = Some((r.model.source().to_path_buf(), r.model.clone()));
+        view.images = run_images(ctx, &r);
+        view.pending_input = None;
+        view.result = Some(r);
+        self.errors.retain(|e| !e.starts_with("de-render:"));
+    }
+
+    /// A run failed or was cancelled.
+    pub(crate) fn derender_failed(&mut self, generation: u64, message: String) {
+        let view = &mut self.analysis.derender;
+        if generation != view.generation {
+            return;
+        }
+        view.running = false;
+        view.cancel = None;
+        if message.ends_with(": cancelled") {
+            self.notice = Some("de-rendering cancelled".into());
+        } else {
+            self.error(message);
+        }
+    }
+
+    /// Open the dataset at `path` in the inspector.
+    /// Without the worker (before the first frame) only the path is kept; the first frame opens it.
+    pub(crate) fn open_dataset(&mut self, path: PathBuf) {
+        let Some(w) = &self.worker else {
+            self.inputs.dataset_path = path.display().to_string();
+            self.state.dataset.path = Some(path);
+            self.analysis.dataset = None;
+            return;
+        };
+        self.analysis.dataset_generation += 1;
+        let generation = self.analysis.dataset_generation;
+        match DatasetBrowser::open(&path, generation, w.sender(), w.context()) {
+            Ok(b) => {
+                self.inputs.dataset_path = path.display().to_string();
+                let s = &mut self.state.dataset;
+                if s.path.as_ref() != Some(&path) {
+                    s.selected = None;
+                    s.object = None;
+                }
+                if b.dataset.len(s.split) == 0 {
+                    s.split = tactile_derender::dataset::SplitName::ALL
+                        .into_iter()
+                        .find(|&x| b.dataset.len(x) > 0)
+                        .unwrap_or(s.split);
+                }
+                s.path = Some(path);
+                self.analysis.dataset = Some(b);
+                if let Some(i) = self.state.dataset.selected {
+                    self.select_pair(i);
+                }
+            }
+            Err(e) => self.error(format!("dataset: {e:#}")),
+        }
+    }
+
+    /// Select pair `index` of the shown split and load it at full size.
+    pub(crate) fn select_pair(&mut self, index: usize) {
+        let split = self.state.dataset.split;
+        self.state.dataset.selected = Some(index);
+        if let Some(b) = &mut self.analysis.dataset {
+            if index < b.dataset.len(split) {
+                b.request_pair((split, index));
+            } else {
+                self.state.dataset.selected = None;
+            }
+        }
+    }
+
+    /// Make the selected dataset pair the de-rendering input and show the De-render tab.
+    pub(crate) fn send_pair_to_derender(&mut self) -> Result<()> {
+        let b = self
+            .analysis
+            .dataset
+            .as_ref()
+            .ok_or_else(|| anyhow!("open a dataset first"))?;
+        let sel = b
+            .selected
+            .as_ref()
+            .ok_or_else(|| anyhow!("select a pair first (it is still loading)"))?;
+        let m = &sel.pair.meta;
+        self.state.derender.input = DerenderInput::DatasetPair {
+            dir: b.dir.clone(),
+            split: m.split,
+            index: m.split_index,
+        };
+        self.analysis.derender.pending_input = Some(RunInput {
+            imprint: sel.pair.imprint.clone(),
+            truth: Some(sel.pair.target.clone()),
+            label: format!("{} pair {} ({})", m.split, m.split_index, m.object),
+        });
+        self.state.view.tab = Tab::Derender;
+        Ok(())
+    }
+
+    /// Place the simulated scene where the selected dataset pair was taken.
+    pub(crate) fn place_pair_scene(&mut self) -> Result<()> {
+        let b = self
+            .analysis
+            .dataset
+            .as_ref()
+            .ok_or_else(|| anyhow!("open a dataset first"))?;
+        let sel = b
+            .selected
+            .as_ref()
+            .ok_or_else(|| anyhow!("select a pair first"))?;
+        let set = b.dataset.object_set()?;
+        let m = &sel.pair.meta;
+        let pair = PairScene {
+            object: ObjectSource::Library {
+                set: set.spec(),
+                name: m.object.clone(),
+            },
+            object_pose: m.object_pose,
+            sensor: m.sensor,
+        };
+        self.place_scene(&pair)?;
+        self.state.derender.input = DerenderInput::Scene;
+        self.state.view.tab = Tab::Scene;
+        Ok(())
+    }
+
+    /// The model checkpoint a run uses: the chosen one or the bundled default.
+    pub fn model_path(&self) -> Option<PathBuf> {
+        self.state
+            .model
+            .path
+            .clone()
+            .or_else(derender::default_model_path)
+    }
+
+    fn derender_input(&self) -> Result<InputSource> {
+        Ok(match &self.state.derender.input {
+            DerenderInput::Scene => {
+                let out = &self
+                    .sim
+                    .as_ref()
+                    .ok_or_else(|| anyhow!("the scene has not been simulated yet"))?
+                    .output;
+                InputSource::Images(RunInput {
+                    imprint: out.imprint.clone(),
+                    truth: Some(out.target.clone()),
+                    label: format!(
+                        "scene: {}, press {:.1} mm",
+                        self.state.scene.object.display_name(),
+                        self.state.scene.press * 1e3
+                    ),
+                })
+            }
+            DerenderInput::DatasetPair { dir, split, index } => {
+                match &self.analysis.derender.pending_input {
+                    Some(i) => InputSource::Images(i.clone()),
+                    None => InputSource::Pair {
+                        dir: dir.clone(),
+                        split: *split,
+                        index: *index,
+                    },
+                }
+            }
+            DerenderInput::Measurement { path } => InputSource::Npy(path.clone()),
+        })
+    }
+
+    /// Start a run with the current settings (cancelling a running one).
+    pub(crate) fn run_derender(&mut self) -> Result<()> {
+        self.state
+            .derender
+            .validate()
+            .map_err(|e| anyhow!("settings: {e}"))?;
+        let model_path = self
+            .model_path()
+            .ok_or_else(|| anyhow!("{}", derender::MISSING_DEFAULT))?;
+        let input = self.derender_input()?;
+        let w = self
+            .worker
+            .as_ref()
+            .ok_or_else(|| anyhow!("de-rendering needs the worker thread"))?;
+        let (tx, ctx) = (w.sender(), w.context());
+        self.cancel_derender();
+        let view = &mut self.analysis.derender;
+        view.generation += 1;
+        let cached = view
+            .model
+            .as_ref()
+            .filter(|(p, _)| *p == model_path)
+            .map(|(_, m)| m.clone());
+        let req = RunRequest {
+            generation: view.generation,
+            model_path,
+            cached,
+            input,
+            samples: self.state.derender.samples,
+            sampler: self.state.derender.sampler_kind(),
+            seed: self.state.derender.seed,
+        };
+        let cancel = Arc::new(AtomicBool::new(false));
+        view.cancel = Some(cancel.clone());
+        view.running = true;
+        view.progress = None;
+        view.started = Some(Instant::now());
+        derender::spawn(req, cancel, tx, ctx).inspect_err(|_| {
+            self.analysis.derender.running = false;
+        })
+    }
+
+    /// Cancel the running run, if any.
+    pub(crate) fn cancel_derender(&mut self) {
+        if let Some(c) = self.analysis.derender.cancel.take() {
+            c.store(true, Ordering::Relaxed);
+        }
+    }
+
+    /// Apply an analysis command (called from [`WorkbenchApp::apply`]).
+    pub(crate) fn apply_analysis(&mut self, cmd: Command) {
+        let result = match cmd {
+            Command::OpenDataset(path) => {
+                self.open_dataset(path);
+                Ok(())
+            }
+            Command::SetDataset(d) => {
+                let split_changed = d.split != self.state.dataset.split;
+                let selected = d.selected;
+                self.state.dataset = d;
+                match selected {
+                    Some(i) if split_changed || self.analysis.dataset.is_some() => {
+                        self.select_pair(i)
+                    }
+                    _ => {}
+                }
+                Ok(())
+            }
+            Command::SendPairToDerender => self
+                .send_pair_to_derender()
+                .map_err(|e| e.context("send to de-render")),
+            Command::PlacePairScene => self
+                .place_pair_scene()
+                .map_err(|e| e.context("place the scene")),
+            Command::SetDerender(d) => {
+                if d.input != self.state.derender.input {
+                    self.analysis.derender.pending_input = None;
+                }
+                self.state.derender = d;
+                Ok(())
+            }
+            Command::SetModel(m) => {
+                self.state.model = m;
+                if let Some(p) = &self.state.model.path {
+                    self.inputs.model_path = p.display().to_string();
+                }
+                Ok(())
+            }
+            Command::RunDerender => self.run_derender().map_err(|e| e.context("de-render")),
+            Command::CancelDerender => {
+                self.cancel_derender();
+                Ok(())
+            }
+            _ => Ok(()),
+        };
+        if let Err(e) = result {
+            self.error(format!("{e:#}"));
+        }
+    }
+}

@@ -1,0 +1,270 @@
+//! De-rendering runs (paper IV.B sampling, V.C Table I metrics) for the workbench: the model is loaded once and
+//! cached, every run samples N in-contact depths X̂0 for one imprint Y on its own thread (progress and cancel through
+//! the sampler's callback), then the per-pixel mean and standard deviation and — when the input's X0 is known — the
+//! per-sample depth scores. Nothing here touches egui textures; [`crate::panels::derender_panel`] shows the result.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::Sender;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{anyhow, Result};
+use tactile_derender::image::Image;
+use tactile_derender::model::{DiffusionModel, ModelError, SamplerKind};
+
+use crate::scores::{depth_scores, DepthScores};
+use crate::worker::{JobKind, WorkerMsg};
+
+/// The bundled model, relative to the working directory (the repository root when run with `cargo run`).
+pub const DEFAULT_MODEL: &str = "assets/models/default.safetensors";
+
+/// Where the bundled default model is, if it exists (working directory first, then the source checkout).
+pub fn default_model_path() -> Option<PathBuf> {
+    let here = PathBuf::from(DEFAULT_MODEL);
+    if here.is_file() {
+        return Some(here);
+    }
+    let built = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(DEFAULT_MODEL);
+    built.is_file().then_some(built)
+}
+
+/// The message shown when no model is chosen and the bundled one is missing.
+pub const MISSING_DEFAULT: &str =
+    "the bundled model (assets/models/default.safetensors) is not there yet — \
+     it is still being trained; open a checkpoint (.safetensors) instead";
+
+/// The imprint a run de-renders, with its ground truth when known.
+#[derive(Clone, Debug)]
+pub struct RunInput {
+    /// Y, metres.
+    pub imprint: Image,
+    /// X0, metres (simulated scenes and dataset pairs).
+    pub truth: Option<Image>,
+    /// One line for the UI ("scene: cross, press 6 mm", "train pair 3").
+    pub label: String,
+}
+
+/// Where a run's input comes from; files are read on the run's thread.
+#[derive(Clone, Debug)]
+pub enum InputSource {
+    /// Images already in memory (the simulated scene, the selected dataset pair).
+    Images(RunInput),
+    /// Pair `index` of `split` of the dataset at `dir`.
+    Pair {
+        dir: PathBuf,
+        split: tactile_derender::dataset::SplitName,
+        index: usize,
+    },
+    /// An `.npy` imprint in metres (no ground truth).
+    Npy(PathBuf),
+}
+
+impl InputSource {
+    /// Read the input.
+    pub fn resolve(self) -> Result<RunInput> {
+        match self {
+            InputSource::Images(i) => Ok(i),
+            InputSource::Pair { dir, split, index } => {
+                let ds = tactile_derender::dataset::Dataset::open(&dir)?;
+                let pair = ds
+                    .pair(split, index)
+                    .map_err(|e| anyhow!("{}: pair {index} of {split}: {e}", dir.display()))?;
+                Ok(RunInput {
+                    label: format!("{split} pair {index} ({})", pair.meta.object),
+                    imprint: pair.imprint,
+                    truth: Some(pair.target),
+                })
+            }
+            InputSource::Npy(path) => {
+                let imprint = tactile_derender::io::npy::read_image(&path)?;
+                Ok(RunInput {
+                    label: format!("measurement {}", path.display()),
+                    imprint,
+                    truth: None,
+                })
+            }
+        }
+    }
+}
+
+/// One requested run.
+pub struct RunRequest {
+    pub generation: u64,
+    /// Checkpoint to use.
+    pub model_path: PathBuf,
+    /// The already loaded model, when it is the one at `model_path`.
+    pub cached: Option<Arc<DiffusionModel>>,
+    pub input: InputSource,
+    pub samples: usize,
+    pub sampler: SamplerKind,
+    pub seed: u64,
+}
+
+/// A finished run.
+pub struct RunResult {
+    pub generation: u64,
+    pub model: Arc<DiffusionModel>,
+    pub input: RunInput,
+    /// X̂0 samples, metres.
+    pub samples: Vec<Image>,
+    /// Per-pixel mean of the samples, metres.
+    pub mean: Image,
+    /// Per-pixel (population) standard deviation of the samples, metres.
+    pub std: Image,
+    /// Scores of each sample against the ground truth (empty without one).
+    pub scores: Vec<DepthScores>,
+    /// Sampler wall time, seconds.
+    pub seconds: f64,
+    pub sampler: SamplerKind,
+    pub seed: u64,
+}
+
+/// Per-pixel mean and population standard deviation of equally sized images (`None` for an empty list).
+pub fn mean_std(samples: &[Image]) -> Option<(Image, Image)> {
+    let first = samples.first()?;
+    let (w, h) = (first.width, first.height);
+    let n = samples.len() as f64;
+    let mut mean = vec![0.0f64; w * h];
+    for s in samples {
+        for (m, &v) in mean.iter_mut().zip(&s.data) {
+            *m += f64::from(v) / n;
+        }
+    }
+    let mut var = vec![0.0f64; w * h];
+    for s in samples {
+        for ((q, &v), &m) in var.iter_mut().zip(&s.data).zip(&mean) {
+            let d = f64::from(v) - m;
+            *q += d * d / n;
+        }
+    }
+    let mean = Image::from_vec(w, h, mean.iter().map(|&v| v as f32).collect())?;
+    let std = Image::from_vec(w, h, var.iter().map(|&v| v.sqrt() as f32).collect())?;
+    Some((mean, std))
+}
+
+/// Load (unless cached), sample, and summarise one run; `cancel` stops it between steps.
+pub fn run(
+    req: RunRequest,
+    cancel: &AtomicBool,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<RunResult> {
+    let input = req.input.resolve()?;
+    let model = match req.cached {
+        Some(m) => m,
+        None => Arc::new(DiffusionModel::load(&req.model_path)?),
+    };
+    let (w, h) = model.resolution();
+    if (input.imprint.width, input.imprint.height) != (w, h) {
+        return Err(anyhow!(
+            "{}: the model works at {w}x{h} pixels but the imprint is {}x{} (set the sensor resolution to {w}x{h} \
+             or use a model trained at this resolution)",
+            req.model_path.display(),
+            input.imprint.width,
+            input.imprint.height
+        ));
+    }
+    let t0 = Instant::now();
+    let samples = model
+        .sample(
+            &input.imprint,
+            req.samples,
+            req.sampler,
+            req.seed,
+            &mut |done, total| {
+                progress(done, total);
+                !cancel.load(Ordering::Relaxed)
+            },
+        )
+        .map_err(|e| match e {
+            ModelError::Cancelled => anyhow!("cancelled"),
+            e => anyhow!("{e}"),
+        })?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let (mean, std) =
+        mean_std(&samples).ok_or_else(|| anyhow!("the sampler returned no samples"))?;
+    let scores = match &input.truth {
+        Some(truth) => samples
+            .iter()
+            .map(|s| depth_scores(s, truth))
+            .collect::<Result<Vec<_>>>()?,
+        None => Vec::new(),
+    };
+    Ok(RunResult {
+        generation: req.generation,
+        model,
+        input,
+        samples,
+        mean,
+        std,
+        scores,
+        seconds,
+        sampler: req.sampler,
+        seed: req.seed,
+    })
+}
+
+/// Start `req` on its own thread; it reports progress, the result or the error through `tx`.
+pub fn spawn(
+    req: RunRequest,
+    cancel: Arc<AtomicBool>,
+    tx: Sender<WorkerMsg>,
+    ctx: egui::Context,
+) -> Result<()> {
+    let generation = req.generation;
+    std::thread::Builder::new()
+        .name("tnd-derender".into())
+        .spawn(move || {
+            let mut last = Instant::now();
+            let mut progress = |done: usize, total: usize| {
+                // At most ~60 progress messages a second, and always the last step.
+                if done == total || last.elapsed().as_millis() >= 16 {
+                    last = Instant::now();
+                    let _ = tx.send(WorkerMsg::Progress {
+                        job: JobKind::Derender,
+                        done,
+                        total,
+                    });
+                    ctx.request_repaint();
+                }
+            };
+            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                run(req, &cancel, &mut progress)
+            }));
+            let msg = match result {
+                Ok(Ok(r)) => WorkerMsg::Derendered(Box::new(r)),
+                Ok(Err(e)) => WorkerMsg::Error {
+                    job: JobKind::Derender,
+                    generation,
+                    message: format!("de-render: {e:#}"),
+                },
+                Err(_) => WorkerMsg::Error {
+                    job: JobKind::Derender,
+                    generation,
+                    message: "de-render: internal error (the sampler panicked); please report it"
+                        .into(),
+                },
+            };
+            let _ = tx.send(msg);
+            ctx.request_repaint();
+        })
+        .map(|_| ())
+        .map_err(|e| anyhow!("cannot start the de-rendering thread: {e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_and_std_of_known_images() {
+        let a = Image::from_vec(2, 1, vec![1.0, 0.0]).unwrap();
+        let b = Image::from_vec(2, 1, vec![3.0, 0.0]).unwrap();
+        let (m, s) = mean_std(&[a, b]).unwrap();
+        assert_eq!(m.data, vec![2.0, 0.0]);
+        assert_eq!(s.data, vec![1.0, 0.0]);
+        assert!(mean_std(&[]).is_none());
+    }
+}

@@ -1,0 +1,242 @@
+//! De-render tab (paper IV.B sampling, V.C metrics): choose the model (bundled default or a checkpoint), the sampler
+//! (DDPM-250 or DDIM with K steps and η), the number of samples and the seed, and the input (the simulated scene, a
+//! dataset pair, or an `.npy` measurement); run in the background with progress and Cancel; show the samples, their
+//! per-pixel mean and standard deviation, and L1 / PSNR / SSIM per sample when the ground truth is known.
+
+use crate::analysis::RunImage;
+use crate::app::WorkbenchApp;
+use crate::command::Command;
+use crate::derender::{self, MISSING_DEFAULT};
+use crate::panels::image_card::{self, Scale};
+use crate::panels::widgets::path_field;
+use crate::state::{DerenderInput, ModelSettings, SamplerChoice};
+use crate::worker::DialogPurpose;
+
+pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    model_row(app, ui, cmds);
+    let mut d = app.state.derender.clone();
+    ui.horizontal(|ui| {
+        ui.label("sampler");
+        ui.radio_value(&mut d.sampler, SamplerChoice::Ddpm, "DDPM (250 steps)");
+        ui.radio_value(&mut d.sampler, SamplerChoice::Ddim, "DDIM");
+        ui.add_enabled_ui(d.sampler == SamplerChoice::Ddim, |ui| {
+            ui.add(egui::Slider::new(&mut d.ddim_steps, 1..=250).text("steps K"));
+            ui.add(egui::Slider::new(&mut d.eta, 0.0..=1.0).text("η"));
+        });
+        ui.separator();
+        ui.add(egui::Slider::new(&mut d.samples, 1..=64).text("samples"));
+        ui.add(egui::DragValue::new(&mut d.seed).prefix("seed "));
+    });
+    ui.horizontal(|ui| {
+        ui.label("input");
+        let scene = matches!(d.input, DerenderInput::Scene);
+        if ui.radio(scene, "simulated scene").clicked() {
+            d.input = DerenderInput::Scene;
+        }
+        match &d.input {
+            DerenderInput::DatasetPair { split, index, .. } => {
+                let _ = ui.radio(true, format!("dataset pair: {split} #{index}"));
+            }
+            _ => {
+                ui.add_enabled(false, egui::RadioButton::new(false, "dataset pair"))
+                    .on_disabled_hover_text(
+                        "select a pair in the Dataset tab and press 'Send to de-render'",
+                    );
+            }
+        }
+        let r = path_field(
+            ui,
+            "measurement",
+            &mut app.inputs.imprint_path,
+            ".npy imprint (m)",
+        );
+        let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+        if (ui.button("Use measurement").clicked() || enter) && !app.inputs.imprint_path.is_empty()
+        {
+            d.input = DerenderInput::Measurement {
+                path: app.inputs.imprint_path.trim().into(),
+            };
+        }
+        if ui.button("Browse…").clicked() {
+            cmds.push(Command::Browse(DialogPurpose::OpenDerenderImprint));
+        }
+    });
+    if d != app.state.derender {
+        cmds.push(Command::SetDerender(d));
+    }
+    run_row(app, ui, cmds);
+    ui.separator();
+    results(app, ui);
+}
+
+fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    ui.horizontal(|ui| {
+        ui.label("model");
+        let bundled = app.state.model.path.is_none();
+        if ui.radio(bundled, "bundled default").clicked() && !bundled {
+            cmds.push(Command::SetModel(ModelSettings { path: None }));
+        }
+        let r = path_field(
+            ui,
+            "checkpoint",
+            &mut app.inputs.model_path,
+            "model .safetensors",
+        );
+        let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+        if (ui.button("Use checkpoint").clicked() || enter) && !app.inputs.model_path.is_empty() {
+            cmds.push(Command::SetModel(ModelSettings {
+                path: Some(app.inputs.model_path.trim().into()),
+            }));
+        }
+        if ui.button("Open…").clicked() {
+            cmds.push(Command::Browse(DialogPurpose::OpenCheckpoint));
+        }
+    });
+    match app.model_path() {
+        Some(p) => {
+            let loaded = app
+                .analysis
+                .derender
+                .model
+                .as_ref()
+                .filter(|(q, _)| *q == p)
+                .map(|(_, m)| {
+                    let (w, h) = m.resolution();
+                    format!(" · loaded, {w}x{h} px")
+                })
+                .unwrap_or_default();
+            ui.weak(format!("using {}{loaded}", p.display()));
+        }
+        None => {
+            ui.colored_label(egui::Color32::from_rgb(230, 160, 40), MISSING_DEFAULT);
+        }
+    }
+}
+
+fn run_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    let view = &app.analysis.derender;
+    ui.horizontal(|ui| {
+        if view.running {
+            if ui.button("Cancel").clicked() {
+                cmds.push(Command::CancelDerender);
+            }
+            let (done, total) = view.progress.unwrap_or((0, 1));
+            let secs = view.started.map_or(0.0, |t| t.elapsed().as_secs_f32());
+            ui.add(
+                egui::ProgressBar::new(done as f32 / total.max(1) as f32)
+                    .desired_width(320.0)
+                    .text(format!("step {done}/{total} · {secs:.1} s")),
+            );
+        } else {
+            let can = app.model_path().is_some();
+            if ui
+                .add_enabled(can, egui::Button::new("Run de-rendering"))
+                .on_disabled_hover_text(MISSING_DEFAULT)
+                .clicked()
+            {
+                cmds.push(Command::RunDerender);
+            }
+            if let Some(i) = &view.pending_input {
+                ui.label(format!("input: {} (not sampled yet)", i.label));
+            }
+        }
+    });
+}
+
+fn results(app: &mut WorkbenchApp, ui: &mut egui::Ui) {
+    let view = &app.analysis.derender;
+    let Some(r) = view.result.as_ref() else {
+        ui.weak("No samples yet: choose the input and press 'Run de-rendering'.");
+        return;
+    };
+    let sampler = match r.sampler {
+        tactile_derender::model::SamplerKind::Ddpm => "DDPM-250".to_string(),
+        tactile_derender::model::SamplerKind::Ddim { steps, eta } => {
+            format!("DDIM-{steps} η={eta}")
+        }
+    };
+    ui.label(format!(
+        "{} · {} samples · {sampler} · seed {} · {:.2} s ({})",
+        r.input.label,
+        r.samples.len(),
+        r.seed,
+        r.seconds,
+        r.model.source().display()
+    ));
+    let n_fixed = view.images.len() - r.samples.len();
+    egui::ScrollArea::vertical()
+        .id_salt("derender_results")
+        .auto_shrink([false, false])
+        .show(ui, |ui| {
+            let big = ((ui.available_width() / n_fixed.max(1) as f32) - 80.0).clamp(64.0, 256.0);
+            ui.horizontal(|ui| {
+                for (k, img) in view.images.iter().take(n_fixed).enumerate() {
+                    card(ui, img, fixed_image(r, k), big);
+                }
+            });
+            if !r.scores.is_empty() {
+                scores_table(ui, r);
+            } else {
+                ui.weak("no ground truth for this input: no scores");
+            }
+            ui.separator();
+            let small = 96.0;
+            let cols = ((ui.available_width() / (small + 80.0)).floor() as usize).max(1);
+            for (row, chunk) in view.images[n_fixed..].chunks(cols).enumerate() {
+                ui.horizontal(|ui| {
+                    for (j, img) in chunk.iter().enumerate() {
+                        card(ui, img, &r.samples[row * cols + j], small);
+                    }
+                });
+            }
+        });
+}
+
+/// The k-th fixed image of a run: Y, X0 (when known), mean, std.
+fn fixed_image(r: &derender::RunResult, k: usize) -> &tactile_derender::image::Image {
+    let mut list = vec![&r.input.imprint];
+    if let Some(t) = &r.input.truth {
+        list.push(t);
+    }
+    list.push(&r.mean);
+    list.push(&r.std);
+    list.get(k).copied().unwrap_or(&r.mean)
+}
+
+fn card(ui: &mut egui::Ui, img: &RunImage, data: &tactile_derender::image::Image, side: f32) {
+    let scale = Scale {
+        range: img.range,
+        millimetres: true,
+        zero_is_missing: img.zero_is_missing,
+    };
+    image_card::card(ui, &img.title, img.texture.id(), data, &scale, side);
+}
+
+fn scores_table(ui: &mut egui::Ui, r: &derender::RunResult) {
+    let mean = |f: &dyn Fn(&crate::scores::DepthScores) -> f64| {
+        r.scores.iter().map(f).sum::<f64>() / r.scores.len().max(1) as f64
+    };
+    ui.label(format!(
+        "mean over samples: L1 {:.3} mm · PSNR {:.2} dB",
+        mean(&|s| s.l1_mm),
+        mean(&|s| s.psnr_db)
+    ));
+    egui::CollapsingHeader::new("scores per sample")
+        .default_open(false)
+        .show(ui, |ui| {
+            egui::Grid::new("scores").striped(true).show(ui, |ui| {
+                ui.strong("sample");
+                ui.strong("L1 (mm)");
+                ui.strong("PSNR (dB)");
+                ui.strong("SSIM");
+                ui.end_row();
+                for (i, s) in r.scores.iter().enumerate() {
+                    ui.label(i.to_string());
+                    ui.label(format!("{:.3}", s.l1_mm));
+                    ui.label(format!("{:.2}", s.psnr_db));
+                    ui.label(s.ssim.map_or("–".into(), |v| format!("{v:.4}")));
+                    ui.end_row();
+                }
+            });
+        });
+}

@@ -1,0 +1,332 @@
+//! The analysis tabs driven by egui_kittest through their labels: open a small generated dataset, filter and select a
+//! pair, send it to de-rendering, sample it with a tiny random model saved to a temporary checkpoint, cancel a run.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use egui::accesskit::Role;
+use egui_kittest::kittest::Queryable;
+use egui_kittest::Harness;
+use tactile_derender::dataset::{generate, Dataset, GenConfig, SplitName};
+use tactile_derender::model::checkpoint::{build, save_model};
+use tactile_derender::model::init::init_params;
+use tactile_derender::model::{DiffusionModel, SamplerKind, UNet2DConfig};
+use tactile_derender::objects::ObjectSet;
+use tnd_workbench::app::WorkbenchApp;
+use tnd_workbench::state::{State, Tab};
+
+fn harness(app: WorkbenchApp) -> Harness<'static, WorkbenchApp> {
+    Harness::builder()
+        .with_size([1500.0, 950.0])
+        .build_ui_state(|ui, app: &mut WorkbenchApp| app.show(ui), app)
+}
+
+/// Step until `done` holds (60 s at most).
+fn wait_for(h: &mut Harness<'_, WorkbenchApp>, what: &str, done: impl Fn(&WorkbenchApp) -> bool) {
+    let t0 = Instant::now();
+    loop {
+        h.step();
+        if done(h.state()) {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "timed out waiting for {what}: {:?}",
+            h.state().errors
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    h.run_ok();
+}
+
+/// A small noiseless dataset (64 x 64, 8 pairs) in `dir`.
+fn small_dataset(dir: &Path) -> PathBuf {
+    let data = dir.join("synth");
+    let mut sim = State::default().sim;
+    sim.signature.noise_std = 0.0;
+    let cfg = GenConfig {
+        pairs: 8,
+        seed: 3,
+        shard_pairs: 8,
+        ..GenConfig::default()
+    };
+    generate(&data, &sim, &ObjectSet::builtin(), &cfg, &|_| {}).unwrap();
+    data
+}
+
+/// A tiny randomly initialised model at 64 x 64 saved as a checkpoint.
+fn tiny_model(dir: &Path) -> PathBuf {
+    let cfg = UNet2DConfig {
+        sample_size: 64,
+        block_out_channels: vec![4, 8],
+        down_block_types: vec!["DownBlock2D".into(), "DownBlock2D".into()],
+        up_block_types: vec!["UpBlock2D".into(), "UpBlock2D".into()],
+        layers_per_block: 1,
+        norm_num_groups: 2,
+        attention_head_dim: Some(4),
+        ..UNet2DConfig::default()
+    };
+    let vars = build(&cfg, &candle_core::Device::Cpu).unwrap();
+    init_params(&vars.varmap, 11).unwrap();
+    let path = dir.join("tiny.safetensors");
+    save_model(&path, &vars.varmap, &cfg, Default::default()).unwrap();
+    path
+}
+
+fn type_into(h: &mut Harness<'_, WorkbenchApp>, field: &str, text: &str) {
+    h.get_by_role_and_label(Role::TextInput, field).click();
+    h.run_ok();
+    h.get_by_role_and_label(Role::TextInput, field)
+        .type_text(text);
+    h.run_ok();
+}
+
+fn open_dataset(h: &mut Harness<'_, WorkbenchApp>, data: &Path) {
+    h.get_by_label("Dataset").click();
+    h.run_ok();
+    type_into(h, "Dataset", &data.display().to_string());
+    h.get_by_label("Open dataset").click();
+    h.run_ok();
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+}
+
+#[test]
+fn dataset_inspector_shows_filters_and_selects_pairs() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = small_dataset(dir.path());
+    let ds = Dataset::open(&data).unwrap();
+    let n_train = ds.len(SplitName::Train);
+    assert!(
+        n_train >= 2,
+        "the generated dataset has {n_train} train pairs"
+    );
+    let first = ds.pair(SplitName::Train, 0).unwrap();
+
+    let mut h = harness(WorkbenchApp::default());
+    open_dataset(&mut h, &data);
+    assert_eq!(h.state().state.view.tab, Tab::Dataset);
+    // Every thumbnail on screen gets decoded (the grid holds them all at this size).
+    wait_for(&mut h, "thumbnails", |a| {
+        a.analysis
+            .dataset
+            .as_ref()
+            .is_some_and(|b| b.cached() == n_train)
+    });
+    assert!(h
+        .query_by_label(&format!(
+            "{n_train} of {n_train} pairs shown · {n_train} thumbnails cached"
+        ))
+        .is_some());
+
+    // Select pair 0: metadata and the four full-size images.
+    h.get_by_label("train pair 0").click();
+    wait_for(&mut h, "the selected pair", |a| {
+        a.analysis
+            .dataset
+            .as_ref()
+            .is_some_and(|b| b.selected.is_some())
+    });
+    let sel = h
+        .state()
+        .analysis
+        .dataset
+        .as_ref()
+        .unwrap()
+        .selected
+        .as_ref()
+        .unwrap();
+    assert_eq!(
+        sel.pair, first,
+        "the shown pair is not the dataset's pair 0"
+    );
+    for title in [
+        "Y imprint",
+        "S signature",
+        "X0 = M·D target",
+        "M contact mask",
+    ] {
+        assert!(h.query_by_label(title).is_some(), "no {title}");
+    }
+    assert!(h
+        .query_by_label_contains(&format!("object {} at", first.meta.object))
+        .is_some());
+
+    // Filter by pair 0's object: exactly the train pairs of that object are listed.
+    let want: Vec<usize> = (0..n_train)
+        .filter(|&i| ds.pair(SplitName::Train, i).unwrap().meta.object == first.meta.object)
+        .collect();
+    let mut s = h.state().state.dataset.clone();
+    s.object = Some(first.meta.object.clone());
+    h.state_mut()
+        .apply(tnd_workbench::command::Command::SetDataset(s));
+    h.run_ok();
+    let shown: Vec<usize> = h
+        .state_mut()
+        .analysis
+        .dataset
+        .as_mut()
+        .unwrap()
+        .filtered(SplitName::Train, Some(&first.meta.object))
+        .to_vec();
+    assert_eq!(shown, want);
+    assert!(h
+        .query_by_label_contains(&format!("{} of {n_train} pairs shown", want.len()))
+        .is_some());
+
+    // A directory that is not a dataset: one error naming it.
+    let bogus = dir.path().join("not-a-dataset");
+    std::fs::create_dir_all(&bogus).unwrap();
+    h.state_mut().inputs.dataset_path = bogus.display().to_string();
+    h.run_ok();
+    h.get_by_label("Open dataset").click();
+    h.run_ok();
+    let errors = &h.state().errors;
+    assert!(
+        errors
+            .iter()
+            .any(|e| e.contains("not-a-dataset") && e.contains("manifest.json")),
+        "{errors:?}"
+    );
+}
+
+#[test]
+fn de_rendering_a_dataset_pair_with_a_tiny_model_matches_the_core_sampler() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = small_dataset(dir.path());
+    let model_path = tiny_model(dir.path());
+    let pair = Dataset::open(&data)
+        .unwrap()
+        .pair(SplitName::Train, 1)
+        .unwrap();
+
+    let mut h = harness(WorkbenchApp::default());
+    open_dataset(&mut h, &data);
+    h.get_by_label("train pair 1").click();
+    wait_for(&mut h, "the selected pair", |a| {
+        a.analysis
+            .dataset
+            .as_ref()
+            .is_some_and(|b| b.selected.is_some())
+    });
+    h.get_by_label("Send to de-render").click();
+    h.run_ok();
+    assert_eq!(h.state().state.view.tab, Tab::Derender);
+    assert!(h.query_by_label("dataset pair: train #1").is_some());
+
+    type_into(&mut h, "checkpoint", &model_path.display().to_string());
+    h.get_by_label("Use checkpoint").click();
+    h.run_ok();
+    let mut d = h.state().state.derender.clone();
+    d.ddim_steps = 4;
+    d.samples = 3;
+    d.seed = 7;
+    h.state_mut()
+        .apply(tnd_workbench::command::Command::SetDerender(d));
+    h.run_ok();
+    h.get_by_label("Run de-rendering").click();
+    h.run_ok();
+    wait_for(&mut h, "the samples", |a| !a.analysis.derender.running);
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    let r = h.state().analysis.derender.result.as_ref().unwrap();
+
+    // The same samples as the core's sampler with the same model, input, sampler and seed.
+    let model = DiffusionModel::load(&model_path).unwrap();
+    let want = model
+        .sample(
+            &pair.imprint,
+            3,
+            SamplerKind::Ddim { steps: 4, eta: 0.0 },
+            7,
+            &mut |_, _| true,
+        )
+        .unwrap();
+    assert_eq!(r.samples, want);
+    // Per-pixel mean and std of the samples (checked at one pixel by hand).
+    let k = 64 * 32 + 30;
+    let v: Vec<f64> = want.iter().map(|s| f64::from(s.data[k])).collect();
+    let mean = v.iter().sum::<f64>() / 3.0;
+    let std = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 3.0).sqrt();
+    assert!((f64::from(r.mean.data[k]) - mean).abs() < 1e-6);
+    assert!((f64::from(r.std.data[k]) - std).abs() < 1e-6);
+    // Scores against the pair's X0: L1 is the mean absolute difference in mm.
+    assert_eq!(r.scores.len(), 3);
+    let l1: f64 = want[0]
+        .data
+        .iter()
+        .zip(&pair.target.data)
+        .map(|(a, b)| f64::from((a - b).abs()))
+        .sum::<f64>()
+        / want[0].data.len() as f64
+        * 1e3;
+    assert!(
+        (r.scores[0].l1_mm - l1).abs() < 1e-6,
+        "{} vs {l1}",
+        r.scores[0].l1_mm
+    );
+    for title in [
+        "Y imprint",
+        "X0 ground truth",
+        "mean X̂0",
+        "std X̂0",
+        "sample 2",
+    ] {
+        assert!(h.query_by_label(title).is_some(), "no {title}");
+    }
+    assert!(h.query_by_label_contains("mean over samples: L1").is_some());
+}
+
+#[test]
+fn a_long_run_can_be_cancelled_and_a_bad_checkpoint_shows_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let model_path = tiny_model(dir.path());
+    let mut state = State::default();
+    state.view.tab = Tab::Derender;
+    state.derender.sampler = tnd_workbench::state::SamplerChoice::Ddpm;
+    state.derender.samples = 16;
+    state.model.path = Some(model_path);
+    let mut h = harness(WorkbenchApp::with_state(state));
+    wait_for(&mut h, "the simulation", |a| a.sim.is_some());
+    h.get_by_label("Run de-rendering").click();
+    h.run_ok();
+    wait_for(&mut h, "progress", |a| {
+        a.analysis.derender.progress.is_some()
+    });
+    h.get_by_label("Cancel").click();
+    wait_for(&mut h, "the cancel", |a| !a.analysis.derender.running);
+    let app = h.state();
+    assert!(app.analysis.derender.result.is_none());
+    assert!(app.errors.is_empty(), "{:?}", app.errors);
+    assert_eq!(app.notice.as_deref(), Some("de-rendering cancelled"));
+    let (done, total) = app.analysis.derender.progress.unwrap();
+    assert!(done < total && total == 250, "{done}/{total}");
+
+    // A truncated checkpoint: one error naming the file.
+    let bad = dir.path().join("bad.safetensors");
+    std::fs::write(&bad, b"\x10\x00\x00\x00").unwrap();
+    type_into(&mut h, "checkpoint", &bad.display().to_string());
+    h.get_by_label("Use checkpoint").click();
+    h.run_ok();
+    h.get_by_label("Run de-rendering").click();
+    wait_for(&mut h, "the error", |a| !a.analysis.derender.running);
+    let errors = &h.state().errors;
+    assert!(
+        errors.iter().any(|e| e.contains("bad.safetensors")),
+        "{errors:?}"
+    );
+}
+
+#[test]
+fn without_a_checkpoint_the_missing_bundled_model_is_explained() {
+    let mut state = State::default();
+    state.view.tab = Tab::Derender;
+    let mut h = harness(WorkbenchApp::with_state(state));
+    h.run_ok();
+    match tnd_workbench::derender::default_model_path() {
+        None => assert!(h
+            .query_by_label(tnd_workbench::derender::MISSING_DEFAULT)
+            .is_some()),
+        Some(p) => assert!(h
+            .query_by_label_contains(&format!("using {}", p.display()))
+            .is_some()),
+    }
+}
