@@ -81,6 +81,8 @@ pub struct Launch {
     pub cpu_3d: bool,
     /// Print the timings as one JSON line when the window closes.
     pub print_timings: bool,
+    /// Start a de-rendering run (the session's settings) once the scene is simulated (screenshots, timings).
+    pub run_derender: bool,
 }
 
 /// A pending `--screenshot`.
@@ -127,6 +129,8 @@ pub struct WorkbenchApp {
     printed: Option<(Instant, usize)>,
     last_frame: Option<Instant>,
     frames: u64,
+    /// A de-rendering run to start once the scene is simulated (`--run-derender`).
+    auto_run: bool,
 }
 
 impl Default for WorkbenchApp {
@@ -162,6 +166,7 @@ impl WorkbenchApp {
             printed: None,
             last_frame: None,
             frames: 0,
+            auto_run: false,
         };
         app.replace_state(state);
         app
@@ -197,6 +202,7 @@ impl WorkbenchApp {
         }
         app.persist = launch.screenshot.is_none();
         app.print_timings = launch.print_timings;
+        app.auto_run = launch.run_derender;
         app.screenshot = launch.screenshot.map(|(out, result)| ScreenshotJob {
             out,
             requested: false,
@@ -343,6 +349,10 @@ impl WorkbenchApp {
             }
         }
         let mut commands = Vec::new();
+        if self.auto_run && self.sim.is_some() && !self.busy() {
+            self.auto_run = false;
+            commands.push(Command::RunDerender);
+        }
         panels::show_all(self, ui, &mut commands);
         for cmd in commands {
             self.apply(cmd);
@@ -378,7 +388,15 @@ impl WorkbenchApp {
     }
 
     fn drive_screenshot(&mut self, ctx: &egui::Context) {
-        let ready = !self.busy() && self.sim.is_some() && self.frames > 4;
+        let dataset_loading = self.analysis.dataset.as_ref().is_some_and(|b| {
+            b.missing > 0 || (self.state.dataset.selected.is_some() && b.selected.is_none())
+        }) || (self.state.dataset.path.is_some()
+            && self.analysis.dataset.is_none());
+        let ready = !self.busy()
+            && !self.auto_run
+            && !dataset_loading
+            && self.sim.is_some()
+            && self.frames > 4;
         let Some(job) = &mut self.screenshot else {
             return;
         };

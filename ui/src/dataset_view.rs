@@ -117,6 +117,8 @@ pub struct DatasetBrowser {
     pub selected: Option<SelectedPair>,
     /// Thumbnails decoded and uploaded so far (for the timings).
     pub uploaded: usize,
+    /// Thumbnails the grid missed in its last frame.
+    pub missing: usize,
 }
 
 impl Drop for DatasetBrowser {
@@ -174,6 +176,7 @@ impl DatasetBrowser {
             filtered: None,
             selected: None,
             uploaded: 0,
+            missing: 0,
         })
     }
 
@@ -223,7 +226,8 @@ impl DatasetBrowser {
     }
 
     /// Replace the loader's thumbnail queue with what the grid misses now (in display order).
-    pub fn request_thumbs(&self, missing: Vec<PairKey>) {
+    pub fn request_thumbs(&mut self, missing: Vec<PairKey>) {
+        self.missing = missing.len();
         if let Ok(mut q) = self.shared.queue.lock() {
             if q.thumbs != missing {
                 q.thumbs = missing;

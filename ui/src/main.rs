@@ -26,6 +26,10 @@ struct Args {
     /// Present frames without waiting for vertical sync (frame-time measurements).
     #[arg(long)]
     no_vsync: bool,
+    /// Start a de-rendering run with the session's settings once the scene is simulated (screenshots of the
+    /// De-render tab, frame timings while sampling).
+    #[arg(long)]
+    run_derender: bool,
 }
 
 fn main() -> Result<()> {
@@ -54,6 +58,7 @@ fn main() -> Result<()> {
                 screenshot,
                 cpu_3d: args.cpu_3d,
                 print_timings: args.timings,
+                run_derender: args.run_derender,
             };
             Ok(Box::new(WorkbenchApp::new(cc, launch)))
         }),

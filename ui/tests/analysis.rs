@@ -1,6 +1,8 @@
 //! The analysis tabs driven by egui_kittest through their labels: open a small generated dataset, filter and select a
 //! pair, send it to de-rendering, sample it with a tiny random model saved to a temporary checkpoint, cancel a run.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
