@@ -87,14 +87,18 @@ fn depth_range(images: &[&Image]) -> (f32, f32) {
     }
 }
 
-/// Textures of a finished run: a common depth range for truth, mean and samples so they compare by colour.
+/// Textures of a finished run: one depth range for truth, mean and samples so they compare by colour.
 fn run_images(ctx: &egui::Context, r: &RunResult) -> Vec<RunImage> {
     let mut depths: Vec<&Image> = r.samples.iter().collect();
     depths.push(&r.mean);
     if let Some(t) = &r.input.truth {
         depths.push(t);
     }
-    let range = depth_range(&depths);
+    // With a ground truth, its range (samples outside it saturate); else the range of all samples.
+    let range = match &r.input.truth {
+        Some(t) => depth_range(&[t]),
+        None => depth_range(&depths),
+    };
     let own = |img: &Image, zim: bool| {
         preview::display_range(
             img,
@@ -122,8 +126,8 @@ fn run_images(ctx: &egui::Context, r: &RunResult) -> Vec<RunImage> {
     if let Some(t) = &r.input.truth {
         add("X0 ground truth".into(), t, range, true);
     }
-    add("mean X̂0".into(), &r.mean, range, true);
-    add("std X̂0".into(), &r.std, own(&r.std, false), false);
+    add("sample mean".into(), &r.mean, range, true);
+    add("sample std".into(), &r.std, own(&r.std, false), false);
     for (i, s) in r.samples.iter().enumerate() {
         add(format!("sample {i}"), s, range, true);
     }

@@ -15,6 +15,7 @@ pub mod dialogs;
 pub mod images;
 pub mod measured;
 pub mod panels;
+pub mod pose_view;
 pub mod scores;
 pub mod session;
 pub mod state;
