@@ -152,7 +152,10 @@ fn interrupted_run_resumes_to_the_uninterrupted_result() {
     assert!(report.kept_chunks >= 1, "{report:?}");
     assert!(report.generated < cfg.pairs, "{report:?}");
     assert_same_tree(&full, &part);
-    // Running the finished command again changes nothing.
+    // Running the finished command again changes nothing, also after a kill between writing manifest.json and
+    // removing progress.json, or during a write.
+    std::fs::write(part.join(PROGRESS_FILE), b"{}").unwrap();
+    std::fs::write(part.join(".manifest.json.tmp.99999"), b"{").unwrap();
     let again = generate(&part, &sim_config(), &set, &cfg, &|_| {}).unwrap();
     assert!(again.already_complete && again.generated == 0);
     assert_same_tree(&full, &part);

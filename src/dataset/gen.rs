@@ -125,6 +125,18 @@ pub fn generate(
         for s in &existing.shards {
             shard::verify_file(out, s)?;
         }
+        // A run killed between writing manifest.json and removing progress.json leaves both.
+        if progress_path.exists() {
+            std::fs::remove_file(&progress_path)
+                .map_err(|e| DatasetError::io(&progress_path, e))?;
+        }
+        for dir in [
+            out.to_path_buf(),
+            out.join(SHARDS_DIR),
+            out.join(OBJECTS_DIR),
+        ] {
+            remove_stale_temp_files(&dir)?;
+        }
         progress(config.pairs);
         report.already_complete = true;
         report.kept_chunks = config.chunks();
