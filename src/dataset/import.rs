@@ -408,6 +408,11 @@ fn load_image(from: &Path, rel: &str, config: &ImportConfig) -> Result<Image, Da
         path: path.clone(),
         message,
     };
+    if !path.is_file() {
+        return Err(bad(
+            "file not found (paths in the pair table are relative to its directory)".into(),
+        ));
+    }
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -441,9 +446,6 @@ fn load_image(from: &Path, rel: &str, config: &ImportConfig) -> Result<Image, Da
             ))
         }
     };
-    if !path.is_file() {
-        return Err(bad("file not found".into()));
-    }
     let scale = scale as f32;
     Ok(Image {
         data: img.data.iter().map(|&x| x * scale).collect(),
