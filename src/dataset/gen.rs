@@ -355,7 +355,7 @@ pub(crate) fn refuse_foreign_dir(out: &Path) -> Result<(), DatasetError> {
 }
 
 /// [`remove_stale_temp_files`] in the dataset root, `shards/` and `objects/`.
-fn remove_all_stale_temp_files(out: &Path) -> Result<(), DatasetError> {
+pub(crate) fn remove_all_stale_temp_files(out: &Path) -> Result<(), DatasetError> {
     for dir in [
         out.to_path_buf(),
         out.join(SHARDS_DIR),

@@ -25,12 +25,13 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::gen::{exported_manifest, refuse_foreign_dir};
+use super::gen::{exported_manifest, refuse_foreign_dir, remove_all_stale_temp_files};
 use super::manifest::{
     DatasetKind, DatasetManifest, ImportInfo, ObjectSetInfo, SplitCounts, FORMAT_NAME,
     FORMAT_VERSION, MANIFEST_FILE, OBJECTS_DIR,
 };
 use super::resample;
+use super::shard::SHARDS_DIR;
 use super::shard::{self, Record};
 use super::split;
 use super::{DatasetError, SplitName};
@@ -104,7 +105,7 @@ pub fn import(
             message: "the pair table has no rows".into(),
         });
     }
-    refuse_foreign_dir(out)?;
+    refuse_unless_interrupted_import(out)?;
     let sim = Simulator::new(sim_config.clone())?;
     let camera = &sim_config.camera;
     let (w, h) = camera.resolution;
@@ -340,6 +341,26 @@ impl RowReader<'_> {
             mask,
         };
         Ok((record, explicit_split, size))
+    }
+}
+
+/// Import writes every shard before `manifest.json`, so a directory holding only `shards/`, `objects/` and temporary
+/// files is an interrupted import of ours and is overwritten (the same command resumes by starting over); anything
+/// else must be missing or empty.
+fn refuse_unless_interrupted_import(out: &Path) -> Result<(), DatasetError> {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return refuse_foreign_dir(out);
+    };
+    let ours = entries.flatten().all(|e| {
+        let name = e.file_name().to_string_lossy().into_owned();
+        name == SHARDS_DIR
+            || name == OBJECTS_DIR
+            || (name.starts_with('.') && name.contains(".tmp."))
+    });
+    if ours && !out.join(MANIFEST_FILE).exists() {
+        remove_all_stale_temp_files(out)
+    } else {
+        refuse_foreign_dir(out)
     }
 }
 
