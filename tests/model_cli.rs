@@ -1,6 +1,8 @@
 //! `tnd model verify` and `tnd sample` end to end on the small diffusers fixture (8 × 8 model), and the sampling
 //! API's determinism, batch layout and cancellation.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use std::path::Path;
 use std::process::Command;
 
