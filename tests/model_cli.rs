@@ -149,3 +149,24 @@ fn sampling_api_batches_seeds_and_cancels() {
         .unwrap();
     assert!(matches!(e, ModelError::NonFinite { .. }), "{e}");
 }
+
+#[test]
+fn model_can_move_to_a_worker_thread() {
+    fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<DiffusionModel>();
+    let model = DiffusionModel::load(Path::new(MODEL)).unwrap();
+    let n = std::thread::spawn(move || {
+        model.sample(
+            &Image::filled(8, 8, 0.0),
+            2,
+            SamplerKind::Ddim { steps: 2, eta: 0.0 },
+            0,
+            &mut |_, _| true,
+        )
+    })
+    .join()
+    .unwrap()
+    .unwrap()
+    .len();
+    assert_eq!(n, 2);
+}
