@@ -1,6 +1,8 @@
 //! Cosine schedule and DDPM / DDIM steps against diffusers (fixture `tests/fixtures/sched_ref.safetensors`, made by
 //! `tests/fixtures/make_sched_fixture.py`).
 
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use std::path::Path;
 use std::sync::Arc;
 

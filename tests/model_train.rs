@@ -1,6 +1,8 @@
 //! Training: the loss falls on a learnable synthetic task, a run killed after a checkpoint resumes to exactly the
 //! weights of an uninterrupted run, and `init` fine-tunes from a saved model.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 

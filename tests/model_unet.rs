@@ -1,6 +1,8 @@
 //! U-Net parity with diffusers `UNet2DModel` (fixtures made by `../shared/peers/unet_torch.py`, see
 //! `tests/fixtures/README.md`), our convolution vs candle's, and checkpoint error handling.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use std::path::Path;
 
 use candle_core::{Device, Tensor, Var};
@@ -263,4 +265,47 @@ fn fused_group_norm_silu_matches_candle_nn() {
             assert!(d < 1e-4, "gradient silu={silu}: {d}");
         }
     }
+}
+
+#[test]
+fn loads_a_diffusers_save_pretrained_directory() {
+    // `UNet2DModel.save_pretrained` layout: config.json + diffusion_pytorch_model.safetensors without our metadata.
+    let dir = tempfile::tempdir().unwrap();
+    let src = read_tensors(Path::new("tests/fixtures/unet_small/unet_ref.safetensors")).unwrap();
+    let tensors = src
+        .tensors
+        .iter()
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    tactile_derender::model::checkpoint::write_tensors(
+        &dir.path().join("diffusion_pytorch_model.safetensors"),
+        &tensors,
+        Default::default(),
+    )
+    .unwrap();
+    std::fs::copy(
+        "tests/fixtures/unet_small/unet_ref_config.json",
+        dir.path().join("config.json"),
+    )
+    .unwrap();
+    let model = DiffusionModel::load(dir.path()).unwrap();
+    let io = read_tensors(Path::new(
+        "tests/fixtures/unet_small/unet_ref_io.safetensors",
+    ))
+    .unwrap();
+    let t: Vec<f32> = io.tensors["timesteps"]
+        .to_vec1::<i64>()
+        .unwrap()
+        .iter()
+        .map(|&t| t as f32)
+        .collect();
+    let out = model.unet().forward(&io.tensors["input"], &t).unwrap();
+    assert!(max_abs(&out, &io.tensors["output"]) <= 1e-4);
+    // Without any config: a config error naming the file.
+    std::fs::remove_file(dir.path().join("config.json")).unwrap();
+    let e = DiffusionModel::load(dir.path()).err().unwrap();
+    assert!(matches!(e, ModelError::Config { .. }), "{e}");
+    assert!(e
+        .to_string()
+        .contains("diffusion_pytorch_model.safetensors"));
 }

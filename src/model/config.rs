@@ -73,8 +73,9 @@ pub struct UNet2DConfig {
 }
 
 impl Default for UNet2DConfig {
-    /// The shipped default architecture (see `assets/models/README.md`): 64 × 64, three levels 32/64/64, one ResNet
-    /// per level, attention at the coarsest level and in the middle block.
+    /// The shipped default architecture (see `assets/models/README.md`): 64 × 64, four levels 16/32/64/64, one ResNet
+    /// per level, attention at the coarsest level (8 × 8) and in the middle block — the peer script's "smaller U-Net"
+    /// (1.09 M parameters), so that PyTorch figures exist for it.
     fn default() -> Self {
         Self {
             sample_size: 64,
@@ -88,6 +89,7 @@ impl Default for UNet2DConfig {
             down_block_types: vec![
                 "DownBlock2D".into(),
                 "DownBlock2D".into(),
+                "DownBlock2D".into(),
                 "AttnDownBlock2D".into(),
             ],
             mid_block_type: Some("UNetMidBlock2D".into()),
@@ -95,8 +97,9 @@ impl Default for UNet2DConfig {
                 "AttnUpBlock2D".into(),
                 "UpBlock2D".into(),
                 "UpBlock2D".into(),
+                "UpBlock2D".into(),
             ],
-            block_out_channels: vec![32, 64, 64],
+            block_out_channels: vec![16, 32, 64, 64],
             layers_per_block: 1,
             mid_block_scale_factor: 1.0,
             downsample_padding: 1,

@@ -1,4 +1,5 @@
-//! 2-D convolution of the U-Net (paper IV.B), with our own CPU path: im2col + one large GEMM.
+//! 2-D convolution of the U-Net (paper IV.B) and the choice of implementation: candle's `conv2d`, a full im2col +
+//! one large GEMM (this file), or the cache-tiled custom op of [`super::conv_tiled`] (the default).
 //!
 //! candle 0.11's CPU `conv2d` reaches ~20 GFLOP/s forward and its backward goes through `conv_transpose2d`
 //! (~10 GFLOP/s), while its GEMM reaches ~80 GFLOP/s on the same 2 cores. Here a convolution is

@@ -175,6 +175,13 @@ struct SendPtr(*mut f32);
 unsafe impl Send for SendPtr {}
 unsafe impl Sync for SendPtr {}
 
+impl SendPtr {
+    /// The pointer (a method, so closures capture the whole `Sync` wrapper rather than the raw field).
+    fn ptr(self) -> *mut f32 {
+        self.0
+    }
+}
+
 impl CustomOp3 for TiledConv {
     fn name(&self) -> &'static str {
         "conv2d-tiled"
@@ -220,7 +227,6 @@ impl CustomOp3 for TiledConv {
                 let t = d.tile.min(hw - p0);
                 let xb = &x[b * d.c * d.h * d.w..(b + 1) * d.c * d.h * d.w];
                 im2col_tile(xb, &d, g, p0, t, &mut cols[..d.k * t]);
-                let yp = yp;
                 // SAFETY: dst is columns p0..p0+t of sample b's [Cout, HW] block, disjoint across work items; all
                 // pointers stay inside their buffers for the given strides and sizes.
                 unsafe {
@@ -228,7 +234,7 @@ impl CustomOp3 for TiledConv {
                         co,
                         t,
                         d.k,
-                        yp.0.add(b * co * hw + p0),
+                        yp.ptr().add(b * co * hw + p0),
                         1,
                         hw as isize,
                         true,

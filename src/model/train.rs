@@ -463,11 +463,10 @@ fn save_run(run_dir: &Path, run: &Run, tc: &TrainConfig) -> Result<(), ModelErro
     match &run.ema {
         Some(ema) => {
             // The model file holds the EMA weights under the plain keys.
-            let mut plain: BTreeMap<String, Tensor> = ema.clone();
+            let plain: BTreeMap<String, Tensor> = ema.clone();
             let mut m = meta;
             m.insert("config".into(), run.cfg.to_json()?);
             m.insert("weights".into(), "ema".into());
-            plain.retain(|_, _| true);
             write_tensors(&model, &plain, m)
         }
         None => save_model(&model, &run.vars.varmap, &run.cfg, meta),

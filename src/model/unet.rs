@@ -161,4 +161,44 @@ impl UNet2DModel {
         let h = self.conv_norm_out.forward_silu(&h)?;
         self.conv_out.forward(&h)
     }
+
+    /// Multiply-add FLOPs (2 per MAC) of one forward pass of one `sample_size`² sample: convolutions, linear layers
+    /// and attention products (normalisations and activations are not counted).
+    pub fn flops_per_sample(&self) -> f64 {
+        let conv = |c: &Conv2d, out_px: usize| 2.0 * c.weight.elem_count() as f64 * out_px as f64;
+        let resnet = |r: &super::resnet::ResnetBlock2D, px: usize| {
+            conv(&r.conv1, px)
+                + conv(&r.conv2, px)
+                + r.conv_shortcut.as_ref().map_or(0.0, |c| conv(c, px))
+        };
+        let attn = |a: &super::attention::Attention, px: usize| {
+            let c = a.group_norm.weight.elem_count() as f64;
+            let n = px as f64;
+            8.0 * n * c * c + 4.0 * n * n * c
+        };
+        let s = self.config.sample_size;
+        let mut f = conv(&self.conv_in, s * s) + conv(&self.conv_out, s * s);
+        let mut px = s * s;
+        for b in &self.down_blocks {
+            f += b.resnets.iter().map(|r| resnet(r, px)).sum::<f64>();
+            f += b.attentions.iter().map(|a| attn(a, px)).sum::<f64>();
+            if let Some(d) = &b.downsamplers {
+                px /= 4;
+                f += conv(&d.conv, px);
+            }
+        }
+        if let Some(m) = &self.mid_block {
+            f += m.resnets.iter().map(|r| resnet(r, px)).sum::<f64>();
+            f += m.attentions.iter().map(|a| attn(a, px)).sum::<f64>();
+        }
+        for b in &self.up_blocks {
+            f += b.resnets.iter().map(|r| resnet(r, px)).sum::<f64>();
+            f += b.attentions.iter().map(|a| attn(a, px)).sum::<f64>();
+            if let Some(u) = &b.upsamplers {
+                px *= 4;
+                f += conv(&u.conv, px);
+            }
+        }
+        f
+    }
 }

@@ -41,6 +41,7 @@ enum Command {
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     tactile_derender::model::alloc::keep_freed_memory();
+    tactile_derender::model::alloc::prefer_inline_elementwise();
     let result = match cli.command {
         Command::Sim(a) => sim_cmd::run(*a),
         Command::Objects(a) => objects_cmd::run(a),

@@ -83,7 +83,7 @@ fn verify(a: &VerifyArgs) -> Result<()> {
         json!({"max_abs_diff": d, "model": a.model, "io": a.io})
     );
     if let Some(tol) = a.tol {
-        if !(d <= tol) {
+        if d.is_nan() || d > tol {
             bail!("max |Δ| {d} exceeds the tolerance {tol}");
         }
     }

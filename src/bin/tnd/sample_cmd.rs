@@ -143,7 +143,7 @@ fn grid_png(imprint: &Image, samples: &[Image], mean: &Image, std: &Image) -> Rg
     let rows: Vec<RgbImage> = panels.chunks(8).map(|c| side_by_side(c, &[])).collect();
     let width = rows.iter().map(|r| r.width()).max().unwrap_or(1);
     let height = rows.iter().map(|r| r.height()).sum::<u32>().max(1);
-    let mut out = RgbImage::new(width, height);
+    let mut out = RgbImage::from_pixel(width, height, image::Rgb([255, 255, 255]));
     let mut y0 = 0;
     for r in &rows {
         image::imageops::overlay(&mut out, r, 0, i64::from(y0));

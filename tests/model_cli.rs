@@ -1,0 +1,172 @@
+//! `tnd model verify` and `tnd sample` end to end on the small diffusers fixture (8 × 8 model), and the sampling
+//! API's determinism, batch layout and cancellation.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::Path;
+use std::process::Command;
+
+use tactile_derender::image::Image;
+use tactile_derender::io::npy;
+use tactile_derender::model::{DiffusionModel, ModelError, SamplerKind};
+
+const MODEL: &str = "tests/fixtures/unet_small/unet_ref.safetensors";
+
+fn tnd(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_tnd"))
+        .args(args)
+        .output()
+        .expect("run tnd")
+}
+
+#[test]
+fn verify_prints_max_abs_diff() {
+    let out = tnd(&[
+        "model",
+        "verify",
+        "--model",
+        MODEL,
+        "--io",
+        "tests/fixtures/unet_small/unet_ref_io.safetensors",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v["max_abs_diff"].as_f64().unwrap() <= 1e-4);
+    // A mismatched reference (other architecture's io) is reported as an error naming the file, not a panic.
+    let out = tnd(&[
+        "model",
+        "verify",
+        "--model",
+        MODEL,
+        "--io",
+        "tests/fixtures/sched_ref.safetensors",
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("sched_ref.safetensors"));
+}
+
+#[test]
+fn sample_writes_deterministic_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let imprint =
+        Image::from_vec(8, 8, (0..64).map(|i| 0.0002 * (i % 8) as f32).collect()).unwrap();
+    let ip = dir.path().join("imprint.npy");
+    npy::write_image(&ip, &imprint).unwrap();
+    let run = |out: &str| {
+        let o = dir.path().join(out);
+        let r = tnd(&[
+            "sample",
+            "--model",
+            MODEL,
+            "--imprint",
+            ip.to_str().unwrap(),
+            "--n",
+            "4",
+            "--sampler",
+            "ddim",
+            "--steps",
+            "5",
+            "--eta",
+            "0.5",
+            "--seed",
+            "3",
+            "--out",
+            o.to_str().unwrap(),
+        ]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        o
+    };
+    let (a, b) = (run("a"), run("b"));
+    for f in ["samples.npy", "mean.npy", "std.npy", "grid.png"] {
+        assert!(a.join(f).is_file(), "{f}");
+    }
+    let sa = std::fs::read(a.join("samples.npy")).unwrap();
+    assert_eq!(
+        sa,
+        std::fs::read(b.join("samples.npy")).unwrap(),
+        "same seed, same samples"
+    );
+    let samples = npy::read(&a.join("samples.npy")).unwrap();
+    assert_eq!(samples.shape, vec![4, 8, 8]);
+    let mean = npy::read_image(&a.join("mean.npy")).unwrap();
+    for p in 0..64 {
+        let m: f32 = (0..4).map(|k| samples.data[k * 64 + p]).sum::<f32>() / 4.0;
+        assert!((m - mean.data[p]).abs() < 1e-6);
+    }
+    // Wrong imprint size: a clear error.
+    let small = dir.path().join("small.npy");
+    npy::write_image(&small, &Image::filled(4, 4, 0.0)).unwrap();
+    let r = tnd(&[
+        "sample",
+        "--model",
+        MODEL,
+        "--imprint",
+        small.to_str().unwrap(),
+        "--out",
+        "x",
+    ]);
+    assert!(!r.status.success());
+    assert!(String::from_utf8_lossy(&r.stderr).contains("8x8"));
+}
+
+#[test]
+fn sampling_api_batches_seeds_and_cancels() {
+    let model = DiffusionModel::load(Path::new(MODEL)).unwrap();
+    assert_eq!(model.resolution(), (8, 8));
+    let imprint = Image::filled(8, 8, 0.001);
+    let kind = SamplerKind::Ddim { steps: 4, eta: 0.0 };
+    let mut calls = Vec::new();
+    let a = model.sample(&imprint, 3, kind, 7, &mut |i, n| {
+        calls.push((i, n));
+        true
+    });
+    let a = a.unwrap();
+    assert_eq!(calls, vec![(1, 4), (2, 4), (3, 4), (4, 4)]);
+    assert_eq!(a.len(), 3);
+    assert_ne!(a[0], a[1], "different samples within a batch");
+    let b = model
+        .sample(&imprint, 3, kind, 7, &mut |_, _| true)
+        .unwrap();
+    assert_eq!(a, b, "same seed, same samples");
+    let c = model
+        .sample(&imprint, 3, kind, 8, &mut |_, _| true)
+        .unwrap();
+    assert_ne!(a, c, "another seed, other samples");
+    let e = model
+        .sample(&imprint, 3, SamplerKind::Ddpm, 7, &mut |i, _| i < 2)
+        .err()
+        .unwrap();
+    assert!(matches!(e, ModelError::Cancelled));
+    let mut nan = imprint.clone();
+    nan.data[5] = f32::NAN;
+    let e = model
+        .sample(&nan, 1, kind, 7, &mut |_, _| true)
+        .err()
+        .unwrap();
+    assert!(matches!(e, ModelError::NonFinite { .. }), "{e}");
+}
+
+#[test]
+fn model_can_move_to_a_worker_thread() {
+    fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<DiffusionModel>();
+    let model = DiffusionModel::load(Path::new(MODEL)).unwrap();
+    let n = std::thread::spawn(move || {
+        model.sample(
+            &Image::filled(8, 8, 0.0),
+            2,
+            SamplerKind::Ddim { steps: 2, eta: 0.0 },
+            0,
+            &mut |_, _| true,
+        )
+    })
+    .join()
+    .unwrap()
+    .unwrap()
+    .len();
+    assert_eq!(n, 2);
+}
