@@ -17,7 +17,7 @@ use crate::app::WorkbenchApp;
 use crate::colormap::to_color_image;
 use crate::command::Command;
 use crate::dataset_view::{DatasetBrowser, DatasetMsg};
-use crate::derender::{self, InputSource, RunInput, RunRequest, RunResult};
+use crate::derender::{self, InputSource, PoseContext, RunInput, RunRequest, RunResult};
 use crate::measured::PairScene;
 use crate::state::{DerenderInput, ObjectSource, Tab};
 
@@ -251,10 +251,12 @@ impl WorkbenchApp {
             split: m.split,
             index: m.split_index,
         };
+        let pose = PoseContext::of_pair(&b.dataset, &sel.pair)?;
         self.analysis.derender.pending_input = Some(RunInput {
             imprint: sel.pair.imprint.clone(),
             truth: Some(sel.pair.target.clone()),
             label: format!("{} pair {} ({})", m.split, m.split_index, m.object),
+            pose: Some(pose),
         });
         self.state.view.tab = Tab::Derender;
         Ok(())
@@ -299,12 +301,19 @@ impl WorkbenchApp {
     fn derender_input(&self) -> Result<InputSource> {
         Ok(match &self.state.derender.input {
             DerenderInput::Scene => {
-                let out = &self
+                let sim = self
                     .sim
                     .as_ref()
-                    .ok_or_else(|| anyhow!("the scene has not been simulated yet"))?
-                    .output;
+                    .ok_or_else(|| anyhow!("the scene has not been simulated yet"))?;
+                let out = &sim.output;
                 InputSource::Images(RunInput {
+                    pose: Some(PoseContext {
+                        object: self.state.scene.object.clone(),
+                        truth: self.state.scene.object_pose,
+                        t_world_camera: sim.t_world_camera,
+                        signature: out.signature.clone(),
+                        sim: self.state.sim.clone(),
+                    }),
                     imprint: out.imprint.clone(),
                     truth: Some(out.target.clone()),
                     label: format!(

@@ -36,6 +36,42 @@ pub const MISSING_DEFAULT: &str =
     "the bundled model (assets/models/default.safetensors) is not there yet — \
      it is still being trained; open a checkpoint (.safetensors) instead";
 
+/// What pose estimation needs to know about an input (simulated scenes and dataset pairs).
+#[derive(Clone, Debug)]
+pub struct PoseContext {
+    /// The pressed object.
+    pub object: crate::state::ObjectSource,
+    /// Its true pose `t_world_object`.
+    pub truth: tactile_derender::sensor::Se2,
+    /// The sensor camera's pose.
+    pub t_world_camera: glam::DAffine3,
+    /// S, for the threshold baseline, metres.
+    pub signature: Image,
+    /// The sensor configuration the input was made with (intrinsics, membrane).
+    pub sim: tactile_derender::sim::SimConfig,
+}
+
+impl PoseContext {
+    /// The context of dataset pair `pair` of `ds`.
+    pub fn of_pair(
+        ds: &tactile_derender::dataset::Dataset,
+        pair: &tactile_derender::dataset::Pair,
+    ) -> Result<Self> {
+        let set = ds.object_set()?;
+        let sim = ds.sim_config().clone();
+        Ok(Self {
+            object: crate::state::ObjectSource::Library {
+                set: set.spec(),
+                name: pair.meta.object.clone(),
+            },
+            truth: pair.meta.object_pose,
+            t_world_camera: pair.meta.sensor.t_world_sensor() * sim.mount.t_sensor_camera(),
+            signature: pair.signature.clone(),
+            sim,
+        })
+    }
+}
+
 /// The imprint a run de-renders, with its ground truth when known.
 #[derive(Clone, Debug)]
 pub struct RunInput {
@@ -45,6 +81,8 @@ pub struct RunInput {
     pub truth: Option<Image>,
     /// One line for the UI ("scene: cross, press 6 mm", "train pair 3").
     pub label: String,
+    /// Object, true pose and camera, when known.
+    pub pose: Option<PoseContext>,
 }
 
 /// Where a run's input comes from; files are read on the run's thread.
@@ -74,6 +112,7 @@ impl InputSource {
                     .map_err(|e| anyhow!("{}: pair {index} of {split}: {e}", dir.display()))?;
                 Ok(RunInput {
                     label: format!("{split} pair {index} ({})", pair.meta.object),
+                    pose: Some(PoseContext::of_pair(&ds, &pair)?),
                     imprint: pair.imprint,
                     truth: Some(pair.target),
                 })
@@ -84,6 +123,7 @@ impl InputSource {
                     label: format!("measurement {}", path.display()),
                     imprint,
                     truth: None,
+                    pose: None,
                 })
             }
         }

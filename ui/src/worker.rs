@@ -95,6 +95,9 @@ pub struct SimResult {
     pub total_ms: f64,
     /// Geometry for the 3D view (world frame).
     pub geometry: Arc<SceneGeometry>,
+    /// Where the sensor was (world frame), and `t_world_camera` of its camera.
+    pub sensor: tactile_derender::sensor::SensorPose,
+    pub t_world_camera: glam::DAffine3,
 }
 
 /// Load the object mesh named by `source` in its resting pose.
@@ -166,6 +169,8 @@ impl SimCache {
             simulate_ms: simulate_s * 1e3,
             total_ms: t0.elapsed().as_secs_f64() * 1e3,
             geometry,
+            sensor: scene.sensor,
+            t_world_camera: sim.t_world_camera(&scene.sensor),
         })
     }
 }
