@@ -11,6 +11,10 @@
 pub mod image;
 pub mod io;
 pub mod mesh;
+pub mod metrics;
 pub mod objects;
+pub mod pose;
+pub mod recon;
 pub mod sensor;
 pub mod sim;
+pub mod uncertainty;
