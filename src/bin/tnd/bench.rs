@@ -27,6 +27,8 @@ pub struct BenchArgs {
 pub enum BenchCommand {
     /// Ray casting (rays/s) and full synthetic pairs (pairs/s).
     Sim(SimBenchArgs),
+    /// SE(2) registration from K starts: wall time and pose errors (optionally the peer's saved problem).
+    Pose(super::bench_pose::PoseBenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -51,6 +53,7 @@ pub struct SimBenchArgs {
 pub fn run(a: BenchArgs) -> Result<()> {
     match a.command {
         BenchCommand::Sim(s) => bench_sim(&s),
+        BenchCommand::Pose(p) => super::bench_pose::run(&p),
     }
 }
 

@@ -2,6 +2,7 @@
 
 mod args;
 mod bench;
+mod bench_pose;
 mod objects_cmd;
 mod sim_cmd;
 
