@@ -193,6 +193,36 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn sphere_signed_distance_matches_analytic_within_tessellation_error() {
+        // An icosphere (4 subdivisions, 5120 faces) inscribed in a sphere of radius r: the surface lies between the
+        // sphere and the inscribed radius r cos(a), a = the largest angular radius of a face (< 0.06 rad here; an edge spans about 0.07 rad), so
+        // the mesh SDF equals |p - c| - r up to r (1 - cos a) < 2e-3 r, plus f32 rounding.
+        let r = 0.02f64;
+        let mesh = crate::objects::shapes::sphere(r, 4).unwrap();
+        let c = Vec3::new(0.0, 0.0, r as f32);
+        let sdf = SignedDistance::new(&mesh).unwrap();
+        let tolerance = (r * (1.0 - 0.06f64.cos())) as f32 + 1e-6;
+        let mut state = 99u64;
+        let mut rnd = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 33) as f32 / (1u64 << 31) as f32) * 2.0 - 1.0
+        };
+        let mut worst = 0.0f32;
+        for _ in 0..2000 {
+            let p = c + Vec3::new(rnd(), rnd(), rnd()) * 0.04;
+            let want = (p - c).length() - r as f32;
+            let err = sdf.distance(p) - want;
+            // The tessellated surface is inside the sphere: the mesh SDF is never below the analytic one.
+            assert!(err > -1e-6, "p={p} err={err}");
+            worst = worst.max(err);
+        }
+        assert!(worst < tolerance, "worst {worst} vs bound {tolerance}");
+        assert!(worst > 0.0, "a tessellated sphere cannot be exact");
+    }
+
+    #[test]
     fn open_mesh_uses_winding_number() {
         // A box without its top face: points well inside are still inside, points outside are outside.
         let mesh = box_mesh(Vec3::splat(0.01));

@@ -3,6 +3,7 @@
 mod args;
 mod bench;
 mod bench_pose;
+mod dataset_cmd;
 mod objects_cmd;
 mod sim_cmd;
 
@@ -22,6 +23,8 @@ enum Command {
     Sim(Box<sim_cmd::SimArgs>),
     /// The object library: list the built-in set or a directory set, export the built-in set.
     Objects(objects_cmd::ObjectsArgs),
+    /// Synthetic and real datasets: generate, import, statistics, preview.
+    Dataset(dataset_cmd::DatasetArgs),
     /// Benchmarks printing JSON lines.
     Bench(bench::BenchArgs),
 }
@@ -31,6 +34,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Sim(a) => sim_cmd::run(*a),
         Command::Objects(a) => objects_cmd::run(a),
+        Command::Dataset(a) => dataset_cmd::run(a),
         Command::Bench(a) => bench::run(a),
     };
     match result {

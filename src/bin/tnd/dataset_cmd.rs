@@ -1,0 +1,333 @@
+//! `tnd dataset`: generate synthetic datasets, import real sensor pairs, print statistics, preview one pair.
+
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+use anyhow::{anyhow, Context, Result};
+use clap::{Args, Subcommand};
+use kdam::BarExt;
+use serde_json::json;
+use tactile_derender::dataset::import::{self, ImportConfig};
+use tactile_derender::dataset::{self, Dataset, GenConfig, SplitName};
+use tactile_derender::io::preview;
+use tactile_derender::objects::ObjectSet;
+
+use crate::args::SensorArgs;
+
+#[derive(Args, Debug)]
+pub struct DatasetArgs {
+    #[command(subcommand)]
+    pub command: DatasetCommand,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum DatasetCommand {
+    /// Generate synthetic pairs (resumable: re-run the same command after an interruption).
+    Gen(Box<GenArgs>),
+    /// Import real sensor pairs (npy/npz or 16-bit PNG, a CSV or JSON pair table) into the dataset format.
+    Import(Box<ImportArgs>),
+    /// Counts per split and object, depth/imprint ranges and a contact-area histogram.
+    Stats {
+        dir: PathBuf,
+        /// Print one JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Also verify every shard's checksum, dtype and shape (always done for the pairs read).
+        #[arg(long)]
+        verify: bool,
+    },
+    /// Write one pair as a PNG: imprint, signature, target and mask with colour bars in mm, and its metadata.
+    Show {
+        dir: PathBuf,
+        /// Index of the pair within its split.
+        #[arg(long)]
+        index: usize,
+        /// train, unseen_poses or unseen_objects.
+        #[arg(long, default_value = "train")]
+        split: String,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+#[derive(Args, Debug)]
+pub struct GenArgs {
+    /// Output directory (created; an unfinished run there is resumed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Number of pairs.
+    #[arg(long, default_value_t = 24_000)]
+    pub pairs: usize,
+    /// Global seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Object set: "builtin" or a directory with objects.json.
+    #[arg(long, default_value = "builtin")]
+    pub objects: String,
+    #[command(flatten)]
+    pub sensor: SensorArgs,
+    /// Press depth range MIN,MAX in metres.
+    #[arg(long, default_value = "0.003,0.015")]
+    pub press: String,
+    /// Object positions: fraction of the camera's view at the apex height (0..1).
+    #[arg(long, default_value_t = 0.4)]
+    pub offset_fraction: f64,
+    /// Rejection rule: minimum fraction of the image in contact; fewer -> redraw pose and press.
+    #[arg(long, default_value_t = 0.01)]
+    pub min_contact: f64,
+    /// Draws per pair before giving up.
+    #[arg(long, default_value_t = 200)]
+    pub max_attempts: usize,
+    /// Pairs per chunk (one shard per split per chunk).
+    #[arg(long, default_value_t = 1000)]
+    pub shard_pairs: usize,
+    /// Worker threads (default: all cores). The output does not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+#[derive(Args, Debug)]
+pub struct ImportArgs {
+    /// Directory holding the pair table (pairs.csv or pairs.json) and the image files it names.
+    #[arg(long)]
+    pub from: PathBuf,
+    /// Output dataset directory (must be new or empty).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Object set the table's object names refer to: "builtin" or a directory with objects.json.
+    #[arg(long, default_value = "builtin")]
+    pub objects: String,
+    #[command(flatten)]
+    pub sensor: SensorArgs,
+    /// Metres per unit of .npy/.npz depth arrays (1 = metres, 0.001 = millimetres).
+    #[arg(long, default_value_t = 1.0)]
+    pub npy_scale: f64,
+    /// Metres per unit of 16-bit PNG depth images (default: millimetres).
+    #[arg(long, default_value_t = 0.001)]
+    pub png_scale: f64,
+    /// Split for rows without a split column: "auto" (unseen objects -> unseen_objects, seen objects 9:1), or a split.
+    #[arg(long, default_value = "auto")]
+    pub split: String,
+    /// Seed of the automatic 9:1 split.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+pub fn run(a: DatasetArgs) -> Result<()> {
+    match a.command {
+        DatasetCommand::Gen(g) => gen(*g),
+        DatasetCommand::Import(i) => run_import(*i),
+        DatasetCommand::Stats { dir, json, verify } => stats(dir, json, verify),
+        DatasetCommand::Show {
+            dir,
+            index,
+            split,
+            out,
+        } => show(dir, index, &split, out),
+    }
+}
+
+fn bar(total: usize, desc: &str) -> Result<Mutex<kdam::Bar>> {
+    let b = kdam::Bar::builder()
+        .total(total)
+        .desc(desc)
+        .unit(" pairs")
+        .mininterval(0.2)
+        .build()
+        .map_err(|e| anyhow!(e))?;
+    Ok(Mutex::new(b))
+}
+
+fn tick(b: &Mutex<kdam::Bar>, n: usize) {
+    if let Ok(mut b) = b.lock() {
+        let _ = b.update(n);
+    }
+}
+
+fn finish(b: &Mutex<kdam::Bar>) {
+    if let Ok(mut b) = b.lock() {
+        let _ = b.refresh();
+    }
+    eprintln!();
+}
+
+fn gen(a: GenArgs) -> Result<()> {
+    let (p0, p1) = a
+        .press
+        .split_once(',')
+        .and_then(|(x, y)| Some((x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?)))
+        .ok_or_else(|| {
+            anyhow!(
+                "--press '{}' must be MIN,MAX in metres, e.g. 0.003,0.015",
+                a.press
+            )
+        })?;
+    let config = GenConfig {
+        pairs: a.pairs,
+        seed: a.seed,
+        press_range: [p0, p1],
+        offset_fraction: a.offset_fraction,
+        min_contact_fraction: a.min_contact,
+        max_attempts: a.max_attempts,
+        shard_pairs: a.shard_pairs,
+        ..GenConfig::default()
+    };
+    let sim = a.sensor.sim_config()?;
+    let set = ObjectSet::open(&a.objects).with_context(|| format!("--objects {}", a.objects))?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()?;
+    let pb = bar(config.pairs, "gen")?;
+    let report = pool.install(|| dataset::generate(&a.out, &sim, &set, &config, &|n| tick(&pb, n)));
+    finish(&pb);
+    let report = report?;
+    println!(
+        "{}",
+        json!({
+            "out": a.out,
+            "pairs": report.pairs,
+            "generated": report.generated,
+            "kept_chunks": report.kept_chunks,
+            "redraws": report.redraws,
+            "already_complete": report.already_complete,
+            "counts": report.counts,
+            "elapsed_s": report.elapsed_s,
+            "pairs_per_s": report.generated as f64 / report.elapsed_s.max(1e-9),
+            "threads": pool.current_num_threads(),
+        })
+    );
+    Ok(())
+}
+
+fn run_import(a: ImportArgs) -> Result<()> {
+    let sim = a.sensor.sim_config()?;
+    let set = ObjectSet::open(&a.objects).with_context(|| format!("--objects {}", a.objects))?;
+    let split = match a.split.as_str() {
+        "auto" => None,
+        s => Some(
+            s.parse::<SplitName>()
+                .map_err(|e| anyhow!(e))
+                .context("--split")?,
+        ),
+    };
+    let config = ImportConfig {
+        npy_scale: a.npy_scale,
+        png_scale: a.png_scale,
+        split,
+        seed: a.seed,
+    };
+    let report = import::import(&a.from, &a.out, &sim, &set, &config)?;
+    println!("{}", serde_json::to_string(&report)?);
+    Ok(())
+}
+
+fn stats(dir: PathBuf, as_json: bool, verify: bool) -> Result<()> {
+    let ds = Dataset::open(&dir)?;
+    if verify {
+        ds.verify()?;
+    }
+    let total = ds.manifest().counts.total();
+    let pb = bar(total, "stats")?;
+    let s = dataset::stats::compute(&ds, &|n| tick(&pb, n));
+    finish(&pb);
+    let s = s?;
+    if as_json {
+        println!("{}", serde_json::to_string(&s)?);
+        return Ok(());
+    }
+    let mm = |r: Option<[f32; 2]>| {
+        r.map_or("-".to_string(), |[a, b]| {
+            format!("{:.2} .. {:.2} mm", a * 1e3, b * 1e3)
+        })
+    };
+    println!(
+        "{}: {:?} dataset, {}x{}",
+        dir.display(),
+        ds.manifest().kind,
+        ds.resolution().0,
+        ds.resolution().1
+    );
+    println!(
+        "pairs: train {}, unseen_poses {}, unseen_objects {} (total {})",
+        s.counts.train, s.counts.unseen_poses, s.counts.unseen_objects, total
+    );
+    println!(
+        "{:<28} {:>7} {:>13} {:>15}",
+        "object", "train", "unseen_poses", "unseen_objects"
+    );
+    for (name, c) in &s.per_object {
+        println!(
+            "{name:<28} {:>7} {:>13} {:>15}",
+            c.train, c.unseen_poses, c.unseen_objects
+        );
+    }
+    println!("target X0 (contact pixels): {}", mm(s.target_range_m));
+    println!("signature S:                {}", mm(s.signature_range_m));
+    println!("imprint Y:                  {}", mm(s.imprint_range_m));
+    if let Some([a, b]) = s.press_range_m {
+        println!(
+            "press:                      {:.2} .. {:.2} mm",
+            a * 1e3,
+            b * 1e3
+        );
+    }
+    println!(
+        "contact area: mean {:.1} px ({:.2} % of the image); histogram over 0..{:.2} % of the image:",
+        s.contact_pixels_mean,
+        s.contact_fraction_mean * 100.0,
+        s.area_hist_max_fraction * 100.0
+    );
+    let peak = s.area_hist.iter().copied().max().unwrap_or(1).max(1);
+    for (i, &c) in s.area_hist.iter().enumerate() {
+        let lo = s.area_hist_max_fraction * 100.0 * i as f64 / s.area_hist.len() as f64;
+        let hi = s.area_hist_max_fraction * 100.0 * (i + 1) as f64 / s.area_hist.len() as f64;
+        println!("  {lo:6.2}-{hi:6.2} % {c:>7} {}", "#".repeat(c * 50 / peak));
+    }
+    Ok(())
+}
+
+fn show(dir: PathBuf, index: usize, split: &str, out: PathBuf) -> Result<()> {
+    let split: SplitName = split
+        .parse()
+        .map_err(|e: String| anyhow!(e))
+        .context("--split")?;
+    let ds = Dataset::open(&dir)?;
+    let pair = ds.pair(split, index)?;
+    let panels: Vec<_> = [
+        ("imprint", "Y imprint", &pair.imprint),
+        ("signature", "S signature", &pair.signature),
+        ("target", "X0 target", &pair.target),
+        ("mask", "M mask", &pair.mask),
+    ]
+    .iter()
+    .map(|(f, t, img)| preview::render_panel(img, &crate::sim_cmd::preview_style(f, t)))
+    .collect();
+    let m = &pair.meta;
+    let press = if m.press.is_finite() {
+        format!("{:.2}mm", m.press * 1e3)
+    } else {
+        "unknown".into()
+    };
+    let caption = vec![
+        format!(
+            "{} #{} (pair {})  object {}  pose x={:.2}mm y={:.2}mm theta={:.1}deg",
+            split,
+            index,
+            m.index,
+            m.object,
+            m.object_pose.x * 1e3,
+            m.object_pose.y * 1e3,
+            m.object_pose.theta.to_degrees()
+        ),
+        format!(
+            "press={press}  contact={} px  seed={}  {}",
+            m.contact_pixels,
+            m.seed,
+            dir.display()
+        ),
+    ];
+    preview::save_png(&out, &preview::side_by_side(&panels, &caption))?;
+    println!("{}", json!({"out": out, "meta": m}));
+    Ok(())
+}

@@ -1,0 +1,99 @@
+//! Parameters of synthetic **dataset generation** (paper V.A: random contacts of the object library against the
+//! simulated Soft Bubble). The sensor itself is described by [`crate::sim::SimConfig`]; this is everything else.
+
+use serde::{Deserialize, Serialize};
+
+use super::DatasetError;
+
+/// How pairs are drawn, split and sharded. Together with the `SimConfig` and the object set it determines the dataset
+/// byte for byte.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct GenConfig {
+    /// Number of pairs to generate (default 24 000, the paper's pre-training set).
+    pub pairs: usize,
+    /// Global seed; pair `i` uses the seed [`super::split::pair_seed`]`(seed, i)` (default 0).
+    pub seed: u64,
+    /// Press depth of the membrane apex below the object's top, drawn uniformly in `[min, max]`, metres
+    /// (default 0.003..0.015).
+    pub press_range: [f64; 2],
+    /// Where the object's top point may lie: uniformly in the camera's view at the height of the membrane apex,
+    /// shrunk about its centre by this factor (0..1], so the contact stays inside the image (default 0.4).
+    pub offset_fraction: f64,
+    /// Rejection rule: a draw is kept only if at least this fraction of the image's pixels are in contact
+    /// (default 0.01, i.e. 41 pixels at 64 x 64); otherwise pose and press are redrawn (the object is kept).
+    pub min_contact_fraction: f64,
+    /// Draws per pair before generation stops with an error naming the object (default 200).
+    pub max_attempts: usize,
+    /// Pairs per chunk: chunk `k` holds pairs `k * shard_pairs ..`, written as one shard per split it contains
+    /// (default 1000; about 80 MB per chunk at 64 x 64).
+    pub shard_pairs: usize,
+    /// One pair in every `holdout_every` of each seen object goes to `unseen_poses` (default 10: the paper's 9:1).
+    pub holdout_every: usize,
+}
+
+impl Default for GenConfig {
+    fn default() -> Self {
+        Self {
+            pairs: 24_000,
+            seed: 0,
+            press_range: [0.003, 0.015],
+            offset_fraction: 0.4,
+            min_contact_fraction: 0.01,
+            max_attempts: 200,
+            shard_pairs: 1000,
+            holdout_every: 10,
+        }
+    }
+}
+
+impl GenConfig {
+    /// Check the parameters, with a message saying what to change.
+    pub fn validate(&self) -> Result<(), DatasetError> {
+        let bad = |m: String| Err(DatasetError::Config(m));
+        let [lo, hi] = self.press_range;
+        if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi >= lo) {
+            return bad(format!(
+                "press range [{lo}, {hi}] must satisfy 0 <= min <= max (metres)"
+            ));
+        }
+        if !(self.offset_fraction.is_finite()
+            && self.offset_fraction >= 0.0
+            && self.offset_fraction <= 1.0)
+        {
+            return bad(format!(
+                "offset fraction {} must be in [0, 1]",
+                self.offset_fraction
+            ));
+        }
+        if !(self.min_contact_fraction.is_finite()
+            && self.min_contact_fraction >= 0.0
+            && self.min_contact_fraction < 1.0)
+        {
+            return bad(format!(
+                "minimum contact fraction {} must be in [0, 1)",
+                self.min_contact_fraction
+            ));
+        }
+        if self.max_attempts == 0 || self.shard_pairs == 0 || self.holdout_every < 2 {
+            return bad(format!(
+                "max_attempts ({}), shard_pairs ({}) must be >= 1 and holdout_every ({}) >= 2",
+                self.max_attempts, self.shard_pairs, self.holdout_every
+            ));
+        }
+        if self.pairs == 0 {
+            return bad("the number of pairs must be at least 1".into());
+        }
+        Ok(())
+    }
+
+    /// Minimum number of contact pixels of the rejection rule for a `width x height` image (at least 1).
+    pub fn min_contact_pixels(&self, width: usize, height: usize) -> usize {
+        ((self.min_contact_fraction * (width * height) as f64).ceil() as usize).max(1)
+    }
+
+    /// Number of chunks.
+    pub fn chunks(&self) -> usize {
+        self.pairs.div_ceil(self.shard_pairs)
+    }
+}

@@ -1,0 +1,332 @@
+//! Synthetic **dataset generation** (paper V.A): plan every pair ([`super::split`]), simulate them in parallel
+//! (rayon) chunk by chunk, and write each chunk's shards atomically while the next chunk is simulated.
+//!
+//! Determinism: a pair depends only on the configuration, the global seed and its index, and a chunk's shards hold
+//! its pairs in index order, so the output is byte-identical whatever the thread count.
+//!
+//! Resume: `progress.json` records the configuration and the chunks whose shards are written (with their sha256). A
+//! re-run of the same command (after kill -9 at any moment) keeps the chunks whose files still verify, regenerates
+//! the others (identical bytes), and finally writes `manifest.json` and removes `progress.json`. A run with another
+//! configuration in the same directory is refused. Temporary files of a killed run are removed.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::manifest::{
+    DatasetKind, DatasetManifest, ObjectSetInfo, ShardEntry, SplitCounts, FORMAT_NAME,
+    FORMAT_VERSION, MANIFEST_FILE, OBJECTS_DIR, PROGRESS_FILE,
+};
+use super::sample::Sampler;
+use super::shard::{self, Record, SHARDS_DIR};
+use super::split::{self, PlannedPair};
+use super::{DatasetError, GenConfig, SplitName};
+use crate::objects::{ObjectManifest, ObjectSet};
+use crate::sim::{PreparedObject, SimConfig, Simulator};
+
+/// What a generation run did.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct GenReport {
+    /// Pairs in the dataset.
+    pub pairs: usize,
+    /// Pairs simulated by this run (the rest were already on disk).
+    pub generated: usize,
+    /// Chunks found complete on disk and kept.
+    pub kept_chunks: usize,
+    /// Rejected draws (redraws) of the pairs simulated by this run.
+    pub redraws: usize,
+    pub counts: SplitCounts,
+    /// True when the directory already held the finished dataset.
+    pub already_complete: bool,
+    /// Wall time of this run, seconds.
+    pub elapsed_s: f64,
+}
+
+/// `progress.json`: the dataset being made (without shards) and the chunks already written.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct Progress {
+    format: String,
+    version: u32,
+    dataset: DatasetManifest,
+    done: BTreeMap<usize, Vec<ShardEntry>>,
+}
+
+/// Generate (or resume generating) a dataset of `config.pairs` pairs into `out`. `progress(n)` is called from worker
+/// threads each time `n` more pairs are done (including pairs found on disk).
+pub fn generate(
+    out: &Path,
+    sim_config: &SimConfig,
+    set: &ObjectSet,
+    config: &GenConfig,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<GenReport, DatasetError> {
+    let t0 = Instant::now();
+    config.validate()?;
+    if set.entries().is_empty() {
+        return Err(DatasetError::Config("the object set is empty".into()));
+    }
+    let sim = Simulator::new(sim_config.clone())?;
+    let names: Vec<String> = set.entries().iter().map(|e| e.name.clone()).collect();
+    let object_splits: Vec<_> = set.entries().iter().map(|e| e.split).collect();
+    let plan = split::plan(
+        config.seed,
+        config.pairs,
+        &object_splits,
+        config.holdout_every,
+    );
+    let mut counts = SplitCounts::default();
+    for p in &plan {
+        counts.add(p.split, 1);
+    }
+    let dataset = DatasetManifest {
+        format: FORMAT_NAME.into(),
+        version: FORMAT_VERSION,
+        kind: DatasetKind::Synthetic,
+        resolution: [
+            sim_config.camera.resolution.0,
+            sim_config.camera.resolution.1,
+        ],
+        sim: sim_config.clone(),
+        generation: Some(config.clone()),
+        import: None,
+        object_set: ObjectSetInfo {
+            source: set.spec(),
+            dir: OBJECTS_DIR.into(),
+            manifest: exported_manifest(set)?,
+        },
+        counts,
+        arrays: DatasetManifest::array_table(),
+        shards: Vec::new(),
+    };
+    let mut report = GenReport {
+        pairs: config.pairs,
+        generated: 0,
+        kept_chunks: 0,
+        redraws: 0,
+        counts,
+        already_complete: false,
+        elapsed_s: 0.0,
+    };
+
+    let manifest_path = out.join(MANIFEST_FILE);
+    let progress_path = out.join(PROGRESS_FILE);
+    if manifest_path.exists() {
+        let existing = DatasetManifest::load(&manifest_path)?;
+        if let Some(field) = existing.identity_difference(&dataset) {
+            return Err(DatasetError::ConfigMismatch {
+                path: manifest_path,
+                field,
+            });
+        }
+        for s in &existing.shards {
+            shard::verify_file(out, s)?;
+        }
+        progress(config.pairs);
+        report.already_complete = true;
+        report.kept_chunks = config.chunks();
+        report.elapsed_s = t0.elapsed().as_secs_f64();
+        return Ok(report);
+    }
+    let mut state = if progress_path.exists() {
+        let p = load_progress(&progress_path)?;
+        if let Some(field) = p.dataset.identity_difference(&dataset) {
+            return Err(DatasetError::ConfigMismatch {
+                path: progress_path,
+                field,
+            });
+        }
+        Progress { dataset, ..p }
+    } else {
+        refuse_foreign_dir(out)?;
+        Progress {
+            format: FORMAT_NAME.into(),
+            version: FORMAT_VERSION,
+            dataset,
+            done: BTreeMap::new(),
+        }
+    };
+    set.export(&out.join(OBJECTS_DIR))?;
+    state.save(&progress_path)?;
+    for dir in [
+        out.to_path_buf(),
+        out.join(SHARDS_DIR),
+        out.join(OBJECTS_DIR),
+    ] {
+        remove_stale_temp_files(&dir)?;
+    }
+
+    // Chunks already on disk and intact are kept.
+    let mut todo = Vec::new();
+    let recorded = std::mem::take(&mut state.done);
+    for chunk in 0..config.chunks() {
+        let intact = recorded
+            .get(&chunk)
+            .is_some_and(|shards| shards.iter().all(|s| shard::verify_file(out, s).is_ok()));
+        if intact {
+            if let Some(shards) = recorded.get(&chunk) {
+                state.done.insert(chunk, shards.clone());
+            }
+            progress(chunk_range(config, chunk).len());
+            report.kept_chunks += 1;
+        } else {
+            todo.push(chunk);
+        }
+    }
+
+    let objects: Vec<PreparedObject> = names
+        .par_iter()
+        .map(|n| Ok(PreparedObject::new(set.mesh(n)?)?))
+        .collect::<Result<_, DatasetError>>()?;
+    let sampler = Sampler::new(&sim, &objects, &names, config);
+    let (w, h) = sim_config.camera.resolution;
+
+    let (tx, rx) = mpsc::sync_channel::<(usize, Vec<Record>)>(1);
+    let writer_result = std::thread::scope(|scope| {
+        let writer = scope.spawn(|| -> Result<Progress, DatasetError> {
+            let mut state = state;
+            for (chunk, records) in rx {
+                let mut entries = Vec::new();
+                for split in SplitName::ALL {
+                    let mine: Vec<&Record> = records.iter().filter(|r| r.split == split).collect();
+                    if !mine.is_empty() {
+                        entries.push(shard::write(out, split, chunk, &mine, w, h)?);
+                    }
+                }
+                state.done.insert(chunk, entries);
+                state.save(&progress_path)?;
+            }
+            Ok(state)
+        });
+        let mut sim_result = Ok(());
+        for &chunk in &todo {
+            let planned: &[PlannedPair] = &plan[chunk_range(config, chunk)];
+            let simulated: Result<Vec<(Record, usize)>, DatasetError> = planned
+                .par_iter()
+                .map(|p| {
+                    let r = sampler.sample(p);
+                    progress(1);
+                    r
+                })
+                .collect();
+            match simulated {
+                Ok(v) => {
+                    report.generated += v.len();
+                    report.redraws += v.iter().map(|(_, a)| a - 1).sum::<usize>();
+                    let records = v.into_iter().map(|(r, _)| r).collect();
+                    if tx.send((chunk, records)).is_err() {
+                        break; // the writer failed; its error is reported below
+                    }
+                }
+                Err(e) => {
+                    sim_result = Err(e);
+                    break;
+                }
+            }
+        }
+        drop(tx);
+        let written = writer
+            .join()
+            .map_err(|_| DatasetError::Config("the shard writer thread panicked".into()))?;
+        sim_result.and(written)
+    })?;
+
+    let mut manifest = writer_result.dataset;
+    manifest.shards = writer_result.done.into_values().flatten().collect();
+    manifest.validate(&manifest_path)?;
+    manifest.save(&manifest_path)?;
+    std::fs::remove_file(&progress_path).map_err(|e| DatasetError::io(&progress_path, e))?;
+    report.elapsed_s = t0.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+/// Pair indices of chunk `chunk`.
+fn chunk_range(config: &GenConfig, chunk: usize) -> std::ops::Range<usize> {
+    let start = chunk * config.shard_pairs;
+    start..(start + config.shard_pairs).min(config.pairs)
+}
+
+impl Progress {
+    fn save(&self, path: &Path) -> Result<(), DatasetError> {
+        let json =
+            serde_json::to_string_pretty(self).map_err(|source| DatasetError::Serialize {
+                what: "the generation progress",
+                source,
+            })?;
+        crate::io::write_atomic(path, json.as_bytes()).map_err(|e| DatasetError::io(path, e))
+    }
+}
+
+fn load_progress(path: &Path) -> Result<Progress, DatasetError> {
+    let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
+    let p: Progress = serde_json::from_str(&text).map_err(|e| DatasetError::Manifest {
+        path: path.to_path_buf(),
+        message: format!("{e} (delete it and the directory to start over)"),
+    })?;
+    if p.version != FORMAT_VERSION {
+        return Err(DatasetError::UnsupportedVersion {
+            path: path.to_path_buf(),
+            found: p.version,
+            supported: FORMAT_VERSION,
+        });
+    }
+    Ok(p)
+}
+
+/// The object set's manifest as exported into a dataset (meshes as `<name>.obj` in metres, no rotation).
+pub(crate) fn exported_manifest(set: &ObjectSet) -> Result<ObjectManifest, DatasetError> {
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    let tmp = std::env::temp_dir().join(format!(
+        "tnd-objects-{}-{nanos}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+    ));
+    let result = set
+        .export(&tmp)
+        .map_err(DatasetError::from)
+        .and_then(|()| Ok(ObjectSet::load_dir(&tmp)?.manifest()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    result
+}
+
+/// A new dataset goes into a missing or empty directory only.
+pub(crate) fn refuse_foreign_dir(out: &Path) -> Result<(), DatasetError> {
+    match std::fs::read_dir(out) {
+        Ok(mut entries) => {
+            if entries.next().is_some() {
+                return Err(DatasetError::NotADataset {
+                    path: out.to_path_buf(),
+                    message: format!(
+                        "the directory is not empty and holds no {PROGRESS_FILE} or {MANIFEST_FILE}; choose a new --out"
+                    ),
+                });
+            }
+            Ok(())
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(DatasetError::io(out, e)),
+    }
+}
+
+/// Remove `.<name>.tmp.<pid>` files left by a killed run (see [`crate::io::write_atomic`]).
+fn remove_stale_temp_files(dir: &Path) -> Result<(), DatasetError> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(DatasetError::io(dir, e)),
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with('.') && name.contains(".tmp.") {
+            let path: PathBuf = entry.path();
+            std::fs::remove_file(&path).map_err(|e| DatasetError::io(&path, e))?;
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,154 @@
+//! Bringing real depth frames to the model resolution with **the simulator's camera model**: the crop of
+//! [`CameraConfig`] (rows/columns of the native image), then area resampling, where each output pixel covers exactly
+//! the block of input pixels whose image-plane area it replaces — the same mapping as
+//! [`crate::sensor::Intrinsics::resized`], so an output pixel's centre ray is the simulator's ray for that pixel.
+
+use crate::image::Image;
+use crate::sensor::CameraConfig;
+
+/// A depth pixel of the output is valid when at least this fraction of its area is covered by valid (non-zero)
+/// input pixels; its value is the area-weighted mean of those.
+pub const MIN_VALID_COVERAGE: f64 = 0.5;
+
+/// Which stage of the camera model an input image is at, judged by its size.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputSize {
+    /// The sensor's native frame (e.g. 224 x 171): crop, then resample.
+    Native,
+    /// Already cropped (e.g. 175 x 140): resample.
+    Cropped,
+    /// Already at the model resolution: used as is.
+    Model,
+}
+
+/// Classify a `width x height` frame against the camera, or say which sizes are accepted.
+pub fn classify(camera: &CameraConfig, width: usize, height: usize) -> Result<InputSize, String> {
+    let crop = camera.crop();
+    if (width, height) == camera.resolution {
+        Ok(InputSize::Model)
+    } else if (width, height) == (camera.native.width, camera.native.height) {
+        Ok(InputSize::Native)
+    } else if (width, height) == (crop.width, crop.height) {
+        Ok(InputSize::Cropped)
+    } else {
+        Err(format!(
+            "image is {width}x{height}; expected the native {}x{}, the crop {}x{} or the model resolution {}x{}",
+            camera.native.width,
+            camera.native.height,
+            crop.width,
+            crop.height,
+            camera.resolution.0,
+            camera.resolution.1
+        ))
+    }
+}
+
+/// Crop rows `rows.0..rows.1`, columns `cols.0..cols.1`.
+pub fn crop(image: &Image, rows: (usize, usize), cols: (usize, usize)) -> Image {
+    let (w, h) = (cols.1 - cols.0, rows.1 - rows.0);
+    let mut data = Vec::with_capacity(w * h);
+    for v in rows.0..rows.1 {
+        let start = v * image.width + cols.0;
+        data.extend_from_slice(&image.data[start..start + w]);
+    }
+    Image {
+        width: w,
+        height: h,
+        data,
+    }
+}
+
+/// Area-resample a depth image (0 = missing) to `width x height`.
+pub fn resample_depth(image: &Image, width: usize, height: usize) -> Image {
+    let sx = image.width as f64 / width as f64;
+    let sy = image.height as f64 / height as f64;
+    let mut out = Image::filled(width, height, 0.0);
+    for v in 0..height {
+        let (y0, y1) = (v as f64 * sy, (v + 1) as f64 * sy);
+        for u in 0..width {
+            let (x0, x1) = (u as f64 * sx, (u + 1) as f64 * sx);
+            let (mut sum, mut valid, mut area) = (0.0f64, 0.0f64, 0.0f64);
+            for iy in (y0.floor() as usize)..(y1.ceil() as usize).min(image.height) {
+                let wy = (y1.min(iy as f64 + 1.0) - y0.max(iy as f64)).max(0.0);
+                for ix in (x0.floor() as usize)..(x1.ceil() as usize).min(image.width) {
+                    let wx = (x1.min(ix as f64 + 1.0) - x0.max(ix as f64)).max(0.0);
+                    let a = wx * wy;
+                    area += a;
+                    let d = image.get(ix, iy);
+                    if d != 0.0 && d.is_finite() {
+                        sum += a * f64::from(d);
+                        valid += a;
+                    }
+                }
+            }
+            if area > 0.0 && valid / area >= MIN_VALID_COVERAGE {
+                *out.get_mut(u, v) = (sum / valid) as f32;
+            }
+        }
+    }
+    out
+}
+
+/// Bring a depth frame to the model resolution: crop if native, resample if not at the model size.
+pub fn to_model(camera: &CameraConfig, image: &Image) -> Result<Image, String> {
+    let (w, h) = camera.resolution;
+    match classify(camera, image.width, image.height)? {
+        InputSize::Model => Ok(image.clone()),
+        InputSize::Cropped => Ok(resample_depth(image, w, h)),
+        InputSize::Native => Ok(resample_depth(
+            &crop(image, camera.crop_rows, camera.crop_cols),
+            w,
+            h,
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn block_average_and_coverage_rule() {
+        // 4x4 -> 2x2: each output pixel is the mean of a 2x2 block.
+        let img = Image::from_vec(4, 4, (1..=16).map(|x| x as f32).collect()).unwrap();
+        let out = resample_depth(&img, 2, 2);
+        assert_eq!(out.data, vec![3.5, 5.5, 11.5, 13.5]);
+        // A block with one valid pixel of four (25 % < 50 %) is missing; two of four (50 %) is their mean.
+        let mut img = Image::filled(4, 2, 0.0);
+        *img.get_mut(0, 0) = 1.0;
+        *img.get_mut(2, 0) = 2.0;
+        *img.get_mut(3, 1) = 4.0;
+        let out = resample_depth(&img, 2, 1);
+        assert_eq!(out.data, vec![0.0, 3.0]);
+    }
+
+    #[test]
+    fn fractional_ratio_conserves_mass_and_preserves_a_constant() {
+        // 175 -> 64 columns: non-integer blocks. Area resampling conserves the integral (sum of value x block width
+        // equals the input sum), each output lies within half a pixel of the ramp at its block centre, and a constant
+        // stays constant.
+        let img = Image::from_vec(175, 1, (0..175).map(|x| x as f32 + 0.5).collect()).unwrap();
+        let out = resample_depth(&img, 64, 1);
+        let input: f64 = img.data.iter().map(|&x| f64::from(x)).sum();
+        let output: f64 = out.data.iter().map(|&x| f64::from(x) * 175.0 / 64.0).sum();
+        assert!((input - output).abs() < 1e-3 * input, "{input} vs {output}");
+        for u in 0..64 {
+            let centre = (u as f64 + 0.5) * 175.0 / 64.0;
+            assert!((f64::from(out.get(u, 0)) - centre).abs() <= 0.5, "{u}");
+        }
+        let c = resample_depth(&Image::filled(175, 140, 0.09), 64, 64);
+        assert!(c.data.iter().all(|&x| (x - 0.09).abs() < 1e-7));
+    }
+
+    #[test]
+    fn classify_and_crop() {
+        let cam = CameraConfig::default();
+        assert_eq!(classify(&cam, 224, 171), Ok(InputSize::Native));
+        assert_eq!(classify(&cam, 175, 140), Ok(InputSize::Cropped));
+        assert_eq!(classify(&cam, 64, 64), Ok(InputSize::Model));
+        assert!(classify(&cam, 100, 100).unwrap_err().contains("224x171"));
+        let img = Image::from_vec(4, 3, (0..12).map(|x| x as f32).collect()).unwrap();
+        assert_eq!(crop(&img, (1, 3), (1, 3)).data, vec![5.0, 6.0, 9.0, 10.0]);
+    }
+}

@@ -1,0 +1,210 @@
+//! **Random contacts** for synthetic pairs (paper V.A): the object's SE(2) pose relative to the sensor, the press
+//! depth, and the rejection rule for draws with too little contact.
+//!
+//! The sensor sits at world `x = y = 0`, yaw 0, pressing its membrane apex `press` below the object's top
+//! ([`Simulator::pressing_pose`]). The object's origin (its top point, for the library's objects) is placed uniformly
+//! in the camera's view at the height of the apex, shrunk about the view's centre by `offset_fraction`, with `θ`
+//! uniform in `[0, 2π)` and the press uniform in `press_range`. A draw is rejected and the pose and press redrawn
+//! (the object stays) while fewer than `min_contact_fraction` of the pixels are in contact.
+//!
+//! Each attempt draws, from the pair's stream after its object: `u, v` (position in the view box), `θ`, `press`, and
+//! the signature's noise seed — so the pair seed reproduces the pair exactly.
+
+use glam::DVec3;
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+use super::shard::Record;
+use super::split::{pair_stream, PlannedPair};
+use super::{DatasetError, GenConfig};
+use crate::sensor::{Scene, Se2};
+use crate::sim::{signature, PreparedObject, Simulator};
+
+/// The part of the world plane under the sensor where object positions are drawn: a box in world x/y, metres.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OffsetBox {
+    /// World x range, metres.
+    pub x: [f64; 2],
+    /// World y range, metres.
+    pub y: [f64; 2],
+}
+
+impl OffsetBox {
+    /// The camera's view at the apex height (the rays through the image's outer pixel edges), shrunk about its
+    /// centre by `fraction`, in the world frame of a sensor at `x = y = 0`, yaw 0.
+    pub fn new(sim: &Simulator, fraction: f64) -> Self {
+        let k = sim.intrinsics();
+        let t_sensor_camera = sim.t_sensor_camera();
+        let origin = t_sensor_camera.translation;
+        let apex_z = sim.apex_height();
+        let corners = [
+            (-0.5, -0.5),
+            (k.width as f64 - 0.5, -0.5),
+            (-0.5, k.height as f64 - 0.5),
+            (k.width as f64 - 0.5, k.height as f64 - 0.5),
+        ];
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for (u, v) in corners {
+            let dir = t_sensor_camera.transform_vector3(k.ray_dir(u, v));
+            let t = if dir.z.abs() > 1e-12 {
+                (apex_z - origin.z) / dir.z
+            } else {
+                0.0
+            };
+            let p_sensor = origin + dir * t;
+            lo = lo.min(p_sensor);
+            hi = hi.max(p_sensor);
+        }
+        // World = sensor rotated by pi about x at yaw 0: x_w = x_s, y_w = -y_s.
+        let shrink = |a: f64, b: f64| {
+            let (c, h) = (0.5 * (a + b), 0.5 * (b - a) * fraction);
+            [c - h, c + h]
+        };
+        let x = shrink(lo.x, hi.x);
+        let ys = shrink(lo.y, hi.y);
+        Self {
+            x,
+            y: [-ys[1], -ys[0]],
+        }
+    }
+}
+
+/// Draws contacts for planned pairs.
+pub struct Sampler<'a> {
+    pub sim: &'a Simulator,
+    pub objects: &'a [PreparedObject],
+    pub names: &'a [String],
+    pub config: &'a GenConfig,
+    pub offsets: OffsetBox,
+    pub min_pixels: usize,
+}
+
+impl<'a> Sampler<'a> {
+    pub fn new(
+        sim: &'a Simulator,
+        objects: &'a [PreparedObject],
+        names: &'a [String],
+        config: &'a GenConfig,
+    ) -> Self {
+        let (w, h) = sim.config().camera.resolution;
+        Self {
+            sim,
+            objects,
+            names,
+            config,
+            offsets: OffsetBox::new(sim, config.offset_fraction),
+            min_pixels: config.min_contact_pixels(w, h),
+        }
+    }
+
+    /// Simulate the planned pair, redrawing pose and press until the contact is large enough: the record and the
+    /// number of draws it took (1 = the first draw was accepted).
+    pub fn sample(&self, plan: &PlannedPair) -> Result<(Record, usize), DatasetError> {
+        let (mut rng, object_index) = pair_stream(plan.seed, self.objects.len());
+        let object = self
+            .objects
+            .get(object_index)
+            .ok_or_else(|| DatasetError::Config("the object set is empty".into()))?;
+        let [p0, p1] = self.config.press_range;
+        let sim_cfg = self.sim.config();
+        let spacing = self.sim.intrinsics().pixel_size_in(&sim_cfg.camera.native);
+        for attempt in 1..=self.config.max_attempts {
+            let u: f64 = rng.random();
+            let v: f64 = rng.random();
+            let theta = rng.random::<f64>() * std::f64::consts::TAU;
+            let press = p0 + (p1 - p0) * rng.random::<f64>();
+            let noise_seed: u64 = rng.random();
+            let b = &self.offsets;
+            let pose = Se2::new(
+                b.x[0] + (b.x[1] - b.x[0]) * u,
+                b.y[0] + (b.y[1] - b.y[0]) * v,
+                theta,
+            );
+            let sensor = self.sim.pressing_pose(object, 0.0, 0.0, 0.0, press);
+            let scene = Scene {
+                object: pose,
+                sensor,
+            };
+            let depth = self.sim.render_depth(object, &scene);
+            let (mask, target) = self.sim.contact(&depth);
+            let contact_pixels = mask.count_nonzero();
+            if contact_pixels < self.min_pixels {
+                continue;
+            }
+            let sig = signature::synthesize(
+                &depth,
+                self.sim.nominal_depth(),
+                &mask,
+                &sim_cfg.signature,
+                spacing,
+                noise_seed,
+            );
+            let record = Record {
+                index: plan.index,
+                seed: plan.seed,
+                object: object_index,
+                split: plan.split,
+                pose,
+                sensor,
+                press,
+                contact_pixels,
+                imprint: sig.imprint,
+                target,
+                signature: sig.signature,
+                reference: sig.reference,
+                mask,
+            };
+            return Ok((record, attempt));
+        }
+        Err(DatasetError::NoContact {
+            index: plan.index,
+            object: self.names.get(object_index).cloned().unwrap_or_default(),
+            min_pixels: self.min_pixels,
+            attempts: self.config.max_attempts,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::sensor::SensorPose;
+    use crate::sim::SimConfig;
+
+    #[test]
+    fn offset_box_at_full_fraction_projects_onto_the_image_edges() {
+        let sim = Simulator::new(SimConfig::default()).unwrap();
+        let k = *sim.intrinsics();
+        let sensor = SensorPose::default(); // x = y = 0, yaw 0, looking down
+        let t_camera_world = sim.t_world_camera(&sensor).inverse();
+        // The apex plane in the world: sensor z = apex height, i.e. world z = position.z - apex height.
+        let z = sensor.position[2] - sim.apex_height();
+        let b = OffsetBox::new(&sim, 1.0);
+        let project = |x: f64, y: f64| {
+            k.project(t_camera_world.transform_point3(DVec3::new(x, y, z)))
+                .unwrap()
+        };
+        let (w, h) = (k.width as f64, k.height as f64);
+        let corners = [
+            (b.x[0], b.y[0]),
+            (b.x[1], b.y[0]),
+            (b.x[0], b.y[1]),
+            (b.x[1], b.y[1]),
+        ];
+        for (x, y) in corners {
+            let (u, v, _) = project(x, y);
+            let on_edge = |p: f64, n: f64| (p + 0.5).abs() < 1e-6 || (p - (n - 0.5)).abs() < 1e-6;
+            assert!(
+                on_edge(u, w) && on_edge(v, h),
+                "corner ({x}, {y}) -> ({u}, {v})"
+            );
+        }
+        // Shrinking keeps the centre and scales the extent.
+        let s = OffsetBox::new(&sim, 0.4);
+        for (a, c) in [(s.x, b.x), (s.y, b.y)] {
+            assert!(((a[0] + a[1]) - (c[0] + c[1])).abs() < 1e-12);
+            assert!(((a[1] - a[0]) - 0.4 * (c[1] - c[0])).abs() < 1e-12);
+        }
+    }
+}
