@@ -14,6 +14,7 @@ use super::pose::{pose_errors, PoseErrors};
 use super::summary::MeanStd;
 use super::MetricsError;
 use crate::image::Image;
+use crate::mesh::Mesh;
 use crate::objects::{ObjectError, ObjectSet, Symmetry};
 use crate::pose::{
     register, sample_surface, threshold_contact, BaselineConfig, Hypothesis, InitStrategy,
@@ -232,8 +233,18 @@ impl Evaluator {
         }
         let mesh = set.mesh(name)?;
         let symmetry = set.find(name).map(|e| e.symmetry).unwrap_or_default();
+        self.object_from_mesh(name, &mesh, symmetry)
+    }
+
+    /// Prepare (and cache under `name`) an object given by its mesh (object frame, resting pose) and symmetry.
+    pub fn object_from_mesh(
+        &self,
+        name: &str,
+        mesh: &Mesh,
+        symmetry: Symmetry,
+    ) -> Result<Arc<ObjectModel>, EvalError> {
         let registration =
-            SdfRegistration::new(&mesh, self.config.registration.clone()).map_err(|source| {
+            SdfRegistration::new(mesh, self.config.registration.clone()).map_err(|source| {
                 EvalError::Pose {
                     object: name.to_string(),
                     source,
@@ -241,7 +252,7 @@ impl Evaluator {
             })?;
         let model = Arc::new(ObjectModel {
             registration,
-            cloud: sample_surface(&mesh, self.config.chamfer_points, 0),
+            cloud: sample_surface(mesh, self.config.chamfer_points, 0),
             symmetry,
         });
         if let Ok(mut m) = self.objects.lock() {

@@ -8,6 +8,7 @@
 //! [`crate::metrics::pose::position_error_m`] (mm, translation axis excluded); the θ error is signed, wrapped to
 //! (−P/2, P/2] with P the symmetry period, in degrees, and absent for continuous symmetry.
 
+pub mod analysis;
 pub mod kde;
 pub mod plot;
 

@@ -68,6 +68,10 @@ pub struct PoseBenchArgs {
     /// Seed of the perturbations and random starts.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// With --problem: save the perturbed problem in the peer's format here (for running the peer's ICP on it with
+    /// tests/fixtures/pose_icp_on_problem.py).
+    #[arg(long)]
+    pub write_problem: Option<PathBuf>,
 }
 
 /// One registration problem in metres.
@@ -261,6 +265,9 @@ pub fn run(a: &PoseBenchArgs) -> Result<()> {
         None => simulated_problem(a)?,
     };
     perturb(&mut p, a)?;
+    if let (Some(out), Some(src)) = (&a.write_problem, &a.problem) {
+        write_problem(out, src, &p)?;
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.max(1))
         .build()?;
@@ -358,4 +365,42 @@ fn grid_accuracy(reg: &SdfRegistration, p: &Problem) -> (f64, f64, f64, f64) {
         b_sum += e;
     }
     (s_max, s_sum / n, b_max, b_sum / n)
+}
+
+/// Save the (perturbed) problem in the peer's format: points in mm (float32), the starts, and the source's mesh and
+/// problem.json.
+fn write_problem(out: &Path, src: &Path, p: &Problem) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let pts = |v: &[DVec3]| -> Vec<f32> {
+        v.iter()
+            .flat_map(|q| (*q * 1e3).to_array().map(|x| x as f32))
+            .collect()
+    };
+    let save = |name: &str, bytes: Vec<u8>| {
+        let path = out.join(name);
+        tactile_derender::io::write_atomic(&path, &bytes)
+            .with_context(|| format!("{}: cannot write", path.display()))
+    };
+    save(
+        "surface_points_mm.npy",
+        npy::encode_f32(&[p.surface.len(), 3], &pts(&p.surface)),
+    )?;
+    save(
+        "free_points_mm.npy",
+        npy::encode_f32(&[p.free.len(), 3], &pts(&p.free)),
+    )?;
+    for name in [
+        "inits_obj_to_world_mm.npy",
+        "problem.json",
+        "cylinder_mm.obj",
+    ] {
+        std::fs::copy(src.join(name), out.join(name)).with_context(|| {
+            format!(
+                "{}: cannot copy into {}",
+                src.join(name).display(),
+                out.display()
+            )
+        })?;
+    }
+    Ok(())
 }

@@ -4,7 +4,9 @@ mod args;
 mod bench;
 mod bench_pose;
 mod dataset_cmd;
+mod eval_cmd;
 mod objects_cmd;
+mod pose_cmd;
 mod sim_cmd;
 
 use clap::{Parser, Subcommand};
@@ -27,6 +29,10 @@ enum Command {
     Dataset(dataset_cmd::DatasetArgs),
     /// Benchmarks printing JSON lines.
     Bench(bench::BenchArgs),
+    /// Evaluate a generator and the threshold baseline on a dataset: the paper's Tables I and II.
+    Eval(Box<eval_cmd::EvalArgs>),
+    /// One signature end to end: samples, pose, uncertainty (CSV + KDE plot).
+    Pose(Box<pose_cmd::PoseArgs>),
 }
 
 fn main() -> std::process::ExitCode {
@@ -36,6 +42,8 @@ fn main() -> std::process::ExitCode {
         Command::Objects(a) => objects_cmd::run(a),
         Command::Dataset(a) => dataset_cmd::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Eval(a) => eval_cmd::run(*a),
+        Command::Pose(a) => pose_cmd::run(*a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
