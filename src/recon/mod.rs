@@ -58,7 +58,8 @@ pub fn is_valid_depth(d: f32) -> bool {
 /// let depth = Image::from_vec(2, 1, vec![0.0, 0.05]).unwrap();
 /// let cloud = back_project(&depth, &k, &DAffine3::from_translation([0.0, 0.0, 1.0].into()));
 /// assert_eq!(cloud.pixels, vec![1]);
-/// assert!((cloud.p_cam[0].x - 0.0005).abs() < 1e-12 && (cloud.p_world[0].z - 1.05).abs() < 1e-12);
+/// // (f32 depth: 0.05 is stored as 0.050000000745)
+/// assert!((cloud.p_cam[0].x - 0.0005).abs() < 1e-9 && (cloud.p_world[0].z - 1.05).abs() < 1e-9);
 /// ```
 pub fn back_project(
     depth: &Image,
