@@ -107,6 +107,32 @@ impl SdfGrid {
         f64::from(self.values[(k * self.dims[1] + j) * self.dims[0] + i])
     }
 
+    /// Trilinear value at a point inside the box (the cost-only path of the solver).
+    #[inline]
+    fn inside_value(&self, p: DVec3) -> f64 {
+        let f = (p - self.origin) / self.spacing;
+        let cell = |x: f64, n: usize| {
+            let i = (x.floor().max(0.0) as usize).min(n.saturating_sub(2));
+            (i, (x - i as f64).clamp(0.0, 1.0))
+        };
+        let (i, tx) = cell(f.x, self.dims[0]);
+        let (j, ty) = cell(f.y, self.dims[1]);
+        let (k, tz) = cell(f.z, self.dims[2]);
+        let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
+        let c = |a: usize, b: usize, d: usize| self.node(i + a, j + b, k + d);
+        let y0 = lerp(
+            lerp(c(0, 0, 0), c(1, 0, 0), tx),
+            lerp(c(0, 1, 0), c(1, 1, 0), tx),
+            ty,
+        );
+        let y1 = lerp(
+            lerp(c(0, 0, 1), c(1, 0, 1), tx),
+            lerp(c(0, 1, 1), c(1, 1, 1), tx),
+            ty,
+        );
+        lerp(y0, y1, tz)
+    }
+
     /// Trilinear value and gradient at a point inside the box.
     #[inline]
     fn inside(&self, p: DVec3) -> (f64, DVec3) {
@@ -140,7 +166,12 @@ impl SdfGrid {
 
 impl ObjectSdf for SdfGrid {
     fn value(&self, p_obj: DVec3) -> f64 {
-        self.value_grad(p_obj).0
+        let (lo, hi) = self.bounds();
+        if p_obj.cmpge(lo).all() && p_obj.cmple(hi).all() {
+            self.inside_value(p_obj)
+        } else {
+            self.value_grad(p_obj).0
+        }
     }
 
     /// Inside the box: trilinear interpolation and its exact derivative. Outside: with `q` the nearest point of the
@@ -190,6 +221,7 @@ mod tests {
                 continue;
             }
             let (got, g) = grid.value_grad(p);
+            assert!((grid.value(p) - got).abs() < 1e-12);
             let err = (got - want).abs();
             max_err = max_err.max(err);
             sum_err += err;
