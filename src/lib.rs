@@ -13,6 +13,7 @@ pub mod image;
 pub mod io;
 pub mod mesh;
 pub mod metrics;
+pub mod model;
 pub mod objects;
 pub mod pose;
 pub mod recon;

@@ -152,7 +152,10 @@ fn interrupted_run_resumes_to_the_uninterrupted_result() {
     assert!(report.kept_chunks >= 1, "{report:?}");
     assert!(report.generated < cfg.pairs, "{report:?}");
     assert_same_tree(&full, &part);
-    // Running the finished command again changes nothing.
+    // Running the finished command again changes nothing, also after a kill between writing manifest.json and
+    // removing progress.json, or during a write.
+    std::fs::write(part.join(PROGRESS_FILE), b"{}").unwrap();
+    std::fs::write(part.join(".manifest.json.tmp.99999"), b"{").unwrap();
     let again = generate(&part, &sim_config(), &set, &cfg, &|_| {}).unwrap();
     assert!(again.already_complete && again.generated == 0);
     assert_same_tree(&full, &part);
@@ -534,4 +537,78 @@ fn the_stored_seed_reproduces_the_pair_with_noise() {
         );
         assert_eq!((r.pose, r.press), (p.meta.object_pose, p.meta.press));
     }
+}
+
+#[test]
+fn cli_stats_and_show_describe_the_dataset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let set = small_set(&tmp.path().join("set"));
+    let out = tmp.path().join("d");
+    run(&out, &set, &gen_config(30), 2);
+    let tnd = env!("CARGO_BIN_EXE_tnd");
+    let o = std::process::Command::new(tnd)
+        .args(["dataset", "stats", "--json", "--verify"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let ds = Dataset::open(&out).unwrap();
+    assert_eq!(
+        s["counts"],
+        serde_json::to_value(ds.manifest().counts).unwrap()
+    );
+    let per_object: usize = s["per_object"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|c| {
+            (0..3)
+                .map(|k| {
+                    c[["train", "unseen_poses", "unseen_objects"][k]]
+                        .as_u64()
+                        .unwrap() as usize
+                })
+                .sum::<usize>()
+        })
+        .sum();
+    assert_eq!(per_object, 30);
+    assert_eq!(
+        s["area_hist"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_u64().unwrap())
+            .sum::<u64>(),
+        30
+    );
+    let [lo, hi] = [0, 1].map(|k| s["press_range_m"][k].as_f64().unwrap());
+    assert!(0.003 <= lo && lo <= hi && hi <= 0.015);
+
+    let png = tmp.path().join("pair.png");
+    let o = std::process::Command::new(tnd)
+        .args([
+            "dataset",
+            "show",
+            "--index",
+            "0",
+            "--split",
+            "unseen_objects",
+            "--out",
+        ])
+        .arg(&png)
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let img = image::open(&png).unwrap();
+    assert!(img.width() > 4 * 4 * 32 && img.height() > 4 * 24);
+    let o = std::process::Command::new(tnd)
+        .args(["dataset", "show", "--index", "100000", "--out"])
+        .arg(&png)
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("out of range"), "{err}");
 }

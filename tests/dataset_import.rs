@@ -218,3 +218,22 @@ fn bad_input_gives_one_clear_error_naming_the_file() {
     .to_string();
     assert!(err.contains("100x100") && err.contains("224x171"), "{err}");
 }
+
+#[test]
+fn an_interrupted_import_is_redone_by_the_same_command_and_a_finished_one_is_kept() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("real");
+    let (sim, set) = (SimConfig::default(), ObjectSet::builtin());
+    import(&fixture(), &out, &sim, &set, &ImportConfig::default()).unwrap();
+    let shard = out.join("shards/train-00000.npz");
+    let before = std::fs::read(&shard).unwrap();
+    // Killed before manifest.json: shards and objects only, one shard half written.
+    std::fs::remove_file(out.join("manifest.json")).unwrap();
+    std::fs::write(&shard, &before[..100]).unwrap();
+    import(&fixture(), &out, &sim, &set, &ImportConfig::default()).unwrap();
+    assert_eq!(std::fs::read(&shard).unwrap(), before);
+    Dataset::open(&out).unwrap().verify().unwrap();
+    // A finished dataset is not overwritten.
+    let err = import(&fixture(), &out, &sim, &set, &ImportConfig::default()).unwrap_err();
+    assert!(matches!(err, DatasetError::NotADataset { .. }), "{err}");
+}

@@ -70,7 +70,6 @@ pub fn generate(
         return Err(DatasetError::Config("the object set is empty".into()));
     }
     let sim = Simulator::new(sim_config.clone())?;
-    let names: Vec<String> = set.entries().iter().map(|e| e.name.clone()).collect();
     let object_splits: Vec<_> = set.entries().iter().map(|e| e.split).collect();
     let plan = split::plan(
         config.seed,
@@ -78,11 +77,62 @@ pub fn generate(
         &object_splits,
         config.holdout_every,
     );
+    let dataset = planned_manifest(sim_config, set, config, &plan)?;
+    let mut report = GenReport {
+        pairs: config.pairs,
+        generated: 0,
+        kept_chunks: 0,
+        redraws: 0,
+        counts: dataset.counts,
+        already_complete: false,
+        elapsed_s: 0.0,
+    };
+    if out.join(MANIFEST_FILE).exists() {
+        check_finished(out, &dataset)?;
+        progress(config.pairs);
+        report.already_complete = true;
+        report.kept_chunks = config.chunks();
+        report.elapsed_s = t0.elapsed().as_secs_f64();
+        return Ok(report);
+    }
+    let mut state = start_or_resume(out, dataset)?;
+    set.export(&out.join(OBJECTS_DIR))?;
+    state.save(&out.join(PROGRESS_FILE))?;
+    remove_all_stale_temp_files(out)?;
+    let todo = keep_intact_chunks(out, config, &mut state, progress);
+    report.kept_chunks = config.chunks() - todo.len();
+
+    let names: Vec<String> = set.entries().iter().map(|e| e.name.clone()).collect();
+    let objects: Vec<PreparedObject> = names
+        .par_iter()
+        .map(|n| Ok(PreparedObject::new(set.mesh(n)?)?))
+        .collect::<Result<_, DatasetError>>()?;
+    let sampler = Sampler::new(&sim, &objects, &names, config);
+    let state = simulate_and_write(out, &plan, &todo, &sampler, state, &mut report, progress)?;
+
+    let manifest_path = out.join(MANIFEST_FILE);
+    let mut manifest = state.dataset;
+    manifest.shards = state.done.into_values().flatten().collect();
+    manifest.validate(&manifest_path)?;
+    manifest.save(&manifest_path)?;
+    let progress_path = out.join(PROGRESS_FILE);
+    std::fs::remove_file(&progress_path).map_err(|e| DatasetError::io(&progress_path, e))?;
+    report.elapsed_s = t0.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+/// The manifest the finished dataset will have, without its shard list.
+fn planned_manifest(
+    sim_config: &SimConfig,
+    set: &ObjectSet,
+    config: &GenConfig,
+    plan: &[PlannedPair],
+) -> Result<DatasetManifest, DatasetError> {
     let mut counts = SplitCounts::default();
-    for p in &plan {
+    for p in plan {
         counts.add(p.split, 1);
     }
-    let dataset = DatasetManifest {
+    Ok(DatasetManifest {
         format: FORMAT_NAME.into(),
         version: FORMAT_VERSION,
         kind: DatasetKind::Synthetic,
@@ -101,37 +151,34 @@ pub fn generate(
         counts,
         arrays: DatasetManifest::array_table(),
         shards: Vec::new(),
-    };
-    let mut report = GenReport {
-        pairs: config.pairs,
-        generated: 0,
-        kept_chunks: 0,
-        redraws: 0,
-        counts,
-        already_complete: false,
-        elapsed_s: 0.0,
-    };
+    })
+}
 
+/// `out` holds a finished dataset: it must be this one, intact; leftovers of a run killed after writing
+/// `manifest.json` (`progress.json`, temporary files) are removed.
+fn check_finished(out: &Path, dataset: &DatasetManifest) -> Result<(), DatasetError> {
     let manifest_path = out.join(MANIFEST_FILE);
-    let progress_path = out.join(PROGRESS_FILE);
-    if manifest_path.exists() {
-        let existing = DatasetManifest::load(&manifest_path)?;
-        if let Some(field) = existing.identity_difference(&dataset) {
-            return Err(DatasetError::ConfigMismatch {
-                path: manifest_path,
-                field,
-            });
-        }
-        for s in &existing.shards {
-            shard::verify_file(out, s)?;
-        }
-        progress(config.pairs);
-        report.already_complete = true;
-        report.kept_chunks = config.chunks();
-        report.elapsed_s = t0.elapsed().as_secs_f64();
-        return Ok(report);
+    let existing = DatasetManifest::load(&manifest_path)?;
+    if let Some(field) = existing.identity_difference(dataset) {
+        return Err(DatasetError::ConfigMismatch {
+            path: manifest_path,
+            field,
+        });
     }
-    let mut state = if progress_path.exists() {
+    for s in &existing.shards {
+        shard::verify_file(out, s)?;
+    }
+    let progress_path = out.join(PROGRESS_FILE);
+    if progress_path.exists() {
+        std::fs::remove_file(&progress_path).map_err(|e| DatasetError::io(&progress_path, e))?;
+    }
+    remove_all_stale_temp_files(out)
+}
+
+/// The progress of an unfinished run of the same configuration, or a fresh start in a missing or empty directory.
+fn start_or_resume(out: &Path, dataset: DatasetManifest) -> Result<Progress, DatasetError> {
+    let progress_path = out.join(PROGRESS_FILE);
+    if progress_path.exists() {
         let p = load_progress(&progress_path)?;
         if let Some(field) = p.dataset.identity_difference(&dataset) {
             return Err(DatasetError::ConfigMismatch {
@@ -139,53 +186,54 @@ pub fn generate(
                 field,
             });
         }
-        Progress { dataset, ..p }
-    } else {
-        refuse_foreign_dir(out)?;
-        Progress {
-            format: FORMAT_NAME.into(),
-            version: FORMAT_VERSION,
-            dataset,
-            done: BTreeMap::new(),
-        }
-    };
-    set.export(&out.join(OBJECTS_DIR))?;
-    state.save(&progress_path)?;
-    for dir in [
-        out.to_path_buf(),
-        out.join(SHARDS_DIR),
-        out.join(OBJECTS_DIR),
-    ] {
-        remove_stale_temp_files(&dir)?;
+        return Ok(Progress { dataset, ..p });
     }
+    refuse_foreign_dir(out)?;
+    Ok(Progress {
+        format: FORMAT_NAME.into(),
+        version: FORMAT_VERSION,
+        dataset,
+        done: BTreeMap::new(),
+    })
+}
 
-    // Chunks already on disk and intact are kept.
-    let mut todo = Vec::new();
+/// Keep the recorded chunks whose shards still verify (reporting their pairs as done); return the others.
+fn keep_intact_chunks(
+    out: &Path,
+    config: &GenConfig,
+    state: &mut Progress,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Vec<usize> {
     let recorded = std::mem::take(&mut state.done);
+    let mut todo = Vec::new();
     for chunk in 0..config.chunks() {
-        let intact = recorded
-            .get(&chunk)
-            .is_some_and(|shards| shards.iter().all(|s| shard::verify_file(out, s).is_ok()));
-        if intact {
-            if let Some(shards) = recorded.get(&chunk) {
+        match recorded.get(&chunk) {
+            Some(shards) if shards.iter().all(|s| shard::verify_file(out, s).is_ok()) => {
                 state.done.insert(chunk, shards.clone());
+                progress(chunk_range(config, chunk).len());
             }
-            progress(chunk_range(config, chunk).len());
-            report.kept_chunks += 1;
-        } else {
-            todo.push(chunk);
+            _ => todo.push(chunk),
         }
     }
+    todo
+}
 
-    let objects: Vec<PreparedObject> = names
-        .par_iter()
-        .map(|n| Ok(PreparedObject::new(set.mesh(n)?)?))
-        .collect::<Result<_, DatasetError>>()?;
-    let sampler = Sampler::new(&sim, &objects, &names, config);
-    let (w, h) = sim_config.camera.resolution;
-
+/// Simulate the `todo` chunks in parallel, one after the other, while a writer thread stores the previous chunk's
+/// shards and records it in `progress.json`. Returns the final progress.
+fn simulate_and_write(
+    out: &Path,
+    plan: &[PlannedPair],
+    todo: &[usize],
+    sampler: &Sampler<'_>,
+    state: Progress,
+    report: &mut GenReport,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<Progress, DatasetError> {
+    let config = sampler.config;
+    let (w, h) = state.dataset.sim.camera.resolution;
+    let progress_path = out.join(PROGRESS_FILE);
     let (tx, rx) = mpsc::sync_channel::<(usize, Vec<Record>)>(1);
-    let writer_result = std::thread::scope(|scope| {
+    std::thread::scope(|scope| {
         let writer = scope.spawn(|| -> Result<Progress, DatasetError> {
             let mut state = state;
             for (chunk, records) in rx {
@@ -202,23 +250,23 @@ pub fn generate(
             Ok(state)
         });
         let mut sim_result = Ok(());
-        for &chunk in &todo {
-            let planned: &[PlannedPair] = &plan[chunk_range(config, chunk)];
-            let simulated: Result<Vec<(Record, usize)>, DatasetError> = planned
-                .par_iter()
-                .map(|p| {
-                    let r = sampler.sample(p);
-                    progress(1);
-                    r
-                })
-                .collect();
+        for &chunk in todo {
+            let simulated: Result<Vec<(Record, usize)>, DatasetError> = plan
+                [chunk_range(config, chunk)]
+            .par_iter()
+            .map(|p| {
+                let r = sampler.sample(p);
+                progress(1);
+                r
+            })
+            .collect();
             match simulated {
                 Ok(v) => {
                     report.generated += v.len();
                     report.redraws += v.iter().map(|(_, a)| a - 1).sum::<usize>();
                     let records = v.into_iter().map(|(r, _)| r).collect();
                     if tx.send((chunk, records)).is_err() {
-                        break; // the writer failed; its error is reported below
+                        break; // the writer failed; its error is returned below
                     }
                 }
                 Err(e) => {
@@ -232,15 +280,7 @@ pub fn generate(
             .join()
             .map_err(|_| DatasetError::Config("the shard writer thread panicked".into()))?;
         sim_result.and(written)
-    })?;
-
-    let mut manifest = writer_result.dataset;
-    manifest.shards = writer_result.done.into_values().flatten().collect();
-    manifest.validate(&manifest_path)?;
-    manifest.save(&manifest_path)?;
-    std::fs::remove_file(&progress_path).map_err(|e| DatasetError::io(&progress_path, e))?;
-    report.elapsed_s = t0.elapsed().as_secs_f64();
-    Ok(report)
+    })
 }
 
 /// Pair indices of chunk `chunk`.
@@ -312,6 +352,18 @@ pub(crate) fn refuse_foreign_dir(out: &Path) -> Result<(), DatasetError> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(e) => Err(DatasetError::io(out, e)),
     }
+}
+
+/// [`remove_stale_temp_files`] in the dataset root, `shards/` and `objects/`.
+pub(crate) fn remove_all_stale_temp_files(out: &Path) -> Result<(), DatasetError> {
+    for dir in [
+        out.to_path_buf(),
+        out.join(SHARDS_DIR),
+        out.join(OBJECTS_DIR),
+    ] {
+        remove_stale_temp_files(&dir)?;
+    }
+    Ok(())
 }
 
 /// Remove `.<name>.tmp.<pid>` files left by a killed run (see [`crate::io::write_atomic`]).

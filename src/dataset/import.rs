@@ -25,12 +25,13 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::gen::{exported_manifest, refuse_foreign_dir};
+use super::gen::{exported_manifest, refuse_foreign_dir, remove_all_stale_temp_files};
 use super::manifest::{
     DatasetKind, DatasetManifest, ImportInfo, ObjectSetInfo, SplitCounts, FORMAT_NAME,
     FORMAT_VERSION, MANIFEST_FILE, OBJECTS_DIR,
 };
 use super::resample;
+use super::shard::SHARDS_DIR;
 use super::shard::{self, Record};
 use super::split;
 use super::{DatasetError, SplitName};
@@ -104,142 +105,29 @@ pub fn import(
             message: "the pair table has no rows".into(),
         });
     }
-    refuse_foreign_dir(out)?;
+    refuse_unless_interrupted_import(out)?;
     let sim = Simulator::new(sim_config.clone())?;
     let camera = &sim_config.camera;
     let (w, h) = camera.resolution;
-    let global_reference = find_global_reference(from);
-    let mut tops: BTreeMap<String, f64> = BTreeMap::new();
+    let mut reader = RowReader {
+        from,
+        table: &table,
+        set,
+        sim: &sim,
+        config,
+        global_reference: find_global_reference(from),
+        tops: BTreeMap::new(),
+    };
     let mut objects = Vec::with_capacity(rows.len());
     let mut explicit_splits = Vec::with_capacity(rows.len());
     let mut records = Vec::with_capacity(rows.len());
     let mut sizes = Vec::new();
     for (i, row) in rows.iter().enumerate() {
-        let at = |message: String| DatasetError::Import {
-            path: table.clone(),
-            message: format!("row {}: {message}", i + 1),
-        };
-        let name = field(row, "object").map_err(at)?;
-        let object = set
-            .entries()
-            .iter()
-            .position(|e| e.name == name)
-            .ok_or_else(|| {
-                at(format!(
-                    "object '{name}' is not in the object set {}",
-                    set.spec()
-                ))
-            })?;
-        let num = |key: &str| -> Result<f64, DatasetError> {
-            let s = field(row, key).map_err(at)?;
-            let v: f64 = s
-                .parse()
-                .map_err(|_| at(format!("{key} '{s}' is not a number")))?;
-            if v.is_finite() {
-                Ok(v)
-            } else {
-                Err(at(format!("{key} is not finite")))
-            }
-        };
-        let pose = Se2::new(num("x")?, num("y")?, num("theta")?);
-        let press = match row.get("press").filter(|s| !s.trim().is_empty()) {
-            Some(_) => num("press")?,
-            None => f64::NAN,
-        };
-        explicit_splits.push(match row.get("split").filter(|s| !s.trim().is_empty()) {
-            Some(s) => Some(s.parse::<SplitName>().map_err(at)?),
-            None => config.split,
-        });
-        let load = |key: &str| -> Result<Option<Image>, DatasetError> {
-            row.get(key)
-                .map(|s| s.trim())
-                .filter(|s| !s.is_empty())
-                .map(|rel| load_image(from, rel, config))
-                .transpose()
-        };
-        let reference = match (load("reference")?, &global_reference) {
-            (Some(r), _) => r,
-            (None, Some(p)) => load_image(from, &p.to_string_lossy(), config)?,
-            (None, None) => {
-                return Err(at(
-                    "no reference column and no reference.npy/.npz/.png in the directory".into(),
-                ))
-            }
-        };
-        let size = |img: &Image| (img.width, img.height);
-        let target = load("target")?.ok_or_else(|| at("missing target".into()))?;
-        let signature = match (load("signature")?, load("imprint")?) {
-            (Some(s), _) => s,
-            (None, Some(y)) if size(&y) == size(&reference) => {
-                reference.zip_map(&y, |r, y| if r > 0.0 { r - y } else { 0.0 })
-            }
-            (None, Some(y)) => {
-                return Err(at(format!(
-                    "imprint is {:?} but the reference is {:?}",
-                    size(&y),
-                    size(&reference)
-                )))
-            }
-            (None, None) => return Err(at("give a signature or an imprint".into())),
-        };
-        if size(&signature) != size(&reference) || size(&target) != size(&reference) {
-            return Err(at(format!(
-                "target {:?}, signature {:?} and reference {:?} must have the same size",
-                size(&target),
-                size(&signature),
-                size(&reference)
-            )));
-        }
-        sizes.push([reference.width, reference.height]);
-        let to_model = |img: &Image, what: &str| {
-            resample::to_model(camera, img).map_err(|m| at(format!("{what}: {m}")))
-        };
-        let s = to_model(&signature, "signature")?;
-        let r = to_model(&reference, "reference")?;
-        let target = to_model(&target, "target")?;
-        let imprint = r.zip_map(&s, |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 });
-        let mask = Image {
-            width: w,
-            height: h,
-            data: target
-                .data
-                .iter()
-                .map(|&x| if x > 0.0 { 1.0 } else { 0.0 })
-                .collect(),
-        };
-        let sensor = if press.is_finite() {
-            let top = match tops.get(name) {
-                Some(&t) => t,
-                None => {
-                    let t = PreparedObject::new(set.mesh(name)?)?.top_z;
-                    tops.insert(name.to_string(), t);
-                    t
-                }
-            };
-            SensorPose::pressing(0.0, 0.0, 0.0, [0.0, 0.0], sim.apex_height(), top, press)
-        } else {
-            SensorPose {
-                position: [0.0, 0.0, f64::NAN],
-                yaw: 0.0,
-                tilt: [0.0, 0.0],
-            }
-        };
-        objects.push(object);
-        records.push(Record {
-            index: i,
-            seed: 0,
-            object,
-            split: SplitName::Train,
-            pose,
-            sensor,
-            press,
-            contact_pixels: mask.count_nonzero(),
-            imprint,
-            target,
-            signature: s,
-            reference: r,
-            mask,
-        });
+        let (record, split, size) = reader.read(i, row)?;
+        objects.push(record.object);
+        explicit_splits.push(split);
+        sizes.push(size);
+        records.push(record);
     }
     let object_splits: Vec<_> = set.entries().iter().map(|e| e.split).collect();
     let auto = split::assign(config.seed, &objects, &object_splits, 10);
@@ -296,6 +184,184 @@ pub fn import(
         counts,
         out: out.to_path_buf(),
     })
+}
+
+/// Reads the rows of a pair table into records (split not yet assigned).
+struct RowReader<'a> {
+    from: &'a Path,
+    table: &'a Path,
+    set: &'a ObjectSet,
+    sim: &'a Simulator,
+    config: &'a ImportConfig,
+    global_reference: Option<PathBuf>,
+    /// Object name -> height of its top, metres (for the sensor pose of pairs with a press depth).
+    tops: BTreeMap<String, f64>,
+}
+
+impl RowReader<'_> {
+    /// Row `i` (0-based): its record, its explicit split (column or `--split`), and the source frame size.
+    fn read(
+        &mut self,
+        i: usize,
+        row: &Row,
+    ) -> Result<(Record, Option<SplitName>, [usize; 2]), DatasetError> {
+        let (w, h) = self.sim.config().camera.resolution;
+        let at = |message: String| DatasetError::Import {
+            path: self.table.to_path_buf(),
+            message: format!("row {}: {message}", i + 1),
+        };
+        let name = field(row, "object").map_err(at)?;
+        let object = self
+            .set
+            .entries()
+            .iter()
+            .position(|e| e.name == name)
+            .ok_or_else(|| {
+                at(format!(
+                    "object '{name}' is not in the object set {}",
+                    self.set.spec()
+                ))
+            })?;
+        let num = |key: &str| -> Result<f64, DatasetError> {
+            let s = field(row, key).map_err(at)?;
+            let v: f64 = s
+                .parse()
+                .map_err(|_| at(format!("{key} '{s}' is not a number")))?;
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(at(format!("{key} is not finite")))
+            }
+        };
+        let pose = Se2::new(num("x")?, num("y")?, num("theta")?);
+        let press = match row.get("press").filter(|s| !s.trim().is_empty()) {
+            Some(_) => num("press")?,
+            None => f64::NAN,
+        };
+        let explicit_split = match row.get("split").filter(|s| !s.trim().is_empty()) {
+            Some(s) => Some(s.parse::<SplitName>().map_err(at)?),
+            None => self.config.split,
+        };
+        let load = |key: &str| -> Result<Option<Image>, DatasetError> {
+            row.get(key)
+                .map(|s| s.trim())
+                .filter(|s| !s.is_empty())
+                .map(|rel| load_image(self.from, rel, self.config))
+                .transpose()
+        };
+        let reference = match (load("reference")?, &self.global_reference) {
+            (Some(r), _) => r,
+            (None, Some(p)) => load_image(self.from, &p.to_string_lossy(), self.config)?,
+            (None, None) => {
+                return Err(at(
+                    "no reference column and no reference.npy/.npz/.png in the directory".into(),
+                ))
+            }
+        };
+        let size = |img: &Image| (img.width, img.height);
+        let target = load("target")?.ok_or_else(|| at("missing target".into()))?;
+        let signature = match (load("signature")?, load("imprint")?) {
+            (Some(s), _) => s,
+            (None, Some(y)) if size(&y) == size(&reference) => {
+                reference.zip_map(&y, |r, y| if r > 0.0 { r - y } else { 0.0 })
+            }
+            (None, Some(y)) => {
+                return Err(at(format!(
+                    "imprint is {:?} but the reference is {:?}",
+                    size(&y),
+                    size(&reference)
+                )))
+            }
+            (None, None) => return Err(at("give a signature or an imprint".into())),
+        };
+        if size(&signature) != size(&reference) || size(&target) != size(&reference) {
+            return Err(at(format!(
+                "target {:?}, signature {:?} and reference {:?} must have the same size",
+                size(&target),
+                size(&signature),
+                size(&reference)
+            )));
+        }
+        let size = [reference.width, reference.height];
+        let to_model = |img: &Image, what: &str| {
+            resample::to_model(&self.sim.config().camera, img)
+                .map_err(|m| at(format!("{what}: {m}")))
+        };
+        let s = to_model(&signature, "signature")?;
+        let r = to_model(&reference, "reference")?;
+        let target = to_model(&target, "target")?;
+        let imprint = r.zip_map(&s, |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 });
+        let mask = Image {
+            width: w,
+            height: h,
+            data: target
+                .data
+                .iter()
+                .map(|&x| if x > 0.0 { 1.0 } else { 0.0 })
+                .collect(),
+        };
+        let sensor = if press.is_finite() {
+            let top = match self.tops.get(name) {
+                Some(&t) => t,
+                None => {
+                    let t = PreparedObject::new(self.set.mesh(name)?)?.top_z;
+                    self.tops.insert(name.to_string(), t);
+                    t
+                }
+            };
+            SensorPose::pressing(
+                0.0,
+                0.0,
+                0.0,
+                [0.0, 0.0],
+                self.sim.apex_height(),
+                top,
+                press,
+            )
+        } else {
+            SensorPose {
+                position: [0.0, 0.0, f64::NAN],
+                yaw: 0.0,
+                tilt: [0.0, 0.0],
+            }
+        };
+        let record = Record {
+            index: i,
+            seed: 0,
+            object,
+            split: SplitName::Train,
+            pose,
+            sensor,
+            press,
+            contact_pixels: mask.count_nonzero(),
+            imprint,
+            target,
+            signature: s,
+            reference: r,
+            mask,
+        };
+        Ok((record, explicit_split, size))
+    }
+}
+
+/// Import writes every shard before `manifest.json`, so a directory holding only `shards/`, `objects/` and temporary
+/// files is an interrupted import of ours and is overwritten (the same command resumes by starting over); anything
+/// else must be missing or empty.
+fn refuse_unless_interrupted_import(out: &Path) -> Result<(), DatasetError> {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return refuse_foreign_dir(out);
+    };
+    let ours = entries.flatten().all(|e| {
+        let name = e.file_name().to_string_lossy().into_owned();
+        name == SHARDS_DIR
+            || name == OBJECTS_DIR
+            || (name.starts_with('.') && name.contains(".tmp."))
+    });
+    if ours && !out.join(MANIFEST_FILE).exists() {
+        remove_all_stale_temp_files(out)
+    } else {
+        refuse_foreign_dir(out)
+    }
 }
 
 fn field<'a>(row: &'a Row, key: &str) -> Result<&'a str, String> {
@@ -408,6 +474,11 @@ fn load_image(from: &Path, rel: &str, config: &ImportConfig) -> Result<Image, Da
         path: path.clone(),
         message,
     };
+    if !path.is_file() {
+        return Err(bad(
+            "file not found (paths in the pair table are relative to its directory)".into(),
+        ));
+    }
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -441,9 +512,6 @@ fn load_image(from: &Path, rel: &str, config: &ImportConfig) -> Result<Image, Da
             ))
         }
     };
-    if !path.is_file() {
-        return Err(bad("file not found".into()));
-    }
     let scale = scale as f32;
     Ok(Image {
         data: img.data.iter().map(|&x| x * scale).collect(),

@@ -408,3 +408,15 @@ impl Iterator for Batches<'_> {
         (left, Some(left))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dataset_can_be_shared_between_threads() {
+        fn assert_send_sync<T: Send + Sync>() {}
+        assert_send_sync::<Dataset>();
+        assert_send_sync::<Batch>();
+    }
+}

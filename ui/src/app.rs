@@ -1,192 +1,431 @@
-//! The workbench window: the default scene (a library object under the bubble) and its simulated images, updated
-//! live as the user moves the sliders.
+//! The workbench shell: the saved [`State`], everything derived from it (simulation result, textures, sweep, GPU
+//! geometry), the frame loop (drain worker messages -> draw panels -> apply their commands), persistence and the
+//! one-shot screenshot mode.
 
-use egui::{Color32, TextureHandle, TextureOptions};
-use tactile_derender::image::Image;
-use tactile_derender::io::preview::{self, PanelStyle};
-use tactile_derender::objects::ObjectSet;
-use tactile_derender::sensor::{Scene, Se2};
-use tactile_derender::sim::{PreparedObject, SimConfig, SimOutput, Simulator};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
-use crate::colormap::to_color_image;
+use egui::Color32;
+use tactile_derender::mesh::Units;
+use tactile_derender::sim::calibration::SweepPoint;
 
-/// What the user set: object, pose, press and inflation.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SceneState {
-    pub object: String,
-    pub pose: Se2,
-    /// Press depth of the membrane apex into the object's top, metres.
-    pub press: f64,
-    /// Elastomer inflation height, metres.
-    pub inflation: f64,
-    pub seed: u64,
+use crate::command::Command;
+use crate::images::ImageTextures;
+use crate::measured::Measured;
+use crate::panels;
+use crate::state::State;
+use crate::timings::Timings;
+use crate::view3d::gpu;
+use crate::worker::{JobKind, SimRequest, SimResult, Worker, WorkerMsg};
+
+/// Key of the persisted state in eframe's storage.
+const STORAGE_KEY: &str = "tnd-workbench";
+
+/// What eframe persistence keeps between runs: the state and the session file it came from.
+#[derive(Default, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+struct Persisted {
+    state: State,
+    session_path: Option<PathBuf>,
 }
 
-impl Default for SceneState {
+/// Text typed into path fields (not saved: the state holds the paths actually in use).
+#[derive(Clone, Debug)]
+pub struct PathInputs {
+    pub session_path: String,
+    pub object_path: String,
+    pub object_units: Units,
+    pub elastomer_path: String,
+    pub measured_path: String,
+}
+
+impl Default for PathInputs {
     fn default() -> Self {
         Self {
-            object: "cross_w12_s50".into(),
-            pose: Se2::new(0.002, -0.001, 0.35),
-            press: 0.006,
-            inflation: 0.030,
-            seed: 0,
+            session_path: String::new(),
+            object_path: String::new(),
+            object_units: Units::Mm,
+            elastomer_path: String::new(),
+            measured_path: String::new(),
         }
     }
 }
 
-/// The running app.
+/// The inflation sweep as the UI sees it.
+#[derive(Default)]
+pub struct CalibrationView {
+    pub generation: u64,
+    pub running: bool,
+    pub progress: Option<(usize, usize)>,
+    pub points: Vec<SweepPoint>,
+}
+
+/// Where `--screenshot` reports: `None` until the PNG was written (or failed).
+pub type ScreenshotSlot = Arc<Mutex<Option<Result<(), String>>>>;
+
+/// How the binary starts the app (command-line options).
+#[derive(Default)]
+pub struct Launch {
+    /// Open this session instead of the last one.
+    pub session: Option<PathBuf>,
+    /// Render the window once into this PNG, report into the slot, and close.
+    pub screenshot: Option<(PathBuf, ScreenshotSlot)>,
+    /// Draw the 3D view with the CPU fallback even when wgpu is available.
+    pub cpu_3d: bool,
+    /// Print the timings as one JSON line when the window closes.
+    pub print_timings: bool,
+}
+
+/// A pending `--screenshot`.
+struct ScreenshotJob {
+    out: PathBuf,
+    requested: bool,
+    started: Instant,
+    result: ScreenshotSlot,
+}
+
+/// The running workbench.
 pub struct WorkbenchApp {
-    pub state: SceneState,
-    objects: ObjectSet,
-    computed_for: Option<SceneState>,
-    output: Option<SimOutput>,
-    error: Option<String>,
-    elapsed_ms: f64,
-    textures: Vec<(String, TextureHandle, (f32, f32))>,
+    /// The saved state (sessions, persistence).
+    pub state: State,
+    /// The session file the state was last opened from or saved to.
+    pub session_path: Option<PathBuf>,
+    pub inputs: PathInputs,
+    pub(crate) worker: Option<Worker>,
+    /// Generation of the newest simulation request.
+    pub(crate) generation: u64,
+    /// The newest simulation result.
+    pub sim: Option<Box<SimResult>>,
+    /// Generation of the last simulation that failed.
+    failed_generation: Option<u64>,
+    /// When each outstanding simulation generation was requested.
+    requested_at: std::collections::BTreeMap<u64, Instant>,
+    pub(crate) textures: ImageTextures,
+    pub calibration: CalibrationView,
+    pub(crate) measured: Option<Measured>,
+    /// Errors shown in the window until dismissed.
+    pub errors: Vec<String>,
+    /// The last informational message.
+    pub notice: Option<String>,
+    pub timings: Timings,
+    /// wgpu render state, when eframe runs on wgpu (None: CPU fallback for the 3D view).
+    pub(crate) render_state: Option<eframe::egui_wgpu::RenderState>,
+    pub(crate) adapter_name: Option<String>,
+    screenshot: Option<ScreenshotJob>,
+    persist: bool,
+    print_timings: bool,
+    /// When the timings were last printed, and the update-sample count then.
+    printed: Option<(Instant, usize)>,
+    last_frame: Option<Instant>,
+    frames: u64,
 }
 
 impl Default for WorkbenchApp {
     fn default() -> Self {
-        let objects = ObjectSet::builtin();
-        let mut state = SceneState::default();
-        if objects.find(&state.object).is_none() {
-            if let Some(first) = objects.entries().first() {
-                state.object = first.name.clone();
-            }
-        }
-        Self {
-            state,
-            objects,
-            computed_for: None,
-            output: None,
-            error: None,
-            elapsed_ms: 0.0,
-            textures: Vec::new(),
-        }
+        Self::with_state(State::default())
     }
 }
 
 impl WorkbenchApp {
-    /// Number of pixels in contact in the current simulation (None before the first run or after an error).
-    pub fn contact_pixels(&self) -> Option<usize> {
-        self.output.as_ref().map(|o| o.contact_pixels)
-    }
-
-    /// Re-run the simulator when the scene changed.
-    pub fn refresh(&mut self) {
-        if self.computed_for.as_ref() == Some(&self.state) {
-            return;
-        }
-        self.computed_for = Some(self.state.clone());
-        let t0 = std::time::Instant::now();
-        match self.simulate() {
-            Ok(out) => {
-                self.output = Some(out);
-                self.error = None;
-            }
-            Err(e) => {
-                self.output = None;
-                self.error = Some(e);
-            }
-        }
-        self.elapsed_ms = t0.elapsed().as_secs_f64() * 1e3;
-        self.textures.clear();
-    }
-
-    fn simulate(&self) -> Result<SimOutput, String> {
-        let mut cfg = SimConfig::default();
-        cfg.elastomer.inflation = self.state.inflation;
-        let sim = Simulator::new(cfg).map_err(|e| e.to_string())?;
-        let mesh = self
-            .objects
-            .mesh(&self.state.object)
-            .map_err(|e| e.to_string())?;
-        let object = PreparedObject::new(mesh).map_err(|e| e.to_string())?;
-        let scene = Scene {
-            object: self.state.pose,
-            sensor: sim.pressing_pose(&object, 0.0, 0.0, 0.0, self.state.press),
+    /// An app on `state` without GPU, persistence or screenshot (tests use this).
+    pub fn with_state(state: State) -> Self {
+        let mut app = Self {
+            state: State::default(),
+            session_path: None,
+            inputs: PathInputs::default(),
+            worker: None,
+            generation: 0,
+            sim: None,
+            failed_generation: None,
+            requested_at: Default::default(),
+            textures: ImageTextures::default(),
+            calibration: CalibrationView::default(),
+            measured: None,
+            errors: Vec::new(),
+            notice: None,
+            timings: Timings::default(),
+            render_state: None,
+            adapter_name: None,
+            screenshot: None,
+            persist: false,
+            print_timings: false,
+            printed: None,
+            last_frame: None,
+            frames: 0,
         };
-        Ok(sim.simulate(&object, &scene, self.state.seed))
+        app.replace_state(state);
+        app
     }
 
-    fn controls(&mut self, ui: &mut egui::Ui) {
-        ui.heading("Scene");
-        egui::ComboBox::from_label("Object")
-            .selected_text(self.state.object.clone())
-            .show_ui(ui, |ui| {
-                for e in self.objects.entries() {
-                    ui.selectable_value(&mut self.state.object, e.name.clone(), &e.name);
+    /// The app as eframe starts it: `launch.session` wins over the persisted last session; `launch.screenshot`
+    /// renders the window once into that PNG, reports into the slot and closes the window.
+    pub fn new(cc: &eframe::CreationContext<'_>, launch: Launch) -> Self {
+        let persisted: Option<Persisted> =
+            cc.storage.and_then(|s| eframe::get_value(s, STORAGE_KEY));
+        let mut app = Self::default();
+        if let Some(p) = persisted.filter(|_| launch.session.is_none()) {
+            match crate::session::validate(&p.state) {
+                Ok(()) => {
+                    app.replace_state(p.state);
+                    app.inputs.session_path = p
+                        .session_path
+                        .as_ref()
+                        .map(|s| s.display().to_string())
+                        .unwrap_or_default();
+                    app.session_path = p.session_path;
                 }
-            });
-        let mut x_mm = self.state.pose.x * 1e3;
-        let mut y_mm = self.state.pose.y * 1e3;
-        let mut theta_deg = self.state.pose.theta.to_degrees();
-        let mut press_mm = self.state.press * 1e3;
-        let mut inflation_mm = self.state.inflation * 1e3;
-        ui.add(egui::Slider::new(&mut x_mm, -30.0..=30.0).text("x (mm)"));
-        ui.add(egui::Slider::new(&mut y_mm, -30.0..=30.0).text("y (mm)"));
-        ui.add(egui::Slider::new(&mut theta_deg, -180.0..=180.0).text("θ (deg)"));
-        ui.add(egui::Slider::new(&mut press_mm, 0.0..=20.0).text("press (mm)"));
-        ui.separator();
-        ui.heading("Elastomer");
-        ui.add(egui::Slider::new(&mut inflation_mm, 10.0..=50.0).text("inflation (mm)"));
-        ui.add(egui::DragValue::new(&mut self.state.seed).prefix("seed "));
-        self.state.pose = Se2::new(x_mm * 1e-3, y_mm * 1e-3, theta_deg.to_radians());
-        self.state.press = press_mm * 1e-3;
-        self.state.inflation = inflation_mm * 1e-3;
-        ui.separator();
-        if let Some(n) = self.contact_pixels() {
-            ui.label(format!("contact pixels: {n}"));
-            ui.label(format!("simulated in {:.1} ms", self.elapsed_ms));
+                Err(e) => app.error(format!("last session not restored: {e}")),
+            }
         }
-        if let Some(e) = &self.error {
-            ui.colored_label(Color32::RED, e);
+        if let Some(path) = launch.session {
+            app.apply(Command::OpenSession(path));
+        }
+        if let Some(rs) = cc.wgpu_render_state.as_ref().filter(|_| !launch.cpu_3d) {
+            gpu::GpuResources::install(rs);
+            app.adapter_name = Some(rs.adapter.get_info().name);
+            app.render_state = Some(rs.clone());
+        }
+        app.persist = launch.screenshot.is_none();
+        app.print_timings = launch.print_timings;
+        app.screenshot = launch.screenshot.map(|(out, result)| ScreenshotJob {
+            out,
+            requested: false,
+            started: Instant::now(),
+            result,
+        });
+        app
+    }
+
+    /// Number of contact pixels of the current simulation.
+    pub fn contact_pixels(&self) -> Option<usize> {
+        self.sim.as_ref().map(|s| s.output.contact_pixels)
+    }
+
+    /// True while a simulation or sweep has not reported back.
+    pub fn busy(&self) -> bool {
+        self.calibration.running
+            || self.worker.is_some()
+                && self.sim.as_ref().map(|s| s.generation) != Some(self.generation)
+                && !self.sim_failed_for_latest()
+    }
+
+    fn sim_failed_for_latest(&self) -> bool {
+        self.failed_generation == Some(self.generation)
+    }
+
+    pub(crate) fn error(&mut self, message: String) {
+        if self.errors.last() != Some(&message) {
+            self.errors.push(message);
         }
     }
 
-    fn images(&mut self, ui: &mut egui::Ui) {
-        let Some(out) = &self.output else {
-            return;
-        };
-        if self.textures.is_empty() {
-            let list: [(&str, &Image, bool); 6] = [
-                ("D depth", &out.depth, true),
-                ("E elastomer", &out.elastomer, true),
-                ("M mask", &out.mask, false),
-                ("X0 in-contact depth", &out.target, true),
-                ("S signature", &out.signature, true),
-                ("Y imprint", &out.imprint, false),
-            ];
-            for (name, img, zero_missing) in list {
-                let style = PanelStyle {
-                    zero_is_missing: zero_missing,
-                    ..Default::default()
-                };
-                let range = preview::display_range(img, &style);
-                let tex = ui.ctx().load_texture(
-                    name,
-                    to_color_image(img, range, zero_missing),
-                    TextureOptions::NEAREST,
-                );
-                self.textures.push((name.to_string(), tex, range));
+    /// The simulation inputs of the current state.
+    pub(crate) fn sim_request(&self) -> SimRequest {
+        SimRequest {
+            generation: self.generation,
+            scene: self.state.scene.clone(),
+            sim: self.state.sim.clone(),
+            seed: self.state.seed,
+        }
+    }
+
+    /// Ask the worker to simulate the current state.
+    pub(crate) fn request_simulation(&mut self) {
+        self.generation += 1;
+        self.requested_at.insert(self.generation, Instant::now());
+        let req = self.sim_request();
+        if let Some(w) = &self.worker {
+            if let Err(e) = w.simulate(req) {
+                self.error(format!("{e:#}"));
             }
         }
-        ui.horizontal_wrapped(|ui| {
-            for (name, tex, range) in &self.textures {
-                ui.vertical(|ui| {
-                    ui.label(name);
-                    ui.image((tex.id(), egui::vec2(256.0, 256.0)));
-                    ui.label(format!("{:.1} .. {:.1} mm", range.0 * 1e3, range.1 * 1e3));
-                });
-            }
-        });
     }
+
+    fn ensure_worker(&mut self, ctx: &egui::Context) {
+        if self.worker.is_some() {
+            return;
+        }
+        match Worker::start(ctx.clone()) {
+            Ok(w) => {
+                self.worker = Some(w);
+                self.request_simulation();
+            }
+            Err(e) => self.error(format!("{e:#}")),
+        }
+    }
+
+    fn handle_messages(&mut self) {
+        let Some(worker) = &self.worker else { return };
+        for msg in worker.drain() {
+            match msg {
+                WorkerMsg::Simulated(result) => {
+                    // The first result includes starting the worker and building every cache: not an update.
+                    if let Some(t) = self
+                        .requested_at
+                        .get(&result.generation)
+                        .filter(|_| self.sim.is_some())
+                    {
+                        self.timings.update.push(t.elapsed().as_secs_f64() * 1e3);
+                    }
+                    self.requested_at = self.requested_at.split_off(&(result.generation + 1));
+                    self.timings.simulate.push(result.simulate_ms);
+                    if self
+                        .sim
+                        .as_ref()
+                        .is_none_or(|s| s.generation < result.generation)
+                    {
+                        self.errors.retain(|e| !e.starts_with("simulation:"));
+                        self.sim = Some(result);
+                    }
+                }
+                WorkerMsg::Progress { job, done, total } => {
+                    if job == JobKind::Calibration {
+                        self.calibration.progress = Some((done, total));
+                    }
+                }
+                WorkerMsg::Calibrated { generation, points } => {
+                    if generation == self.calibration.generation {
+                        self.calibration.running = false;
+                        self.calibration.points = points;
+                    }
+                }
+                WorkerMsg::Dialog { purpose, path } => self.dialog_answer(purpose, path),
+                WorkerMsg::Error {
+                    job,
+                    generation,
+                    message,
+                } => {
+                    match job {
+                        JobKind::Simulation => self.failed_generation = Some(generation),
+                        JobKind::Calibration if generation == self.calibration.generation => {
+                            self.calibration.running = false;
+                        }
+                        _ => {}
+                    }
+                    self.error(message);
+                }
+            }
+        }
+    }
+
+    /// Draw the whole window once and apply what the user did. eframe calls this through [`eframe::App::ui`]; tests
+    /// call it from egui_kittest.
+    pub fn show(&mut self, ui: &mut egui::Ui) {
+        let t0 = Instant::now();
+        let ctx = ui.ctx().clone();
+        self.ensure_worker(&ctx);
+        self.handle_messages();
+        if let Some(result) = &self.sim {
+            self.textures
+                .update(&ctx, result.generation, &result.output, &self.state.view);
+            if let Some(rs) = &self.render_state {
+                gpu::upload(rs, &result.geometry);
+            }
+        }
+        let mut commands = Vec::new();
+        panels::show_all(self, ui, &mut commands);
+        for cmd in commands {
+            self.apply(cmd);
+        }
+        if self.busy() {
+            ctx.request_repaint_after(std::time::Duration::from_millis(50));
+        }
+        self.update_timings(t0);
+        self.drive_screenshot(&ctx);
+    }
+
+    fn update_timings(&mut self, t0: Instant) {
+        self.timings.ui.push(t0.elapsed().as_secs_f64() * 1e3);
+        if let Some(last) = self.last_frame {
+            let dt = last.elapsed().as_secs_f64() * 1e3;
+            // Idle gaps (no repaint requested) are not frame times.
+            if dt < 250.0 {
+                self.timings.frame.push(dt);
+            }
+        }
+        self.last_frame = Some(Instant::now());
+        self.frames += 1;
+        if self.print_timings {
+            let n = self.timings.update.len() + self.timings.frame.len();
+            let due = self
+                .printed
+                .is_none_or(|(t, count)| t.elapsed().as_secs_f64() > 2.0 && count != n);
+            if due {
+                println!("{}", self.timings.summary_json());
+                self.printed = Some((Instant::now(), n));
+            }
+        }
+    }
+
+    fn drive_screenshot(&mut self, ctx: &egui::Context) {
+        let ready = !self.busy() && self.sim.is_some() && self.frames > 4;
+        let Some(job) = &mut self.screenshot else {
+            return;
+        };
+        if let Ok(slot) = job.result.lock() {
+            if slot.is_some() {
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+                return;
+            }
+        }
+        if !job.requested && (ready || job.started.elapsed().as_secs() > 60) {
+            job.requested = true;
+            let out = job.out.clone();
+            let slot = job.result.clone();
+            let wake = ctx.clone();
+            ctx.request_screenshot(move |image| {
+                let saved = save_color_image(&out, &image);
+                if let Ok(mut s) = slot.lock() {
+                    *s = Some(saved);
+                }
+                wake.request_repaint();
+            });
+        }
+        ctx.request_repaint();
+    }
+
+    pub(crate) fn status_color(&self) -> Color32 {
+        if self.errors.is_empty() {
+            Color32::GRAY
+        } else {
+            Color32::from_rgb(220, 60, 60)
+        }
+    }
+}
+
+/// Write an egui screenshot as PNG (atomically).
+fn save_color_image(path: &std::path::Path, image: &egui::ColorImage) -> Result<(), String> {
+    let [w, h] = image.size;
+    let mut rgb = image::RgbImage::new(w as u32, h as u32);
+    for (i, px) in image.pixels.iter().enumerate() {
+        rgb.put_pixel(
+            (i % w) as u32,
+            (i / w) as u32,
+            image::Rgb([px.r(), px.g(), px.b()]),
+        );
+    }
+    tactile_derender::io::preview::save_png(path, &rgb).map_err(|e| e.to_string())
 }
 
 impl eframe::App for WorkbenchApp {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
-        egui::Panel::left("controls").show(ui, |ui| self.controls(ui));
-        self.refresh();
-        egui::CentralPanel::default().show(ui, |ui| self.images(ui));
+        self.show(ui);
+    }
+
+    fn save(&mut self, storage: &mut dyn eframe::Storage) {
+        if self.persist {
+            let p = Persisted {
+                state: self.state.clone(),
+                session_path: self.session_path.clone(),
+            };
+            eframe::set_value(storage, STORAGE_KEY, &p);
+        }
+    }
+
+    fn on_exit(&mut self) {
+        if self.print_timings {
+            println!("{}", self.timings.summary_json());
+        }
     }
 }

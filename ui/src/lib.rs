@@ -1,4 +1,18 @@
-//! The workbench crate: an egui app over the headless `tactile_derender` core.
+//! The workbench crate: an eframe/egui app over the headless `tactile_derender` core.
+//!
+//! Architecture: a serde [`state::State`] (the only thing saved), user intent as [`command::Command`]s applied in one
+//! function, heavy work on [`worker`] threads reporting through one message enum, one file per panel under
+//! [`panels`], and a [`view3d`] drawn by a wgpu paint callback or, without wgpu, on the CPU.
 
 pub mod app;
 pub mod colormap;
+pub mod command;
+pub mod dialogs;
+pub mod images;
+pub mod measured;
+pub mod panels;
+pub mod session;
+pub mod state;
+pub mod timings;
+pub mod view3d;
+pub mod worker;

@@ -1,27 +1,78 @@
 //! `tnd-workbench`: the egui desktop workbench for tactile neural de-rendering.
 
-use anyhow::Result;
-use clap::Parser;
-use tnd_workbench::app::WorkbenchApp;
+use std::path::PathBuf;
 
-/// Open the workbench on the bundled default scene.
+use anyhow::{anyhow, Result};
+use clap::Parser;
+use tnd_workbench::app::{Launch, ScreenshotSlot, WorkbenchApp};
+use tnd_workbench::view3d::gpu::DEPTH_BITS;
+
+/// Open the workbench (on the last session, or the bundled default scene).
 #[derive(Parser)]
 #[command(name = "tnd-workbench", version, about)]
-struct Args {}
+struct Args {
+    /// Open this session file (sessions/*.json) instead of the last session.
+    #[arg(long)]
+    session: Option<PathBuf>,
+    /// Render the window once into this PNG and exit (documentation, bug reports, tests).
+    #[arg(long)]
+    screenshot: Option<PathBuf>,
+    /// Draw the 3D view on the CPU instead of with wgpu (the fallback used where wgpu is missing).
+    #[arg(long)]
+    cpu_3d: bool,
+    /// Print the update, simulation, UI and frame timings (median, p90) as JSON lines.
+    #[arg(long)]
+    timings: bool,
+    /// Present frames without waiting for vertical sync (frame-time measurements).
+    #[arg(long)]
+    no_vsync: bool,
+}
 
 fn main() -> Result<()> {
-    let _args = Args::parse();
-    let options = eframe::NativeOptions {
+    let args = Args::parse();
+    let shooting = args.screenshot.is_some();
+    let mut options = eframe::NativeOptions {
         renderer: eframe::Renderer::Wgpu,
+        depth_buffer: DEPTH_BITS,
         viewport: egui::ViewportBuilder::default()
-            .with_inner_size([1280.0, 800.0])
+            .with_inner_size([1500.0, 940.0])
             .with_title("tactile-derender workbench"),
+        persist_window: !shooting,
         ..Default::default()
     };
+    if args.no_vsync {
+        options.wgpu_options.surface.present_mode = eframe::wgpu::PresentMode::AutoNoVsync;
+    }
+    let slot: ScreenshotSlot = Default::default();
+    let screenshot = args.screenshot.clone().map(|out| (out, slot.clone()));
     eframe::run_native(
-        "tactile-derender workbench",
+        "tnd-workbench",
         options,
-        Box::new(|_cc| Ok(Box::new(WorkbenchApp::default()))),
+        Box::new(move |cc| {
+            let launch = Launch {
+                session: args.session,
+                screenshot,
+                cpu_3d: args.cpu_3d,
+                print_timings: args.timings,
+            };
+            Ok(Box::new(WorkbenchApp::new(cc, launch)))
+        }),
     )
-    .map_err(|e| anyhow::anyhow!("cannot open the workbench window: {e}"))
+    .map_err(|e| {
+        anyhow!("cannot open the workbench window (is there a display and a GPU/Mesa driver?): {e}")
+    })?;
+    if let Some(out) = args.screenshot {
+        let result = slot.lock().ok().and_then(|s| s.clone());
+        match result {
+            Some(Ok(())) => println!("{}", out.display()),
+            Some(Err(e)) => return Err(anyhow!("screenshot {}: {e}", out.display())),
+            None => {
+                return Err(anyhow!(
+                    "the window closed before the screenshot {} was taken",
+                    out.display()
+                ))
+            }
+        }
+    }
+    Ok(())
 }

@@ -29,6 +29,8 @@ pub enum BenchCommand {
     Sim(SimBenchArgs),
     /// SE(2) registration from K starts: wall time and pose errors (optionally the peer's saved problem).
     Pose(super::bench_pose::PoseBenchArgs),
+    /// U-Net forward and training step against `../shared/peers/unet_torch.py`.
+    Unet(crate::bench_unet::UnetBenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -54,6 +56,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     match a.command {
         BenchCommand::Sim(s) => bench_sim(&s),
         BenchCommand::Pose(p) => super::bench_pose::run(&p),
+        BenchCommand::Unet(u) => crate::bench_unet::run(&u),
     }
 }
 

@@ -57,30 +57,30 @@ pub struct GenArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Number of pairs.
-    #[arg(long, default_value_t = 24_000)]
+    #[arg(long, default_value_t = GenConfig::default().pairs)]
     pub pairs: usize,
     /// Global seed.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = GenConfig::default().seed)]
     pub seed: u64,
     /// Object set: "builtin" or a directory with objects.json.
     #[arg(long, default_value = "builtin")]
     pub objects: String,
     #[command(flatten)]
     pub sensor: SensorArgs,
-    /// Press depth range MIN,MAX in metres.
-    #[arg(long, default_value = "0.003,0.015")]
-    pub press: String,
+    /// Press depth range MIN,MAX in metres [default: 0.003,0.015].
+    #[arg(long)]
+    pub press: Option<String>,
     /// Object positions: fraction of the camera's view at the apex height (0..1).
-    #[arg(long, default_value_t = 0.4)]
+    #[arg(long, default_value_t = GenConfig::default().offset_fraction)]
     pub offset_fraction: f64,
     /// Rejection rule: minimum fraction of the image in contact; fewer -> redraw pose and press.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = GenConfig::default().min_contact_fraction)]
     pub min_contact: f64,
     /// Draws per pair before giving up.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = GenConfig::default().max_attempts)]
     pub max_attempts: usize,
     /// Pairs per chunk (one shard per split per chunk).
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = GenConfig::default().shard_pairs)]
     pub shard_pairs: usize,
     /// Worker threads (default: all cores). The output does not depend on it.
     #[arg(long)]
@@ -153,20 +153,17 @@ fn finish(b: &Mutex<kdam::Bar>) {
 }
 
 fn gen(a: GenArgs) -> Result<()> {
-    let (p0, p1) = a
-        .press
-        .split_once(',')
-        .and_then(|(x, y)| Some((x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?)))
-        .ok_or_else(|| {
-            anyhow!(
-                "--press '{}' must be MIN,MAX in metres, e.g. 0.003,0.015",
-                a.press
-            )
-        })?;
+    let press_range = match &a.press {
+        None => GenConfig::default().press_range,
+        Some(p) => p
+            .split_once(',')
+            .and_then(|(x, y)| Some([x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?]))
+            .ok_or_else(|| anyhow!("--press '{p}' must be MIN,MAX in metres, e.g. 0.003,0.015"))?,
+    };
     let config = GenConfig {
         pairs: a.pairs,
         seed: a.seed,
-        press_range: [p0, p1],
+        press_range,
         offset_fraction: a.offset_fraction,
         min_contact_fraction: a.min_contact,
         max_attempts: a.max_attempts,

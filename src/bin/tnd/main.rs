@@ -3,11 +3,15 @@
 mod args;
 mod bench;
 mod bench_pose;
+mod bench_unet;
 mod dataset_cmd;
 mod eval_cmd;
+mod model_cmd;
 mod objects_cmd;
 mod pose_cmd;
+mod sample_cmd;
 mod sim_cmd;
+mod train_cmd;
 
 use clap::{Parser, Subcommand};
 
@@ -33,10 +37,17 @@ enum Command {
     Eval(Box<eval_cmd::EvalArgs>),
     /// One signature end to end: samples, pose, uncertainty (CSV + KDE plot).
     Pose(Box<pose_cmd::PoseArgs>),
+    /// Diffusion model checkpoints: verify against a diffusers reference.
+    Model(model_cmd::ModelArgs),
+    /// De-render: draw N samples of the in-contact depth for one imprint (DDPM or DDIM).
+    Sample(sample_cmd::SampleArgs),
+    /// Train (or resume, or fine-tune) the conditional DDPM on a dataset.
+    Train(Box<train_cmd::TrainArgs>),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    tactile_derender::model::alloc::keep_freed_memory();
     let result = match cli.command {
         Command::Sim(a) => sim_cmd::run(*a),
         Command::Objects(a) => objects_cmd::run(a),
@@ -44,6 +55,9 @@ fn main() -> std::process::ExitCode {
         Command::Bench(a) => bench::run(a),
         Command::Eval(a) => eval_cmd::run(*a),
         Command::Pose(a) => pose_cmd::run(*a),
+        Command::Model(a) => model_cmd::run(a),
+        Command::Sample(a) => sample_cmd::run(a),
+        Command::Train(a) => train_cmd::run(*a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,0 +1,153 @@
+//! `tnd sample`: de-render one imprint — N samples of the in-contact depth X0 in one batched reverse-diffusion run,
+//! written as `.npy` (metres) with their per-pixel mean and standard deviation and a PNG grid.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use image::RgbImage;
+use kdam::BarExt;
+use serde_json::json;
+use tactile_derender::image::Image;
+use tactile_derender::io::preview::{render_panel, save_png, side_by_side, PanelStyle};
+use tactile_derender::io::{npy, write_atomic};
+use tactile_derender::model::{DiffusionModel, SamplerKind};
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum SamplerArg {
+    Ddpm,
+    Ddim,
+}
+
+#[derive(Args, Debug)]
+pub struct SampleArgs {
+    /// Model checkpoint (.safetensors with config, or a diffusers directory).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Imprint Y as a 2-D .npy array in metres, at the model's resolution.
+    #[arg(long)]
+    pub imprint: PathBuf,
+    /// Number of samples.
+    #[arg(long, default_value_t = 50)]
+    pub n: usize,
+    #[arg(long, value_enum, default_value = "ddpm")]
+    pub sampler: SamplerArg,
+    /// DDIM steps.
+    #[arg(long, default_value_t = 25)]
+    pub steps: usize,
+    /// DDIM η (0 = deterministic).
+    #[arg(long, default_value_t = 0.0)]
+    pub eta: f64,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub fn run(a: SampleArgs) -> Result<()> {
+    let model = DiffusionModel::load(&a.model)?;
+    let imprint = npy::read_image(&a.imprint)?;
+    let kind = match a.sampler {
+        SamplerArg::Ddpm => SamplerKind::Ddpm,
+        SamplerArg::Ddim => SamplerKind::Ddim {
+            steps: a.steps,
+            eta: a.eta,
+        },
+    };
+    let mut bar = kdam::tqdm!(desc = "sampling", unit = " steps");
+    let samples = model.sample(&imprint, a.n, kind, a.seed, &mut |i, total| {
+        bar.total = total;
+        let _ = bar.update_to(i);
+        true
+    })?;
+    let _ = bar.refresh();
+    eprintln!();
+    if samples.is_empty() {
+        bail!("--n must be at least 1");
+    }
+    let (w, h) = (samples[0].width, samples[0].height);
+    let (mean, std) = mean_std(&samples);
+    std::fs::create_dir_all(&a.out).with_context(|| a.out.display().to_string())?;
+    let all: Vec<f32> = samples
+        .iter()
+        .flat_map(|s| s.data.iter().copied())
+        .collect();
+    write(
+        &a.out.join("samples.npy"),
+        &npy::encode_f32(&[samples.len(), h, w], &all),
+    )?;
+    npy::write_image(&a.out.join("mean.npy"), &mean)?;
+    npy::write_image(&a.out.join("std.npy"), &std)?;
+    let grid = grid_png(&imprint, &samples, &mean, &std);
+    let png = a.out.join("grid.png");
+    save_png(&png, &grid).with_context(|| png.display().to_string())?;
+    println!(
+        "{}",
+        json!({"samples": samples.len(), "sampler": format!("{kind:?}"), "seed": a.seed, "out": a.out,
+            "mean_std_m": std.data.iter().map(|&v| f64::from(v)).sum::<f64>() / std.data.len() as f64})
+    );
+    Ok(())
+}
+
+fn write(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic(path, bytes).with_context(|| path.display().to_string())
+}
+
+/// Per-pixel mean and (population) standard deviation.
+fn mean_std(samples: &[Image]) -> (Image, Image) {
+    let (w, h, n) = (samples[0].width, samples[0].height, samples.len() as f64);
+    let mut mean = Image::filled(w, h, 0.0);
+    let mut std = Image::filled(w, h, 0.0);
+    for i in 0..w * h {
+        let m = samples.iter().map(|s| f64::from(s.data[i])).sum::<f64>() / n;
+        let v = samples
+            .iter()
+            .map(|s| (f64::from(s.data[i]) - m).powi(2))
+            .sum::<f64>()
+            / n;
+        mean.data[i] = m as f32;
+        std.data[i] = v.sqrt() as f32;
+    }
+    (mean, std)
+}
+
+/// Rows of up to 8 panels: imprint, mean, std, then the first samples (at most 16).
+fn grid_png(imprint: &Image, samples: &[Image], mean: &Image, std: &Image) -> RgbImage {
+    let style = |title: &str, zero_missing: bool| PanelStyle {
+        title: title.into(),
+        zero_is_missing: zero_missing,
+        ..PanelStyle::default()
+    };
+    let range = mean.range_where(|v| v > 0.003).filter(|(lo, hi)| hi > lo);
+    let mut panels = vec![
+        render_panel(imprint, &style("imprint Y", false)),
+        render_panel(
+            mean,
+            &PanelStyle {
+                range_m: range,
+                ..style("mean X0", true)
+            },
+        ),
+        render_panel(std, &style("std", false)),
+    ];
+    for (i, s) in samples.iter().take(16).enumerate() {
+        panels.push(render_panel(
+            s,
+            &PanelStyle {
+                range_m: range,
+                ..style(&format!("sample {i}"), true)
+            },
+        ));
+    }
+    let rows: Vec<RgbImage> = panels.chunks(8).map(|c| side_by_side(c, &[])).collect();
+    let width = rows.iter().map(|r| r.width()).max().unwrap_or(1);
+    let height = rows.iter().map(|r| r.height()).sum::<u32>().max(1);
+    let mut out = RgbImage::new(width, height);
+    let mut y0 = 0;
+    for r in &rows {
+        image::imageops::overlay(&mut out, r, 0, i64::from(y0));
+        y0 += r.height();
+    }
+    out
+}

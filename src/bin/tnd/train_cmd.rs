@@ -1,0 +1,117 @@
+//! `tnd train`: pre-train the conditional DDPM on a dataset, or fine-tune from `--init` (paper IV.B, V.B). Running
+//! the same command again resumes from the run directory's last checkpoint (also after kill -9).
+
+use std::path::PathBuf;
+
+use anyhow::{anyhow, bail, Context, Result};
+use clap::Args;
+use kdam::BarExt;
+use serde_json::json;
+use tactile_derender::dataset::Dataset;
+use tactile_derender::model::train::{train, Loss, TrainConfig};
+use tactile_derender::model::train_data::DatasetTraining;
+use tactile_derender::model::UNet2DConfig;
+
+#[derive(Args, Debug)]
+pub struct TrainArgs {
+    /// Dataset directory (`tnd dataset gen` / `import`); trains on its train split.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Run directory: train_state.safetensors, model.safetensors, log.jsonl.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Fine-tune from this checkpoint (architecture and normalisation come from it).
+    #[arg(long)]
+    pub init: Option<PathBuf>,
+    /// Architecture for training from scratch: a UNet2DModel config JSON object or file (default: the shipped one).
+    #[arg(long)]
+    pub config: Option<String>,
+    /// Total optimiser steps.
+    #[arg(long, conflicts_with = "epochs")]
+    pub steps: Option<u64>,
+    /// Total epochs over the train split (default 1 when --steps is not given).
+    #[arg(long)]
+    pub epochs: Option<u64>,
+    #[arg(long, default_value_t = 16)]
+    pub batch: usize,
+    #[arg(long, default_value_t = 1e-4)]
+    pub lr: f64,
+    #[arg(long, value_enum, default_value = "l2")]
+    pub loss: Loss,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// EMA decay of the weights (e.g. 0.999); the saved model then holds the EMA weights.
+    #[arg(long)]
+    pub ema: Option<f64>,
+    /// Seconds between checkpoints.
+    #[arg(long, default_value_t = 300.0)]
+    pub checkpoint_every: f64,
+    /// Steps between log lines.
+    #[arg(long, default_value_t = 50)]
+    pub log_every: u64,
+}
+
+fn model_config(a: &TrainArgs, resolution: (usize, usize)) -> Result<UNet2DConfig> {
+    let mut cfg = match &a.config {
+        None => UNet2DConfig::default(),
+        Some(c) => {
+            let text = if std::path::Path::new(c).is_file() {
+                std::fs::read_to_string(c).with_context(|| c.clone())?
+            } else {
+                c.clone()
+            };
+            UNet2DConfig::from_json(&text, "--config")?
+        }
+    };
+    if resolution.0 != resolution.1 {
+        bail!(
+            "the dataset's images are {}x{}; the model needs square images",
+            resolution.0,
+            resolution.1
+        );
+    }
+    cfg.sample_size = resolution.0;
+    cfg.validate("--config")?;
+    Ok(cfg)
+}
+
+pub fn run(a: TrainArgs) -> Result<()> {
+    let dataset = Dataset::open(&a.data)?;
+    let cfg = model_config(&a, dataset.resolution())?;
+    let tc = TrainConfig {
+        steps: a.steps,
+        epochs: a.epochs,
+        batch: a.batch,
+        lr: a.lr,
+        loss: a.loss,
+        seed: a.seed,
+        ema: a.ema,
+        checkpoint_every_s: a.checkpoint_every,
+        checkpoint_every_steps: 0,
+        log_every: a.log_every,
+    };
+    if let Some(d) = a.ema {
+        if !(0.0..1.0).contains(&d) {
+            return Err(anyhow!("--ema must be in [0, 1), found {d}"));
+        }
+    }
+    let mut data = DatasetTraining::new(&dataset);
+    let mut bar = kdam::tqdm!(desc = "training", unit = " steps");
+    let summary = train(&a.out, &tc, &cfg, a.init.as_deref(), &mut data, &mut |p| {
+        bar.total = p.total as usize;
+        bar.set_postfix(format!(
+            "loss={:.4}, {:.1} samples/s",
+            p.loss, p.samples_per_s
+        ));
+        let _ = bar.update_to(p.step as usize);
+        true
+    })
+    .with_context(|| format!("training in {}", a.out.display()))?;
+    eprintln!();
+    println!(
+        "{}",
+        json!({"steps": summary.steps, "resumed_from": summary.resumed_from, "last_loss": summary.last_loss,
+            "model": summary.model_path})
+    );
+    Ok(())
+}

@@ -1,0 +1,226 @@
+//! Model checkpoints (paper IV.B model storage), interchangeable with diffusers:
+//! * our file: one `.safetensors` with diffusers `UNet2DModel` state-dict keys and the config JSON in the metadata
+//!   entry `"config"` (the layout of `../shared/peers/unet_torch.py`'s `unet_ref.safetensors`); a diffusers user
+//!   loads it with `UNet2DModel.from_config(json.loads(meta["config"]))` + `load_state_dict(load_file(path))`;
+//! * a diffusers `save_pretrained` directory (`config.json` + `diffusion_pytorch_model.safetensors`);
+//! * a bare `.safetensors` with its config beside it (`<stem>_config.json` or `config.json`).
+//!
+//! Every tensor is checked by name and shape against the config, and for NaN/inf, before use.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+
+use super::config::UNet2DConfig;
+use super::unet::UNet2DModel;
+use super::ModelError;
+use crate::io::write_atomic;
+
+/// Tensors and string metadata read from one safetensors file.
+pub struct TensorFile {
+    pub path: PathBuf,
+    pub tensors: HashMap<String, Tensor>,
+    pub metadata: HashMap<String, String>,
+}
+
+/// Read a safetensors file (any float dtype, converted to f32).
+pub fn read_tensors(path: &Path) -> Result<TensorFile, ModelError> {
+    let bytes = std::fs::read(path).map_err(|source| ModelError::MissingWeights {
+        path: path.to_path_buf(),
+        error: source,
+    })?;
+    let bad = |message: String| ModelError::BadFile {
+        path: path.to_path_buf(),
+        message,
+    };
+    let (_, meta) =
+        safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| bad(e.to_string()))?;
+    let metadata = meta.metadata().clone().unwrap_or_default();
+    let raw = candle_core::safetensors::load_buffer(&bytes, &Device::Cpu)
+        .map_err(|e| bad(e.to_string()))?;
+    let mut tensors = HashMap::with_capacity(raw.len());
+    for (k, t) in raw {
+        let t = match t.dtype() {
+            DType::F32 | DType::I64 | DType::U32 | DType::U8 => t,
+            _ => t.to_dtype(DType::F32)?,
+        };
+        tensors.insert(k, t);
+    }
+    Ok(TensorFile {
+        path: path.to_path_buf(),
+        tensors,
+        metadata,
+    })
+}
+
+/// Write named f32 tensors (sorted by name) with string metadata, atomically.
+pub fn write_tensors(
+    path: &Path,
+    tensors: &BTreeMap<String, Tensor>,
+    metadata: HashMap<String, String>,
+) -> Result<(), ModelError> {
+    let mut views = Vec::with_capacity(tensors.len());
+    for (name, t) in tensors {
+        let data: Vec<f32> = t.to_dtype(DType::F32)?.flatten_all()?.to_vec1()?;
+        let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
+        views.push((name.clone(), t.dims().to_vec(), bytes));
+    }
+    let mut list = Vec::with_capacity(views.len());
+    for (name, shape, bytes) in &views {
+        let view =
+            safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), bytes)
+                .map_err(|e| ModelError::BadFile {
+                    path: path.to_path_buf(),
+                    message: e.to_string(),
+                })?;
+        list.push((name.clone(), view));
+    }
+    let bytes = safetensors::serialize(list, Some(metadata)).map_err(|e| ModelError::BadFile {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    write_atomic(path, &bytes).map_err(|source| ModelError::Io {
+        path: path.to_path_buf(),
+        error: source,
+    })
+}
+
+/// Locate weights and config for `path` (file or diffusers directory) and parse the config.
+pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
+    let weights = if path.is_dir() {
+        path.join("diffusion_pytorch_model.safetensors")
+    } else {
+        path.to_path_buf()
+    };
+    let file = read_tensors(&weights)?;
+    if let Some(text) = file.metadata.get("config") {
+        let cfg = UNet2DConfig::from_json(
+            text,
+            &format!("{} (metadata \"config\")", weights.display()),
+        )?;
+        return Ok((file, cfg));
+    }
+    let dir = weights.parent().unwrap_or(Path::new("."));
+    let stem = weights
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    for candidate in [
+        dir.join(format!("{stem}_config.json")),
+        dir.join("config.json"),
+    ] {
+        if candidate.is_file() {
+            let text = std::fs::read_to_string(&candidate).map_err(|source| ModelError::Io {
+                path: candidate.clone(),
+                error: source,
+            })?;
+            let cfg = UNet2DConfig::from_json(&text, &candidate.display().to_string())?;
+            return Ok((file, cfg));
+        }
+    }
+    Err(ModelError::Config {
+        source_name: weights.display().to_string(),
+        message: format!(
+            "no config: neither a \"config\" metadata entry nor {stem}_config.json / config.json next to it"
+        ),
+    })
+}
+
+/// A U-Net whose parameters live in a [`VarMap`] (trainable; also used for inference).
+pub struct ModelVars {
+    pub varmap: VarMap,
+    pub unet: UNet2DModel,
+}
+
+/// Build the U-Net for `cfg` with freshly allocated parameters (values to be set by [`assign`] or
+/// [`super::init::init_params`]).
+pub fn build(cfg: &UNet2DConfig, device: &Device) -> Result<ModelVars, ModelError> {
+    cfg.validate("config")?;
+    let varmap = VarMap::new();
+    let vb = VarBuilder::from_varmap(&varmap, DType::F32, device);
+    let unet = UNet2DModel::new(vb, cfg)?;
+    Ok(ModelVars { varmap, unet })
+}
+
+/// All parameters by name, sorted.
+pub fn named_vars(varmap: &VarMap) -> BTreeMap<String, candle_core::Var> {
+    match varmap.data().lock() {
+        Ok(g) => g.iter().map(|(k, v)| (k.clone(), v.clone())).collect(),
+        Err(p) => p
+            .into_inner()
+            .iter()
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect(),
+    }
+}
+
+/// Copy `file`'s tensors (keys prefixed by `prefix`) into the parameters, checking that the key sets match, every
+/// shape equals the config's, and no value is NaN/inf.
+pub fn assign(varmap: &VarMap, file: &TensorFile, prefix: &str) -> Result<(), ModelError> {
+    let vars = named_vars(varmap);
+    for (name, var) in &vars {
+        let key = format!("{prefix}{name}");
+        let t = file
+            .tensors
+            .get(&key)
+            .ok_or_else(|| ModelError::MissingTensor {
+                path: file.path.clone(),
+                key: key.clone(),
+            })?;
+        if t.dims() != var.dims() {
+            return Err(ModelError::Shape {
+                path: file.path.clone(),
+                key,
+                expected: var.dims().to_vec(),
+                found: t.dims().to_vec(),
+            });
+        }
+        let t = t.to_dtype(DType::F32)?;
+        let finite = t
+            .flatten_all()?
+            .to_vec1::<f32>()?
+            .iter()
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err(ModelError::NonFinite {
+                what: format!("{}: tensor '{key}'", file.path.display()),
+                at_step: None,
+            });
+        }
+        var.set(&t.to_device(var.device())?)?;
+    }
+    if let Some(extra) = file
+        .tensors
+        .keys()
+        .filter(|k| k.starts_with(prefix))
+        .find(|k| !vars.contains_key(&k[prefix.len()..]))
+    {
+        return Err(ModelError::UnexpectedTensor {
+            path: file.path.clone(),
+            key: extra.clone(),
+        });
+    }
+    Ok(())
+}
+
+/// Save the model parameters with the config in the metadata (our checkpoint format), plus `extra` metadata.
+pub fn save_model(
+    path: &Path,
+    varmap: &VarMap,
+    cfg: &UNet2DConfig,
+    extra: HashMap<String, String>,
+) -> Result<(), ModelError> {
+    let tensors: BTreeMap<String, Tensor> = named_vars(varmap)
+        .into_iter()
+        .map(|(k, v)| (k, v.as_tensor().clone()))
+        .collect();
+    let mut meta = extra;
+    meta.insert("config".into(), cfg.to_json()?);
+    meta.insert(
+        "format".into(),
+        "tactile-derender UNet2DModel (diffusers keys)".into(),
+    );
+    write_tensors(path, &tensors, meta)
+}

@@ -1,0 +1,291 @@
+//! Model configuration (paper IV.B): the diffusers `UNet2DModel` config, mirrored field by field so that a
+//! `config.json` written by `UNet2DModel.save_pretrained` loads here and ours loads there, plus our own section
+//! (`tactile_derender`: normalisation of imprint and target, diffusion schedule) that diffusers ignores.
+
+use serde::{Deserialize, Serialize};
+
+use super::normalise::Normalisation;
+use super::ModelError;
+
+/// diffusers `UNet2DModel` configuration (`diffusers/models/unets/unet_2d.py`). Field names and meanings are
+/// diffusers'; values we do not implement are rejected by [`UNet2DConfig::validate`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct UNet2DConfig {
+    /// Image side length in pixels (square images; the model itself accepts any multiple of 2^(levels-1)).
+    pub sample_size: usize,
+    /// Input channels: the noisy target x_t and the imprint condition (2).
+    pub in_channels: usize,
+    /// Output channels: the predicted noise ε (1).
+    pub out_channels: usize,
+    /// diffusers: map the input from [0, 1] to [-1, 1] first (`2x - 1`).
+    pub center_input_sample: bool,
+    /// Only `"positional"` (sinusoidal) is supported.
+    pub time_embedding_type: String,
+    /// Width of the time embedding; `None` = 4 × `block_out_channels[0]`.
+    pub time_embedding_dim: Option<usize>,
+    /// `downscale_freq_shift` of the sinusoidal embedding (diffusers default 0).
+    pub freq_shift: f64,
+    /// Put cosines before sines in the sinusoidal embedding (diffusers default true).
+    pub flip_sin_to_cos: bool,
+    /// `"DownBlock2D"` or `"AttnDownBlock2D"` per level, finest first.
+    pub down_block_types: Vec<String>,
+    /// `"UNetMidBlock2D"` (with attention when `add_attention`) or `None` for no middle block.
+    pub mid_block_type: Option<String>,
+    /// `"UpBlock2D"` or `"AttnUpBlock2D"` per level, coarsest first.
+    pub up_block_types: Vec<String>,
+    /// Channels of each level, finest first.
+    pub block_out_channels: Vec<usize>,
+    /// ResNet blocks per down level (up levels have one more).
+    pub layers_per_block: usize,
+    /// `output_scale_factor` of the middle block's ResNets and attention.
+    pub mid_block_scale_factor: f64,
+    /// Padding of the stride-2 down-sampling convolutions (1; 0 pads one pixel right/bottom like diffusers).
+    pub downsample_padding: usize,
+    /// Only `"conv"` is supported.
+    pub downsample_type: String,
+    /// Only `"conv"` is supported.
+    pub upsample_type: String,
+    /// Dropout probability (used in training only; 0 in the paper's setting).
+    pub dropout: f64,
+    /// Only `"silu"` is supported.
+    pub act_fn: String,
+    /// Channels per attention head; `None` = one head over all channels.
+    pub attention_head_dim: Option<usize>,
+    /// Groups of every GroupNorm.
+    pub norm_num_groups: usize,
+    /// Groups of the middle block's attention GroupNorm; `None` = `norm_num_groups`.
+    pub attn_norm_num_groups: Option<usize>,
+    /// ε of every GroupNorm.
+    pub norm_eps: f64,
+    /// Only `"default"` (additive time embedding) is supported.
+    pub resnet_time_scale_shift: String,
+    /// Attention in the middle block.
+    pub add_attention: bool,
+    /// Class conditioning is not supported (must be `None`).
+    pub class_embed_type: Option<String>,
+    /// Class conditioning is not supported (must be `None`).
+    pub num_class_embeds: Option<usize>,
+    /// Informational (diffusers keeps it in the config); our schedule is in [`TactileConfig`].
+    pub num_train_timesteps: Option<usize>,
+    /// Our section: normalisation and schedule. Absent in a plain diffusers config (then defaults apply).
+    pub tactile_derender: TactileConfig,
+}
+
+impl Default for UNet2DConfig {
+    /// The shipped default architecture (see `assets/models/README.md`): 64 × 64, three levels 32/64/64, one ResNet
+    /// per level, attention at the coarsest level and in the middle block.
+    fn default() -> Self {
+        Self {
+            sample_size: 64,
+            in_channels: 2,
+            out_channels: 1,
+            center_input_sample: false,
+            time_embedding_type: "positional".into(),
+            time_embedding_dim: None,
+            freq_shift: 0.0,
+            flip_sin_to_cos: true,
+            down_block_types: vec![
+                "DownBlock2D".into(),
+                "DownBlock2D".into(),
+                "AttnDownBlock2D".into(),
+            ],
+            mid_block_type: Some("UNetMidBlock2D".into()),
+            up_block_types: vec![
+                "AttnUpBlock2D".into(),
+                "UpBlock2D".into(),
+                "UpBlock2D".into(),
+            ],
+            block_out_channels: vec![32, 64, 64],
+            layers_per_block: 1,
+            mid_block_scale_factor: 1.0,
+            downsample_padding: 1,
+            downsample_type: "conv".into(),
+            upsample_type: "conv".into(),
+            dropout: 0.0,
+            act_fn: "silu".into(),
+            attention_head_dim: Some(8),
+            norm_num_groups: 8,
+            attn_norm_num_groups: None,
+            norm_eps: 1e-5,
+            resnet_time_scale_shift: "default".into(),
+            add_attention: true,
+            class_embed_type: None,
+            num_class_embeds: None,
+            num_train_timesteps: None,
+            tactile_derender: TactileConfig::default(),
+        }
+    }
+}
+
+/// Our part of the config: how images in metres map to the model's range, and the diffusion schedule.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TactileConfig {
+    /// Imprint (input condition) normalisation.
+    pub imprint: Normalisation,
+    /// Target (in-contact depth X0) normalisation.
+    pub target: Normalisation,
+    /// Diffusion steps T of the training schedule (the paper: 250).
+    pub num_train_timesteps: usize,
+    /// diffusers `beta_schedule`; only `"squaredcos_cap_v2"` (Nichol & Dhariwal's cosine schedule) is supported.
+    pub beta_schedule: String,
+}
+
+impl Default for TactileConfig {
+    fn default() -> Self {
+        Self {
+            imprint: Normalisation::default_imprint(),
+            target: Normalisation::default_target(),
+            num_train_timesteps: 250,
+            beta_schedule: "squaredcos_cap_v2".into(),
+        }
+    }
+}
+
+impl UNet2DConfig {
+    /// Parse a config JSON (ours or diffusers'); `source` names the file in errors.
+    pub fn from_json(text: &str, source: &str) -> Result<Self, ModelError> {
+        let cfg: Self = serde_json::from_str(text).map_err(|e| ModelError::Config {
+            source_name: source.into(),
+            message: format!("not a valid UNet2DModel config: {e}"),
+        })?;
+        cfg.validate(source)?;
+        Ok(cfg)
+    }
+
+    /// The config as diffusers-compatible JSON (with `_class_name` so `UNet2DModel.from_pretrained` accepts it).
+    pub fn to_json(&self) -> Result<String, ModelError> {
+        let mut v = serde_json::to_value(self).map_err(|e| ModelError::Config {
+            source_name: "config".into(),
+            message: e.to_string(),
+        })?;
+        if let Some(o) = v.as_object_mut() {
+            o.insert("_class_name".into(), "UNet2DModel".into());
+        }
+        serde_json::to_string_pretty(&v).map_err(|e| ModelError::Config {
+            source_name: "config".into(),
+            message: e.to_string(),
+        })
+    }
+
+    /// Width of the time embedding.
+    pub fn time_embed_dim(&self) -> usize {
+        self.time_embedding_dim
+            .unwrap_or(4 * self.block_out_channels.first().copied().unwrap_or(0))
+    }
+
+    /// Reject settings we do not implement, with the field named.
+    pub fn validate(&self, source: &str) -> Result<(), ModelError> {
+        let bad = |message: String| {
+            Err(ModelError::Config {
+                source_name: source.into(),
+                message,
+            })
+        };
+        let n = self.block_out_channels.len();
+        if n == 0 || self.down_block_types.len() != n || self.up_block_types.len() != n {
+            return bad(format!(
+                "block_out_channels, down_block_types and up_block_types must have the same non-zero length \
+                 (found {n}, {}, {})",
+                self.down_block_types.len(),
+                self.up_block_types.len()
+            ));
+        }
+        for t in &self.down_block_types {
+            if t != "DownBlock2D" && t != "AttnDownBlock2D" {
+                return bad(format!(
+                    "down block type '{t}' is not supported (DownBlock2D, AttnDownBlock2D)"
+                ));
+            }
+        }
+        for t in &self.up_block_types {
+            if t != "UpBlock2D" && t != "AttnUpBlock2D" {
+                return bad(format!(
+                    "up block type '{t}' is not supported (UpBlock2D, AttnUpBlock2D)"
+                ));
+            }
+        }
+        if let Some(m) = &self.mid_block_type {
+            if m != "UNetMidBlock2D" {
+                return bad(format!(
+                    "mid_block_type '{m}' is not supported (UNetMidBlock2D or null)"
+                ));
+            }
+        }
+        let checks = [
+            (
+                self.time_embedding_type == "positional",
+                "time_embedding_type must be \"positional\"",
+            ),
+            (
+                self.downsample_type == "conv",
+                "downsample_type must be \"conv\"",
+            ),
+            (
+                self.upsample_type == "conv",
+                "upsample_type must be \"conv\"",
+            ),
+            (self.act_fn == "silu", "act_fn must be \"silu\""),
+            (
+                self.resnet_time_scale_shift == "default",
+                "resnet_time_scale_shift must be \"default\"",
+            ),
+            (
+                self.class_embed_type.is_none() && self.num_class_embeds.is_none(),
+                "class conditioning is not supported",
+            ),
+            (
+                self.downsample_padding <= 1,
+                "downsample_padding must be 0 or 1",
+            ),
+            (
+                self.layers_per_block > 0,
+                "layers_per_block must be at least 1",
+            ),
+            (self.norm_eps > 0.0, "norm_eps must be positive"),
+            (
+                self.in_channels > self.out_channels,
+                "in_channels must exceed out_channels (the imprint is a channel)",
+            ),
+            (
+                self.tactile_derender.beta_schedule == "squaredcos_cap_v2",
+                "tactile_derender.beta_schedule must be \"squaredcos_cap_v2\"",
+            ),
+            (
+                self.tactile_derender.num_train_timesteps >= 2,
+                "tactile_derender.num_train_timesteps must be at least 2",
+            ),
+        ];
+        for (ok, msg) in checks {
+            if !ok {
+                return bad(msg.into());
+            }
+        }
+        let g = self.norm_num_groups;
+        for &c in &self.block_out_channels {
+            if g == 0 || c % g != 0 {
+                return bad(format!(
+                    "block_out_channels {c} is not divisible by norm_num_groups {g}"
+                ));
+            }
+            if let Some(h) = self.attention_head_dim {
+                if h == 0 || c % h != 0 {
+                    return bad(format!(
+                        "block_out_channels {c} is not divisible by attention_head_dim {h}"
+                    ));
+                }
+            }
+        }
+        let factor = 1usize << (n - 1);
+        if self.sample_size == 0 || self.sample_size % factor != 0 {
+            return bad(format!(
+                "sample_size {} must be a positive multiple of {factor} (2^(levels-1))",
+                self.sample_size
+            ));
+        }
+        self.tactile_derender.imprint.validate("imprint", source)?;
+        self.tactile_derender.target.validate("target", source)?;
+        Ok(())
+    }
+}

@@ -1,0 +1,151 @@
+//! The de-rendering model as used downstream (paper IV.B, V.B): load a checkpoint, then draw N samples of the
+//! in-contact depth X0 for one imprint Y in one batched reverse-diffusion run (the uncertainty analysis uses 50).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use candle_core::{Device, Tensor};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use super::checkpoint::{assign, build, locate, ModelVars};
+use super::config::UNet2DConfig;
+use super::sampler::{self, SamplerKind};
+use super::schedule::NoiseSchedule;
+use super::unet::UNet2DModel;
+use super::ModelError;
+use crate::image::Image;
+
+/// A loaded conditional DDPM: U-Net, config (with normalisation) and schedule.
+pub struct DiffusionModel {
+    vars: ModelVars,
+    config: UNet2DConfig,
+    schedule: Arc<NoiseSchedule>,
+    source: PathBuf,
+}
+
+impl DiffusionModel {
+    /// Load a checkpoint (our `.safetensors`, a diffusers directory, or weights + config JSON; see
+    /// [`super::checkpoint`]).
+    pub fn load(path: &Path) -> Result<Self, ModelError> {
+        let (file, config) = locate(path)?;
+        let vars = build(&config, &Device::Cpu)?;
+        assign(&vars.varmap, &file, "")?;
+        Ok(Self::from_vars(vars, config, path))
+    }
+
+    /// Wrap already-built parameters (e.g. a model being trained).
+    pub fn from_vars(vars: ModelVars, config: UNet2DConfig, source: &Path) -> Self {
+        let schedule = Arc::new(NoiseSchedule::cosine(
+            config.tactile_derender.num_train_timesteps,
+        ));
+        Self {
+            vars,
+            config,
+            schedule,
+            source: source.to_path_buf(),
+        }
+    }
+
+    /// Image size `(width, height)` in pixels the model works at.
+    pub fn resolution(&self) -> (usize, usize) {
+        (self.config.sample_size, self.config.sample_size)
+    }
+
+    pub fn config(&self) -> &UNet2DConfig {
+        &self.config
+    }
+
+    pub fn unet(&self) -> &UNet2DModel {
+        &self.vars.unet
+    }
+
+    pub fn vars(&self) -> &ModelVars {
+        &self.vars
+    }
+
+    pub fn schedule(&self) -> &NoiseSchedule {
+        &self.schedule
+    }
+
+    /// The file or directory the model came from.
+    pub fn source(&self) -> &Path {
+        &self.source
+    }
+
+    /// `n` samples of X0 (metres) for `imprint` (metres), seeded; `progress(step, total)` returning false cancels.
+    pub fn sample(
+        &self,
+        imprint: &Image,
+        n: usize,
+        kind: SamplerKind,
+        seed: u64,
+        progress: &mut dyn FnMut(usize, usize) -> bool,
+    ) -> Result<Vec<Image>, ModelError> {
+        let (w, h) = self.resolution();
+        if imprint.width != w || imprint.height != h || imprint.data.len() != w * h {
+            return Err(ModelError::Input(format!(
+                "imprint is {}x{}, the model needs {w}x{h}",
+                imprint.width, imprint.height
+            )));
+        }
+        if let Some(i) = imprint.data.iter().position(|v| !v.is_finite()) {
+            return Err(ModelError::NonFinite {
+                what: format!("imprint (pixel {i})"),
+                at_step: None,
+            });
+        }
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let norm = &self.config.tactile_derender;
+        let cond: Vec<f32> = imprint
+            .data
+            .iter()
+            .map(|&v| norm.imprint.forward(v))
+            .collect();
+        let c_out = self.config.out_channels;
+        let c_cond = self.config.in_channels - c_out;
+        let device = Device::Cpu;
+        let cond =
+            Tensor::from_vec(cond, (1, 1, h, w), &device)?.broadcast_as((n, c_cond, h, w))?;
+        let sampler = sampler::make(kind, self.schedule.clone())?;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let len = n * c_out * h * w;
+        let normal = |rng: &mut ChaCha8Rng| -> Vec<f32> {
+            (0..len).map(|_| StandardNormal.sample(rng)).collect()
+        };
+        let mut x = normal(&mut rng);
+        let total = sampler.timesteps().len();
+        for (i, &t) in sampler.timesteps().iter().enumerate() {
+            let xt = Tensor::from_slice(&x, (n, c_out, h, w), &device)?;
+            let input = Tensor::cat(&[&xt, &cond], 1)?;
+            let eps: Vec<f32> = self
+                .vars
+                .unet
+                .forward(&input, &[t as f32])?
+                .flatten_all()?
+                .to_vec1()?;
+            let noise = sampler.needs_noise(t).then(|| normal(&mut rng));
+            x = sampler.step(&eps, t, &x, noise.as_deref())?;
+            if !progress(i + 1, total) {
+                return Err(ModelError::Cancelled);
+            }
+        }
+        if x.iter().any(|v| !v.is_finite()) {
+            return Err(ModelError::NonFinite {
+                what: format!("samples of {}", self.source.display()),
+                at_step: None,
+            });
+        }
+        let per = c_out * h * w;
+        Ok(x.chunks(per)
+            .map(|s| Image {
+                width: w,
+                height: h,
+                data: s[..h * w].iter().map(|&v| norm.target.inverse(v)).collect(),
+            })
+            .collect())
+    }
+}

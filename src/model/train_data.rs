@@ -1,0 +1,86 @@
+//! Training pairs from the dataset stage (paper V.A → IV.B): an adapter from [`crate::dataset::Dataset`]'s
+//! shuffled batches to the trainer's [`TrainingData`]. The train split is used for training; a fixed batch of the
+//! `unseen_poses` split (or of `train` when that is empty) gives the logged validation loss, which only monitors.
+
+use crate::dataset::{Batches, Dataset, SplitName};
+
+use super::train::{TrainBatch, TrainingData};
+use super::ModelError;
+
+/// Batches of the train split, read in the dataset's `(seed, epoch)` order.
+pub struct DatasetTraining<'a> {
+    dataset: &'a Dataset,
+    /// The open epoch: (epoch, index of the next batch, iterator).
+    cursor: Option<(u64, usize, Batches<'a>)>,
+}
+
+impl<'a> DatasetTraining<'a> {
+    pub fn new(dataset: &'a Dataset) -> Self {
+        Self {
+            dataset,
+            cursor: None,
+        }
+    }
+}
+
+fn convert(b: crate::dataset::Batch) -> TrainBatch {
+    TrainBatch {
+        n: b.n,
+        width: b.width,
+        height: b.height,
+        imprint: b.imprint,
+        target: b.target,
+    }
+}
+
+fn data_err(e: impl std::fmt::Display) -> ModelError {
+    ModelError::Data(e.to_string())
+}
+
+impl TrainingData for DatasetTraining<'_> {
+    fn len(&self) -> usize {
+        self.dataset.len(SplitName::Train)
+    }
+
+    fn batch(
+        &mut self,
+        epoch: u64,
+        index: usize,
+        batch: usize,
+        seed: u64,
+    ) -> Result<TrainBatch, ModelError> {
+        let reuse = matches!(&self.cursor, Some((e, i, _)) if *e == epoch && *i == index);
+        if !reuse {
+            // A new epoch, or a resume in the middle of one: skip to `index`.
+            let mut it = self.dataset.batches(SplitName::Train, batch, seed, epoch);
+            for _ in 0..index {
+                it.next().transpose().map_err(data_err)?;
+            }
+            self.cursor = Some((epoch, index, it));
+        }
+        let Some((_, i, it)) = self.cursor.as_mut() else {
+            return Err(ModelError::Data("internal: no open epoch".into()));
+        };
+        let b = it
+            .next()
+            .transpose()
+            .map_err(data_err)?
+            .ok_or_else(|| ModelError::Data(format!("epoch {epoch} has no batch {index}")))?;
+        *i += 1;
+        Ok(convert(b))
+    }
+
+    fn validation(&mut self, batch: usize) -> Result<Option<TrainBatch>, ModelError> {
+        let split = if self.dataset.len(SplitName::UnseenPoses) > 0 {
+            SplitName::UnseenPoses
+        } else {
+            SplitName::Train
+        };
+        self.dataset
+            .batches(split, batch, 0, 0)
+            .next()
+            .transpose()
+            .map(|b| b.map(convert))
+            .map_err(data_err)
+    }
+}

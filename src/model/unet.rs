@@ -1,0 +1,164 @@
+//! Ho et al.'s U-Net as diffusers `UNet2DModel` (`diffusers/models/unets/unet_2d.py`), the ε-predictor of the
+//! conditional DDPM (paper IV.B): input `cat([x_t, imprint])`, output ε. Field and `vb.pp` names are the diffusers
+//! state-dict keys, so diffusers checkpoints load unchanged.
+
+use candle_core::{Module, Result, Tensor};
+use candle_nn::VarBuilder;
+
+use super::config::UNet2DConfig;
+use super::conv::Conv2d;
+use super::embeddings::{timestep_embedding, TimestepEmbedding};
+use super::group_norm::{group_norm, GroupNorm};
+use super::resnet::ResnetCfg;
+use super::unet_blocks::{AttnCfg, DownBlock2D, UNetMidBlock2D, UpBlock2D};
+
+/// diffusers `UNet2DModel` with `time_embedding_type="positional"`.
+#[derive(Clone, Debug)]
+pub struct UNet2DModel {
+    pub conv_in: Conv2d,
+    pub time_embedding: TimestepEmbedding,
+    pub down_blocks: Vec<DownBlock2D>,
+    pub mid_block: Option<UNetMidBlock2D>,
+    pub up_blocks: Vec<UpBlock2D>,
+    pub conv_norm_out: GroupNorm,
+    pub conv_out: Conv2d,
+    pub config: UNet2DConfig,
+}
+
+impl UNet2DModel {
+    /// Build from `vb` (names as in diffusers); `config` must have passed [`UNet2DConfig::validate`].
+    pub fn new(vb: VarBuilder, config: &UNet2DConfig) -> Result<Self> {
+        let ch = &config.block_out_channels;
+        let n = ch.len();
+        let temb = config.time_embed_dim();
+        let rcfg = ResnetCfg {
+            temb_channels: temb,
+            groups: config.norm_num_groups,
+            eps: config.norm_eps,
+            output_scale_factor: 1.0,
+            dropout: config.dropout as f32,
+        };
+        let attn = |ty: &str| {
+            ty.starts_with("Attn").then_some(AttnCfg {
+                head_dim: config.attention_head_dim,
+                groups: config.norm_num_groups,
+            })
+        };
+        let conv_in = Conv2d::new(vb.pp("conv_in"), config.in_channels, ch[0], 3, 1, 1, true)?;
+        let time_embedding = TimestepEmbedding::new(vb.pp("time_embedding"), ch[0], temb)?;
+        let mut down_blocks = Vec::with_capacity(n);
+        let mut c_out = ch[0];
+        for (i, ty) in config.down_block_types.iter().enumerate() {
+            let c_in = c_out;
+            c_out = ch[i];
+            down_blocks.push(DownBlock2D::new(
+                vb.pp("down_blocks").pp(i),
+                c_in,
+                c_out,
+                config.layers_per_block,
+                rcfg,
+                attn(ty),
+                i + 1 < n,
+                config.downsample_padding,
+            )?);
+        }
+        let mid_block = match &config.mid_block_type {
+            Some(_) => {
+                let mcfg = ResnetCfg {
+                    output_scale_factor: config.mid_block_scale_factor,
+                    ..rcfg
+                };
+                let a = config.add_attention.then_some(AttnCfg {
+                    head_dim: config.attention_head_dim,
+                    groups: config
+                        .attn_norm_num_groups
+                        .unwrap_or(config.norm_num_groups),
+                });
+                Some(UNetMidBlock2D::new(vb.pp("mid_block"), ch[n - 1], mcfg, a)?)
+            }
+            None => None,
+        };
+        let rev: Vec<usize> = ch.iter().rev().copied().collect();
+        let mut up_blocks = Vec::with_capacity(n);
+        let mut c_out = rev[0];
+        for (i, ty) in config.up_block_types.iter().enumerate() {
+            let prev = c_out;
+            c_out = rev[i];
+            let c_in = rev[(i + 1).min(n - 1)];
+            up_blocks.push(UpBlock2D::new(
+                vb.pp("up_blocks").pp(i),
+                c_in,
+                prev,
+                c_out,
+                config.layers_per_block + 1,
+                rcfg,
+                attn(ty),
+                i + 1 < n,
+            )?);
+        }
+        Ok(Self {
+            conv_in,
+            time_embedding,
+            down_blocks,
+            mid_block,
+            up_blocks,
+            conv_norm_out: group_norm(
+                config.norm_num_groups,
+                ch[0],
+                config.norm_eps,
+                vb.pp("conv_norm_out"),
+            )?,
+            conv_out: Conv2d::new(vb.pp("conv_out"), ch[0], config.out_channels, 3, 1, 1, true)?,
+            config: config.clone(),
+        })
+    }
+
+    /// ε prediction for `x` `[B, in_channels, H, W]` at diffusion `timesteps` (one per sample, or one for all).
+    pub fn forward(&self, x: &Tensor, timesteps: &[f32]) -> Result<Tensor> {
+        self.forward_t(x, timesteps, false)
+    }
+
+    /// Like [`Self::forward`]; `train` enables dropout.
+    pub fn forward_t(&self, x: &Tensor, timesteps: &[f32], train: bool) -> Result<Tensor> {
+        let b = x.dim(0)?;
+        let t: Vec<f32> = match timesteps.len() {
+            1 => vec![timesteps[0]; b],
+            n if n == b => timesteps.to_vec(),
+            n => candle_core::bail!("{n} timesteps for a batch of {b}"),
+        };
+        let cfg = &self.config;
+        let t_emb = timestep_embedding(
+            &t,
+            cfg.block_out_channels[0],
+            cfg.flip_sin_to_cos,
+            cfg.freq_shift,
+            x.device(),
+        )?;
+        let emb = self.time_embedding.forward(&t_emb)?;
+        let x = if cfg.center_input_sample {
+            x.affine(2.0, -1.0)?
+        } else {
+            x.clone()
+        };
+        let mut h = self.conv_in.forward(&x)?;
+        let mut skips = vec![h.clone()];
+        for block in &self.down_blocks {
+            let (out, states) = block.forward(&h, &emb, train)?;
+            h = out;
+            skips.extend(states);
+        }
+        if let Some(mid) = &self.mid_block {
+            h = mid.forward(&h, &emb, train)?;
+        }
+        for block in &self.up_blocks {
+            let k = block.resnets.len();
+            if skips.len() < k {
+                candle_core::bail!("U-Net skip stack exhausted");
+            }
+            let these = skips.split_off(skips.len() - k);
+            h = block.forward(&h, &these, &emb, train)?;
+        }
+        let h = self.conv_norm_out.forward_silu(&h)?;
+        self.conv_out.forward(&h)
+    }
+}

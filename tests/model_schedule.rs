@@ -1,0 +1,78 @@
+//! Cosine schedule and DDPM / DDIM steps against diffusers (fixture `tests/fixtures/sched_ref.safetensors`, made by
+//! `tests/fixtures/make_sched_fixture.py`).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use tactile_derender::model::checkpoint::read_tensors;
+use tactile_derender::model::sampler::{self, SamplerKind};
+use tactile_derender::model::NoiseSchedule;
+
+fn fixture() -> std::collections::HashMap<String, Vec<f32>> {
+    let f = read_tensors(Path::new("tests/fixtures/sched_ref.safetensors")).unwrap();
+    f.tensors
+        .iter()
+        .filter(|(k, _)| k.as_str() != "ddim_timesteps")
+        .map(|(k, v)| {
+            (
+                k.clone(),
+                v.flatten_all().unwrap().to_vec1::<f32>().unwrap(),
+            )
+        })
+        .collect()
+}
+
+fn max_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
+
+#[test]
+fn cosine_schedule_matches_diffusers() {
+    let f = fixture();
+    let s = NoiseSchedule::cosine(250);
+    let db = max_diff(&s.betas, &f["betas"]);
+    let da = max_diff(&s.alphas_cumprod, &f["alphas_cumprod"]);
+    assert!(db <= 1e-7, "betas max |Δ| = {db}");
+    assert!(da <= 1e-7, "alphas_cumprod max |Δ| = {da}");
+}
+
+#[test]
+fn ddpm_step_matches_diffusers() {
+    let f = fixture();
+    let s = sampler::make(SamplerKind::Ddpm, Arc::new(NoiseSchedule::cosine(250))).unwrap();
+    assert_eq!(s.timesteps().len(), 250);
+    for t in [249usize, 200, 120, 30, 1, 0] {
+        let g = |k: &str| &f[&format!("ddpm.{t}.{k}")];
+        let noise = s.needs_noise(t).then(|| g("noise").as_slice());
+        let prev = s.step(g("eps"), t, g("sample"), noise).unwrap();
+        let d = max_diff(&prev, g("prev"));
+        assert!(d <= 1e-5, "DDPM t = {t}: max |Δ| = {d}");
+    }
+}
+
+#[test]
+fn ddim_step_and_timesteps_match_diffusers() {
+    let file = read_tensors(Path::new("tests/fixtures/sched_ref.safetensors")).unwrap();
+    let ts: Vec<i64> = file.tensors["ddim_timesteps"].to_vec1().unwrap();
+    let f = fixture();
+    for eta in [0.0, 0.5, 1.0] {
+        let s = sampler::make(
+            SamplerKind::Ddim { steps: 25, eta },
+            Arc::new(NoiseSchedule::cosine(250)),
+        )
+        .unwrap();
+        let ours: Vec<i64> = s.timesteps().iter().map(|&t| t as i64).collect();
+        assert_eq!(ours, ts);
+        for t in [240usize, 130, 10, 0] {
+            let g = |k: &str| &f[&format!("ddim.{eta:.1}.{t}.{k}")];
+            let noise = s.needs_noise(t).then(|| g("noise").as_slice());
+            let prev = s.step(g("eps"), t, g("sample"), noise).unwrap();
+            let d = max_diff(&prev, g("prev"));
+            assert!(d <= 1e-5, "DDIM eta {eta} t = {t}: max |Δ| = {d}");
+        }
+    }
+}

@@ -1,0 +1,266 @@
+//! U-Net parity with diffusers `UNet2DModel` (fixtures made by `../shared/peers/unet_torch.py`, see
+//! `tests/fixtures/README.md`), our convolution vs candle's, and checkpoint error handling.
+
+use std::path::Path;
+
+use candle_core::{Device, Tensor, Var};
+use tactile_derender::model::checkpoint::{read_tensors, save_model};
+use tactile_derender::model::conv::{conv2d, ConvBackend, ConvGeom};
+use tactile_derender::model::{DiffusionModel, ModelError};
+
+fn parity(dir: &str) -> f32 {
+    let model =
+        DiffusionModel::load(&Path::new(dir).join("unet_ref.safetensors")).expect("load fixture");
+    let io = read_tensors(&Path::new(dir).join("unet_ref_io.safetensors")).expect("io");
+    let input = &io.tensors["input"];
+    let t: Vec<f32> = io.tensors["timesteps"]
+        .to_vec1::<i64>()
+        .unwrap()
+        .iter()
+        .map(|&t| t as f32)
+        .collect();
+    let out = model.unet().forward(input, &t).unwrap();
+    let diff = (out - &io.tensors["output"]).unwrap().abs().unwrap();
+    let d = diff
+        .flatten_all()
+        .unwrap()
+        .max(0)
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap();
+    eprintln!("{dir}: max |Δ| = {d:e}");
+    d
+}
+
+#[test]
+fn unet_matches_diffusers_small() {
+    let d = parity("tests/fixtures/unet_small");
+    assert!(d <= 1e-4, "max |Δ| = {d}");
+}
+
+#[test]
+fn unet_matches_diffusers_variant() {
+    // downsample_padding 0, freq_shift 1, flip_sin_to_cos false, one head per block, mid_block_scale_factor 2,
+    // time_embedding_dim 10, 2 layers per block, attention at the finest level.
+    let d = parity("tests/fixtures/unet_variant");
+    assert!(d <= 1e-4, "max |Δ| = {d}");
+}
+
+fn rand_t(shape: &[usize], seed: u64) -> Tensor {
+    // Deterministic pseudo-random values (LCG) so the test does not depend on candle's RNG.
+    let n: usize = shape.iter().product();
+    let mut s = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    let v: Vec<f32> = (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 33) as f32 / (1u64 << 31) as f32) - 0.5
+        })
+        .collect();
+    Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
+}
+
+fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
+    (a - b)
+        .unwrap()
+        .abs()
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .max(0)
+        .unwrap()
+        .to_scalar()
+        .unwrap()
+}
+
+#[test]
+fn im2col_conv_matches_candle_forward_and_backward() {
+    let cases = [
+        // (b, c_in, c_out, h, w, geom)
+        (
+            2,
+            3,
+            5,
+            9,
+            7,
+            ConvGeom {
+                kernel: 3,
+                stride: 1,
+                pad_begin: 1,
+                pad_end: 1,
+            },
+        ),
+        (
+            3,
+            4,
+            2,
+            8,
+            8,
+            ConvGeom {
+                kernel: 3,
+                stride: 2,
+                pad_begin: 1,
+                pad_end: 1,
+            },
+        ),
+        (
+            2,
+            4,
+            3,
+            8,
+            6,
+            ConvGeom {
+                kernel: 3,
+                stride: 2,
+                pad_begin: 0,
+                pad_end: 1,
+            },
+        ),
+        (
+            1,
+            6,
+            4,
+            5,
+            5,
+            ConvGeom {
+                kernel: 1,
+                stride: 1,
+                pad_begin: 0,
+                pad_end: 0,
+            },
+        ),
+    ];
+    for (i, &(b, ci, co, h, w, geom)) in cases.iter().enumerate() {
+        let x = Var::from_tensor(&rand_t(&[b, ci, h, w], i as u64)).unwrap();
+        let k =
+            Var::from_tensor(&rand_t(&[co, ci, geom.kernel, geom.kernel], 100 + i as u64)).unwrap();
+        let bias = Var::from_tensor(&rand_t(&[co], 200 + i as u64)).unwrap();
+        let mut outs = Vec::new();
+        for backend in [
+            ConvBackend::Candle,
+            ConvBackend::Im2colGemm,
+            ConvBackend::Tiled,
+        ] {
+            let y = conv2d(
+                x.as_tensor(),
+                k.as_tensor(),
+                Some(bias.as_tensor()),
+                geom,
+                backend,
+            )
+            .unwrap();
+            // A non-uniform upstream gradient: loss = sum(y * r).
+            let r = rand_t(y.dims(), 300 + i as u64);
+            let g = (&y * &r).unwrap().sum_all().unwrap().backward().unwrap();
+            outs.push((
+                y,
+                g.get(&x).unwrap().clone(),
+                g.get(&k).unwrap().clone(),
+                g.get(&bias).unwrap().clone(),
+            ));
+        }
+        let a = &outs[0];
+        for (n, b2) in outs.iter().enumerate().skip(1) {
+            assert_eq!(a.0.dims(), b2.0.dims(), "case {i}");
+            assert!(max_abs(&a.0, &b2.0) < 1e-5, "forward case {i} backend {n}");
+            assert!(max_abs(&a.1, &b2.1) < 1e-5, "grad x case {i} backend {n}");
+            assert!(max_abs(&a.2, &b2.2) < 1e-5, "grad w case {i} backend {n}");
+            assert!(max_abs(&a.3, &b2.3) < 1e-5, "grad b case {i} backend {n}");
+        }
+    }
+}
+
+#[test]
+fn checkpoint_round_trip_and_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let model =
+        DiffusionModel::load(Path::new("tests/fixtures/unet_small/unet_ref.safetensors")).unwrap();
+    // Save in our format, reload, same output.
+    let ours = dir.path().join("m.safetensors");
+    save_model(
+        &ours,
+        &model.vars().varmap,
+        model.config(),
+        Default::default(),
+    )
+    .unwrap();
+    let again = DiffusionModel::load(&ours).unwrap();
+    assert_eq!(again.config(), model.config());
+    let x = rand_t(&[1, 2, 8, 8], 5);
+    let d = max_abs(
+        &model.unet().forward(&x, &[17.0]).unwrap(),
+        &again.unet().forward(&x, &[17.0]).unwrap(),
+    );
+    assert_eq!(d, 0.0);
+
+    // Missing file.
+    let e = DiffusionModel::load(&dir.path().join("nope.safetensors"))
+        .err()
+        .unwrap();
+    assert!(matches!(e, ModelError::MissingWeights { .. }), "{e}");
+    assert!(e.to_string().contains("nope.safetensors"));
+    // Truncated file.
+    let bytes = std::fs::read(&ours).unwrap();
+    let cut = dir.path().join("cut.safetensors");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let e = DiffusionModel::load(&cut).err().unwrap();
+    assert!(matches!(e, ModelError::BadFile { .. }), "{e}");
+    // Config that does not match the weights: more channels -> a shape error naming the key.
+    let mut cfg = model.config().clone();
+    cfg.block_out_channels = vec![8, 8, 8];
+    cfg.norm_num_groups = 2;
+    let wrong = dir.path().join("wrong.safetensors");
+    let file = read_tensors(&ours).unwrap();
+    let mut meta = file.metadata.clone();
+    meta.insert("config".into(), cfg.to_json().unwrap());
+    let tensors = file
+        .tensors
+        .iter()
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    tactile_derender::model::checkpoint::write_tensors(&wrong, &tensors, meta).unwrap();
+    let e = DiffusionModel::load(&wrong).err().unwrap();
+    match &e {
+        ModelError::Shape { key, .. } => assert!(!key.is_empty()),
+        other => panic!("expected a shape error, got {other}"),
+    }
+    assert!(e.to_string().contains("wrong.safetensors"));
+}
+
+#[test]
+fn fused_group_norm_silu_matches_candle_nn() {
+    use tactile_derender::model::group_norm::GroupNorm;
+    let x = Var::from_tensor(&(rand_t(&[3, 6, 5, 4], 1) * 3.0).unwrap()).unwrap();
+    let w = Var::from_tensor(&(rand_t(&[6], 2) + 1.0).unwrap()).unwrap();
+    let b = Var::from_tensor(&rand_t(&[6], 3)).unwrap();
+    for silu in [false, true] {
+        let ours = GroupNorm {
+            weight: w.as_tensor().clone(),
+            bias: b.as_tensor().clone(),
+            groups: 3,
+            eps: 1e-5,
+        };
+        let theirs =
+            candle_nn::GroupNorm::new(w.as_tensor().clone(), b.as_tensor().clone(), 6, 3, 1e-5)
+                .unwrap();
+        let y1 = if silu {
+            ours.forward_silu(x.as_tensor())
+        } else {
+            ours.forward(x.as_tensor())
+        }
+        .unwrap();
+        let y2 = candle_core::Module::forward(&theirs, x.as_tensor()).unwrap();
+        let y2 = if silu { y2.silu().unwrap() } else { y2 };
+        assert!(max_abs(&y1, &y2) < 1e-5, "forward silu={silu}");
+        let r = rand_t(y1.dims(), 9);
+        let g1 = (&y1 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+        let g2 = (&y2 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+        for v in [&x, &w, &b] {
+            let d = max_abs(g1.get(v).unwrap(), g2.get(v).unwrap());
+            assert!(d < 1e-4, "gradient silu={silu}: {d}");
+        }
+    }
+}

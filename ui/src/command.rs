@@ -1,0 +1,294 @@
+//! User intent as one [`Command`] enum, applied in one function ([`WorkbenchApp::apply`]): panels only push commands,
+//! so sessions, tests and (later) undo have a single door into the [`State`].
+
+use std::path::PathBuf;
+
+use anyhow::{anyhow, Result};
+use tactile_derender::io::{npy, preview};
+use tactile_derender::sim::SimConfig;
+
+use crate::app::WorkbenchApp;
+use crate::images::ImageKind;
+use crate::measured;
+use crate::session;
+use crate::state::{CalibrationSettings, ObjectSource, SceneState, State, Tab, ViewState};
+use crate::worker::DialogPurpose;
+
+/// What the user asked for.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Command {
+    /// Replace the scene (object, poses, press).
+    SetScene(SceneState),
+    /// Replace the simulator configuration (camera, mount, elastomer, signature).
+    SetSim(SimConfig),
+    /// Set the noise seed.
+    SetSeed(u64),
+    /// Replace the calibration settings.
+    SetCalibration(CalibrationSettings),
+    /// Replace the display settings (no re-simulation).
+    SetView(ViewState),
+    /// Start over from the default scene (the session file is forgotten).
+    NewSession,
+    /// Open a session file; a bad file shows an error and changes nothing.
+    OpenSession(PathBuf),
+    /// Save the state to a session file (atomically).
+    SaveSession(PathBuf),
+    /// Show a native file dialog; its answer becomes another command.
+    Browse(DialogPurpose),
+    /// Load a measured imprint (`.npy`, metres, or a dataset directory's pair) for the calibration.
+    LoadMeasured(PathBuf),
+    /// Place the scene where the measured dataset pair was taken (object, poses; the sensor base at its height).
+    UseMeasuredScene,
+    /// Forget the measured imprint.
+    ClearMeasured,
+    /// Run the inflation sweep in the background.
+    RunCalibration,
+    /// Cancel the running sweep.
+    CancelCalibration,
+    /// Use this inflation height (metres).
+    PickInflation(f64),
+    /// Write one image to the export folder as a PNG with colour bar or as `.npy`.
+    Export { image: ImageKind, png: bool },
+    /// Clear the error list.
+    DismissErrors,
+}
+
+impl WorkbenchApp {
+    /// Apply one command. Errors are shown in the window; nothing here panics.
+    pub fn apply(&mut self, cmd: Command) {
+        match cmd {
+            Command::SetScene(scene) => {
+                if scene != self.state.scene {
+                    self.state.scene = scene;
+                    self.request_simulation();
+                }
+            }
+            Command::SetSim(sim) => {
+                if sim != self.state.sim {
+                    self.state.sim = sim;
+                    self.request_simulation();
+                }
+            }
+            Command::SetSeed(seed) => {
+                if seed != self.state.seed {
+                    self.state.seed = seed;
+                    self.request_simulation();
+                }
+            }
+            Command::SetCalibration(c) => {
+                let pair_changed = (c.measured_split, c.measured_index)
+                    != (
+                        self.state.calibration.measured_split,
+                        self.state.calibration.measured_index,
+                    );
+                self.state.calibration = c;
+                let dataset = self.measured.as_ref().filter(|m| m.scene.is_some());
+                if let (true, Some(m)) = (pair_changed, dataset) {
+                    let path = m.path.clone();
+                    self.apply(Command::LoadMeasured(path));
+                }
+            }
+            Command::SetView(v) => self.state.view = v,
+            Command::NewSession => {
+                self.replace_state(State::default());
+                self.session_path = None;
+                self.inputs.session_path.clear();
+                self.notice = Some("new session: the default scene".into());
+            }
+            Command::OpenSession(path) => match session::read(&path) {
+                Ok(state) => {
+                    self.replace_state(state);
+                    self.inputs.session_path = path.display().to_string();
+                    self.notice = Some(format!("opened {}", path.display()));
+                    self.session_path = Some(path);
+                }
+                Err(e) => self.error(format!("{e:#}")),
+            },
+            Command::SaveSession(path) => match session::write(&path, &self.state) {
+                Ok(()) => {
+                    self.inputs.session_path = path.display().to_string();
+                    self.notice = Some(format!("saved {}", path.display()));
+                    self.session_path = Some(path);
+                }
+                Err(e) => self.error(format!("{e:#}")),
+            },
+            Command::Browse(purpose) => self.browse(purpose),
+            Command::LoadMeasured(path) => {
+                let c = &self.state.calibration;
+                match measured::load(&path, c.measured_split, c.measured_index) {
+                    Ok(m) => {
+                        self.inputs.measured_path = path.display().to_string();
+                        self.state.calibration.measured = Some(path);
+                        self.measured = Some(m);
+                    }
+                    Err(e) => self.error(format!("measured imprint: {e:#}")),
+                }
+            }
+            Command::UseMeasuredScene => {
+                if let Err(e) = self.use_measured_scene() {
+                    self.error(format!("measured scene: {e:#}"));
+                }
+            }
+            Command::ClearMeasured => {
+                self.state.calibration.measured = None;
+                self.measured = None;
+                self.inputs.measured_path.clear();
+            }
+            Command::RunCalibration => self.run_calibration(),
+            Command::CancelCalibration => {
+                if let Some(w) = &mut self.worker {
+                    w.cancel_calibration();
+                }
+            }
+            Command::PickInflation(h) => {
+                let mut sim = self.state.sim.clone();
+                sim.elastomer.inflation = h;
+                self.apply(Command::SetSim(sim));
+            }
+            Command::Export { image, png } => {
+                if let Err(e) = self.export(image, png) {
+                    self.error(format!("export: {e:#}"));
+                }
+            }
+            Command::DismissErrors => self.errors.clear(),
+        }
+    }
+
+    /// Replace the whole state (new or opened session) and recompute what depends on it.
+    pub(crate) fn replace_state(&mut self, state: State) {
+        self.state = state;
+        self.calibration = Default::default();
+        self.measured = None;
+        self.inputs.measured_path.clear();
+        if let ObjectSource::File { path, units } = &self.state.scene.object {
+            self.inputs.object_path = path.display().to_string();
+            self.inputs.object_units = *units;
+        }
+        if let Some(p) = &self.state.sim.elastomer.mesh_file {
+            self.inputs.elastomer_path = p.display().to_string();
+        }
+        if let Some(p) = self.state.calibration.measured.clone() {
+            self.inputs.measured_path = p.display().to_string();
+            let c = &self.state.calibration;
+            match measured::load(&p, c.measured_split, c.measured_index) {
+                Ok(m) => self.measured = Some(m),
+                Err(e) => self.error(format!("measured imprint: {e:#}")),
+            }
+        }
+        self.request_simulation();
+    }
+
+    /// Turn a file dialog's answer into the command it was opened for.
+    pub(crate) fn dialog_answer(&mut self, purpose: DialogPurpose, path: Option<PathBuf>) {
+        let Some(path) = path else {
+            self.notice = Some("no file chosen (type the path into the field instead)".into());
+            return;
+        };
+        match purpose {
+            DialogPurpose::OpenSession => self.apply(Command::OpenSession(path)),
+            DialogPurpose::SaveSessionAs => self.apply(Command::SaveSession(path)),
+            DialogPurpose::OpenObjectMesh => {
+                self.inputs.object_path = path.display().to_string();
+                let units = self.inputs.object_units;
+                let mut scene = self.state.scene.clone();
+                scene.object = ObjectSource::File { path, units };
+                self.apply(Command::SetScene(scene));
+            }
+            DialogPurpose::OpenElastomerMesh => {
+                self.inputs.elastomer_path = path.display().to_string();
+                let mut sim = self.state.sim.clone();
+                sim.elastomer.mesh_file = Some(path);
+                self.apply(Command::SetSim(sim));
+            }
+            DialogPurpose::OpenMeasured => self.apply(Command::LoadMeasured(path)),
+            DialogPurpose::ExportDir => {
+                let mut view = self.state.view.clone();
+                view.export_dir = path;
+                self.apply(Command::SetView(view));
+            }
+        }
+    }
+
+    fn browse(&mut self, purpose: DialogPurpose) {
+        let start = match purpose {
+            DialogPurpose::OpenSession | DialogPurpose::SaveSessionAs => {
+                Some(PathBuf::from("sessions"))
+            }
+            _ => std::env::current_dir().ok(),
+        };
+        match &self.worker {
+            Some(w) => w.dialog(purpose, start),
+            None => self.error("file dialogs are not available (no worker thread)".into()),
+        }
+    }
+
+    fn use_measured_scene(&mut self) -> Result<()> {
+        let pair = self
+            .measured
+            .as_ref()
+            .and_then(|m| m.scene.clone())
+            .ok_or_else(|| anyhow!("load a dataset pair as the measured imprint first"))?;
+        let elastomer = &self.state.sim.elastomer;
+        let apex = if elastomer.mesh_file.is_none() {
+            elastomer.inflation
+        } else {
+            return Err(anyhow!(
+                "placing the sensor needs the parametric membrane's inflation; switch to the parametric dome"
+            ));
+        };
+        let object = crate::worker::load_object(&pair.object)?;
+        let scene = measured::scene_for(&pair, &self.state.scene, apex, object.top_z)?;
+        self.apply(Command::SetScene(scene));
+        Ok(())
+    }
+
+    fn run_calibration(&mut self) {
+        let req = self.sim_request();
+        let settings = self.state.calibration.clone();
+        let measured = self.measured.as_ref().map(|m| m.imprint.clone());
+        self.calibration.generation += 1;
+        self.calibration.running = true;
+        self.calibration.progress = None;
+        self.calibration.points.clear();
+        let generation = self.calibration.generation;
+        self.state.view.tab = Tab::Calibration;
+        match &mut self.worker {
+            Some(w) => w.calibrate(generation, req, settings, measured),
+            None => {
+                self.calibration.running = false;
+                self.error(
+                    "the inflation sweep needs the worker thread, which is not running".into(),
+                );
+            }
+        }
+    }
+
+    fn export(&mut self, kind: ImageKind, png: bool) -> Result<()> {
+        let result = self
+            .sim
+            .as_ref()
+            .ok_or_else(|| anyhow!("nothing simulated yet"))?;
+        let img = kind.image(&result.output);
+        let dir = &self.state.view.export_dir;
+        let path = dir.join(format!(
+            "{}.{}",
+            kind.file_stem(),
+            if png { "png" } else { "npy" }
+        ));
+        if png {
+            let range = crate::images::range_for(kind, img, &self.state.view);
+            let style = preview::PanelStyle {
+                title: kind.title().replace('·', "*"),
+                range_m: Some(range),
+                zero_is_missing: kind.zero_is_missing(),
+                scale: 4,
+                millimetres: kind.millimetres(),
+            };
+            preview::save_png(&path, &preview::render_panel(img, &style))?;
+        } else {
+            npy::write_image(&path, img)?;
+        }
+        self.notice = Some(format!("wrote {}", path.display()));
+        Ok(())
+    }
+}

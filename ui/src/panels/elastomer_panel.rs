@@ -1,0 +1,182 @@
+//! Elastomer panel: the membrane's footprint, inflation height and tessellation, or a membrane mesh file; and the
+//! inflation calibration sweep's settings (the plot is the "Inflation calibration" tab).
+
+use std::path::PathBuf;
+
+use tactile_derender::dataset::SplitName;
+use tactile_derender::sim::calibration::best_by_iou;
+
+use super::widgets::{mm_slider, path_field, units_combo};
+use crate::app::WorkbenchApp;
+use crate::command::Command;
+use crate::worker::DialogPurpose;
+
+pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    let mut sim = app.state.sim.clone();
+    let e = &mut sim.elastomer;
+    let parametric = e.mesh_file.is_none();
+    ui.add_enabled_ui(parametric, |ui| {
+        mm_slider(ui, &mut e.footprint_x, 40.0..=200.0, "footprint x (mm)");
+        mm_slider(ui, &mut e.footprint_y, 30.0..=150.0, "footprint y (mm)");
+        mm_slider(ui, &mut e.inflation, 5.0..=60.0, "inflation (mm)");
+        ui.horizontal(|ui| {
+            ui.label("tessellation");
+            ui.add(
+                egui::DragValue::new(&mut e.rings)
+                    .range(2..=256)
+                    .prefix("rings "),
+            );
+            ui.add(
+                egui::DragValue::new(&mut e.segments)
+                    .range(8..=1024)
+                    .prefix("segments "),
+            );
+        });
+    });
+    ui.horizontal(|ui| {
+        ui.label("or membrane mesh")
+            .on_hover_text("an OBJ/STL in the sensor frame");
+        units_combo(ui, "membrane_units", &mut e.mesh_units);
+        if ui.button("Browse…").clicked() {
+            cmds.push(Command::Browse(DialogPurpose::OpenElastomerMesh));
+        }
+    });
+    path_field(ui, "Membrane", &mut app.inputs.elastomer_path, "bubble.stl");
+    ui.horizontal(|ui| {
+        let typed = app.inputs.elastomer_path.trim().to_string();
+        if ui
+            .add_enabled(!typed.is_empty(), egui::Button::new("Use membrane mesh"))
+            .clicked()
+        {
+            e.mesh_file = Some(PathBuf::from(typed));
+        }
+        if ui
+            .add_enabled(!parametric, egui::Button::new("Parametric dome"))
+            .clicked()
+        {
+            e.mesh_file = None;
+        }
+    });
+    if sim != app.state.sim {
+        cmds.push(Command::SetSim(sim));
+    }
+
+    ui.add_space(6.0);
+    ui.strong("Inflation calibration");
+    let mut cal = app.state.calibration.clone();
+    ui.horizontal(|ui| {
+        let mut lo = cal.lo * 1e3;
+        let mut hi = cal.hi * 1e3;
+        ui.label("sweep");
+        if ui
+            .add(
+                egui::DragValue::new(&mut lo)
+                    .range(1.0..=100.0)
+                    .suffix(" mm"),
+            )
+            .changed()
+        {
+            cal.lo = lo * 1e-3;
+        }
+        ui.label("to");
+        if ui
+            .add(
+                egui::DragValue::new(&mut hi)
+                    .range(1.0..=100.0)
+                    .suffix(" mm"),
+            )
+            .changed()
+        {
+            cal.hi = hi * 1e-3;
+        }
+        ui.add(
+            egui::DragValue::new(&mut cal.steps)
+                .range(1..=200)
+                .suffix(" steps"),
+        );
+    });
+    ui.horizontal(|ui| {
+        ui.label("measured imprint (.npy or dataset)");
+        if ui.button("Browse…").clicked() {
+            cmds.push(Command::Browse(DialogPurpose::OpenMeasured));
+        }
+    });
+    path_field(
+        ui,
+        "Imprint",
+        &mut app.inputs.measured_path,
+        "imprint.npy or data/synth",
+    );
+    let typed_dir = std::path::Path::new(app.inputs.measured_path.trim()).is_dir();
+    if typed_dir {
+        ui.horizontal(|ui| {
+            egui::ComboBox::new("measured_split", "split")
+                .selected_text(cal.measured_split.as_str())
+                .show_ui(ui, |ui| {
+                    for split in SplitName::ALL {
+                        ui.selectable_value(&mut cal.measured_split, split, split.as_str());
+                    }
+                });
+            let l = ui.label("pair");
+            ui.add(egui::DragValue::new(&mut cal.measured_index))
+                .labelled_by(l.id);
+        });
+    }
+    ui.horizontal(|ui| {
+        let typed = app.inputs.measured_path.trim().to_string();
+        if ui
+            .add_enabled(!typed.is_empty(), egui::Button::new("Load imprint"))
+            .clicked()
+        {
+            cmds.push(Command::LoadMeasured(PathBuf::from(typed)));
+        }
+        if ui
+            .add_enabled(app.measured.is_some(), egui::Button::new("Clear"))
+            .clicked()
+        {
+            cmds.push(Command::ClearMeasured);
+        }
+    });
+    if let Some(m) = &app.measured {
+        ui.weak(format!("loaded {}", m.description));
+        if m.scene.is_some()
+            && ui
+                .button("Use the pair's object and poses")
+                .on_hover_text("object, object pose and sensor position of the measurement; the press keeps the sensor base where it was")
+                .clicked()
+        {
+            cmds.push(Command::UseMeasuredScene);
+        }
+    }
+    mm_slider(ui, &mut cal.threshold, 0.0..=10.0, "contact threshold (mm)");
+    if cal != app.state.calibration {
+        cmds.push(Command::SetCalibration(cal));
+    }
+    ui.horizontal(|ui| {
+        if app.calibration.running {
+            if ui.button("Cancel sweep").clicked() {
+                cmds.push(Command::CancelCalibration);
+            }
+            let (done, total) = app
+                .calibration
+                .progress
+                .unwrap_or((0, app.state.calibration.steps));
+            ui.add(
+                egui::ProgressBar::new(done as f32 / total.max(1) as f32)
+                    .text(format!("{done}/{total}")),
+            );
+        } else if ui.button("Run sweep").clicked() {
+            cmds.push(Command::RunCalibration);
+        }
+    });
+    if let Some(best) = best_by_iou(&app.calibration.points) {
+        let text = format!(
+            "Use best: {:.1} mm (IoU {:.3})",
+            best.inflation * 1e3,
+            best.iou.unwrap_or(0.0)
+        );
+        if ui.button(text).clicked() {
+            cmds.push(Command::PickInflation(best.inflation));
+        }
+    }
+}

@@ -1,0 +1,66 @@
+//! The workbench's panels, one file each (`*_panel.rs`). The layout: a session bar on top, a status bar at the bottom,
+//! the parameter panels (scene, elastomer, sensor) on the left and the central view with one tab per [`Tab`]. Panels
+//! read the app and push [`Command`]s; they change nothing else than the text typed into path fields. The analysis
+//! panels (dataset inspector, de-rendering, pose) slot in as more tabs:
+//!
+//! 1. a [`Tab`] variant and a `*_panel.rs` file whose `show(app, ui, cmds)` draws it (matched below);
+//! 2. its settings (paths, sampler, seeds; e.g. [`crate::state::ModelSettings`]) in [`crate::state::State`] with
+//!    `#[serde(default)]`, so old sessions still open;
+//! 3. one [`Command`] variant per user intent, applied in [`WorkbenchApp::apply`];
+//! 4. background work as a [`crate::worker::JobKind`] reporting through [`crate::worker::WorkerMsg`] (progress,
+//!    result, error) with a cancel flag, like the inflation sweep.
+
+pub mod calibration_panel;
+pub mod elastomer_panel;
+pub mod scene_panel;
+pub mod sensor_panel;
+pub mod session_panel;
+pub mod simulation_panel;
+pub mod status_panel;
+pub mod view3d_panel;
+pub mod widgets;
+
+use crate::app::WorkbenchApp;
+use crate::command::Command;
+use crate::state::Tab;
+
+/// Draw every panel of the window.
+pub fn show_all(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    egui::Panel::top("session").show(ui, |ui| session_panel::show(app, ui, cmds));
+    egui::Panel::bottom("status").show(ui, |ui| status_panel::show(app, ui, cmds));
+    egui::Panel::left("parameters")
+        .resizable(true)
+        .default_size(330.0)
+        .show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| {
+                egui::CollapsingHeader::new("Scene")
+                    .default_open(true)
+                    .show(ui, |ui| scene_panel::show(app, ui, cmds));
+                egui::CollapsingHeader::new("Elastomer")
+                    .default_open(true)
+                    .show(ui, |ui| elastomer_panel::show(app, ui, cmds));
+                egui::CollapsingHeader::new("Sensor")
+                    .default_open(true)
+                    .show(ui, |ui| sensor_panel::show(app, ui, cmds));
+            });
+        });
+    egui::CentralPanel::default().show(ui, |ui| {
+        let mut view = app.state.view.clone();
+        ui.horizontal(|ui| {
+            ui.selectable_value(&mut view.tab, Tab::Scene, "Scene view");
+            ui.selectable_value(&mut view.tab, Tab::Calibration, "Inflation calibration");
+        });
+        if view != app.state.view {
+            cmds.push(Command::SetView(view));
+        }
+        ui.separator();
+        match app.state.view.tab {
+            Tab::Scene => {
+                simulation_panel::show(app, ui, cmds);
+                ui.separator();
+                view3d_panel::show(app, ui, cmds);
+            }
+            Tab::Calibration => calibration_panel::show(app, ui, cmds),
+        }
+    });
+}

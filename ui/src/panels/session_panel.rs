@@ -1,0 +1,63 @@
+//! Session bar: New / Open / Save / Save As of `sessions/*.json`, with a typed path as the fallback where no file
+//! dialog is available.
+
+use std::path::PathBuf;
+
+use crate::app::WorkbenchApp;
+use crate::command::Command;
+use crate::worker::DialogPurpose;
+
+pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    ui.horizontal(|ui| {
+        ui.strong("tactile-derender workbench");
+        ui.separator();
+        if ui
+            .button("New")
+            .on_hover_text("start over from the default scene")
+            .clicked()
+        {
+            cmds.push(Command::NewSession);
+        }
+        if ui
+            .button("Open…")
+            .on_hover_text("open a session with a file dialog")
+            .clicked()
+        {
+            cmds.push(Command::Browse(DialogPurpose::OpenSession));
+        }
+        if ui
+            .button("Save As…")
+            .on_hover_text("save the session with a file dialog")
+            .clicked()
+        {
+            cmds.push(Command::Browse(DialogPurpose::SaveSessionAs));
+        }
+        ui.separator();
+        let label = ui.label("Session file");
+        ui.add(
+            egui::TextEdit::singleline(&mut app.inputs.session_path)
+                .hint_text("sessions/example.json")
+                .desired_width(260.0),
+        )
+        .labelled_by(label.id);
+        let typed = app.inputs.session_path.trim().to_string();
+        if ui
+            .add_enabled(!typed.is_empty(), egui::Button::new("Open"))
+            .on_hover_text("open the session file typed on the left")
+            .clicked()
+        {
+            cmds.push(Command::OpenSession(PathBuf::from(&typed)));
+        }
+        if ui
+            .add_enabled(!typed.is_empty(), egui::Button::new("Save"))
+            .on_hover_text("save to the session file typed on the left (atomic write)")
+            .clicked()
+        {
+            cmds.push(Command::SaveSession(PathBuf::from(&typed)));
+        }
+        if let Some(n) = &app.notice {
+            ui.separator();
+            ui.weak(n);
+        }
+    });
+}

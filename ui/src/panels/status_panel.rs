@@ -1,0 +1,60 @@
+//! Status bar: contact-pixel count, simulation and frame timings, the 3D renderer in use, and the errors (shown here
+//! until dismissed: the workbench never blocks on a dialog).
+
+use crate::app::WorkbenchApp;
+use crate::command::Command;
+
+pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    for e in &app.errors {
+        ui.colored_label(app.status_color(), format!("Error: {e}"));
+    }
+    ui.horizontal(|ui| {
+        if !app.errors.is_empty() && ui.button("Dismiss errors").clicked() {
+            cmds.push(Command::DismissErrors);
+        }
+        ui.label(format!(
+            "scene: {}, press {:.1} mm",
+            app.state.scene.object.display_name(),
+            app.state.scene.press * 1e3
+        ));
+        ui.separator();
+        match &app.sim {
+            Some(s) => {
+                ui.label(format!("contact pixels: {}", s.output.contact_pixels));
+                ui.separator();
+                ui.label(format!(
+                    "simulated {}x{} in {:.1} ms ({:.1} ms with rebuilds)",
+                    s.output.depth.width, s.output.depth.height, s.simulate_ms, s.total_ms
+                ));
+            }
+            None => {
+                ui.label("simulating…");
+            }
+        }
+        if app.busy() {
+            ui.spinner();
+        }
+        ui.separator();
+        let t = &app.timings;
+        let ms = |s: &crate::timings::Samples, q: f64| {
+            if s.is_empty() {
+                "–".to_string()
+            } else {
+                format!("{:.0} ms", s.quantile(q))
+            }
+        };
+        ui.label(format!(
+            "update {} (p90 {}), frame {}, UI {:.1} ms",
+            ms(&t.update, 0.5),
+            ms(&t.update, 0.9),
+            ms(&t.frame, 0.5),
+            t.ui.median()
+        ))
+        .on_hover_text("medians over the last frames: parameter change to image, frame interval, UI build time");
+        ui.separator();
+        match &app.adapter_name {
+            Some(name) => ui.weak(format!("3D: wgpu on {name}")),
+            None => ui.weak("3D: CPU fallback (no wgpu)"),
+        };
+    });
+}

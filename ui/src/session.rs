@@ -1,0 +1,108 @@
+//! Session files (`sessions/*.json`): the [`State`] as pretty JSON, written atomically; reading validates the file and
+//! names it in every error, so a bad file changes nothing.
+
+use std::path::Path;
+
+use anyhow::{anyhow, Context, Result};
+use tactile_derender::io::write_atomic;
+
+use crate::state::{State, SESSION_VERSION};
+
+/// Read and validate a session file.
+pub fn read(path: &Path) -> Result<State> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read session file", path.display()))?;
+    let state: State = serde_json::from_str(&text)
+        .map_err(|e| anyhow!("{}: not a valid session file: {e}", path.display()))?;
+    if state.version > SESSION_VERSION {
+        return Err(anyhow!(
+            "{}: session version {} is newer than this workbench ({SESSION_VERSION}); update the workbench",
+            path.display(),
+            state.version
+        ));
+    }
+    validate(&state).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    Ok(state)
+}
+
+/// Write `state` to `path` atomically (temp file + rename).
+pub fn write(path: &Path, state: &State) -> Result<()> {
+    let text = serde_json::to_string_pretty(state).context("cannot encode the session")?;
+    write_atomic(path, format!("{text}\n").as_bytes())
+        .map_err(|e| anyhow!("cannot save the session: {e}"))
+}
+
+/// Check the numbers a session can carry that the simulator would reject or that make no sense on screen.
+pub fn validate(state: &State) -> Result<(), String> {
+    let s = &state.scene;
+    let finite = [
+        s.object_pose.x,
+        s.object_pose.y,
+        s.object_pose.theta,
+        s.sensor_x,
+        s.sensor_y,
+        s.sensor_yaw,
+        s.press,
+    ];
+    if finite.iter().any(|v| !v.is_finite()) {
+        return Err("scene pose and press must be finite numbers".into());
+    }
+    if s.press < 0.0 {
+        return Err(format!("press depth must be >= 0 m, got {}", s.press));
+    }
+    state.sim.camera.validate()?;
+    state.sim.signature.validate()?;
+    state.sim.elastomer.validate().map_err(|e| e.to_string())?;
+    let c = &state.calibration;
+    tactile_derender::sim::calibration::inflation_values(c.lo, c.hi, c.steps)
+        .map_err(|e| e.to_string())?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_errors_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.json");
+        let mut state = State {
+            seed: 77,
+            ..Default::default()
+        };
+        state.scene.press = 0.0042;
+        write(&p, &state).unwrap();
+        assert_eq!(read(&p).unwrap(), state);
+
+        std::fs::write(&p, "{ \"scene\": ").unwrap();
+        let err = read(&p).unwrap_err().to_string();
+        assert!(
+            err.contains("s.json") && err.contains("not a valid session"),
+            "{err}"
+        );
+
+        std::fs::write(&p, r#"{"scene": {"press": -0.01}}"#).unwrap();
+        let err = read(&p).unwrap_err().to_string();
+        assert!(err.contains("press"), "{err}");
+
+        // Missing fields take their defaults (serde(default)).
+        std::fs::write(&p, r#"{"seed": 5}"#).unwrap();
+        let s = read(&p).unwrap();
+        assert_eq!((s.seed, s.scene), (5, State::default().scene));
+    }
+
+    /// Regenerates `sessions/example.json`: `cargo test -p tnd-workbench -- --ignored write_example_session`.
+    #[test]
+    #[ignore]
+    fn write_example_session() {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sessions/example.json");
+        write(&p, &State::default()).unwrap();
+    }
+
+    #[test]
+    fn committed_example_session_is_the_default_scene() {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sessions/example.json");
+        assert_eq!(read(&p).unwrap(), State::default());
+    }
+}
