@@ -127,3 +127,48 @@ fn dataset_split_source_feeds_the_loop() {
         );
     }
 }
+
+#[test]
+fn the_diffusion_model_is_a_generator() {
+    use glam::DAffine3;
+    use tactile_derender::image::Image;
+    use tactile_derender::metrics::evaluate::{EvalPair, Generator};
+    use tactile_derender::metrics::model_generator::ModelGenerator;
+    use tactile_derender::model::{DiffusionModel, SamplerKind};
+    // The model team's tiny 8x8 reference checkpoint (untrained weights): this checks the wiring, not the quality.
+    let path = std::path::Path::new("tests/fixtures/unet_small/unet_ref.safetensors");
+    let sampler = SamplerKind::Ddim { steps: 3, eta: 0.0 };
+    let generator = ModelGenerator {
+        model: DiffusionModel::load(path).unwrap(),
+        sampler,
+    };
+    let imprint = Image::from_vec(8, 8, (0..64).map(|i| 0.0001 * i as f32).collect()).unwrap();
+    let pair = EvalPair {
+        name: "tiny".into(),
+        object: "none".into(),
+        object_pose: Se2::default(),
+        t_world_camera: DAffine3::IDENTITY,
+        target: Image::filled(8, 8, 0.0),
+        signature: Image::filled(8, 8, 0.0),
+        imprint: imprint.clone(),
+    };
+    let a = generator.generate(&pair, 2, 9).unwrap();
+    assert_eq!(a.len(), 2);
+    assert!(a
+        .iter()
+        .all(|x| (x.width, x.height) == (8, 8) && x.data.iter().all(|v| v.is_finite())));
+    // Exactly what the model's own sampler returns for the same imprint and seed.
+    let direct = DiffusionModel::load(path)
+        .unwrap()
+        .sample(&imprint, 2, sampler, 9, &mut |_, _| true)
+        .unwrap();
+    assert_eq!(a, direct);
+    assert!(generator.name().contains("ddim 3 steps"));
+    // A wrong-size imprint is a generator error naming the checkpoint.
+    let big = EvalPair {
+        imprint: Image::filled(16, 16, 0.0),
+        ..pair
+    };
+    let err = generator.generate(&big, 1, 0).unwrap_err().to_string();
+    assert!(err.contains("unet_ref.safetensors"), "{err}");
+}

@@ -5,6 +5,7 @@
 
 pub mod depth;
 pub mod evaluate;
+pub mod model_generator;
 pub mod pose;
 pub mod sources;
 pub mod ssim;

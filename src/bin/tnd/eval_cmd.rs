@@ -13,8 +13,10 @@ use tactile_derender::dataset::{Dataset, SplitName};
 use tactile_derender::metrics::evaluate::{
     EvalConfig, EvalReport, Evaluator, Generator, GroundTruthGenerator, MethodSummary, PairSource,
 };
+use tactile_derender::metrics::model_generator::ModelGenerator;
 use tactile_derender::metrics::sources::DatasetSource;
 use tactile_derender::metrics::MeanStd;
+use tactile_derender::model::{DiffusionModel, SamplerKind};
 use tactile_derender::pose::threshold_contact;
 use tactile_derender::uncertainty::analysis::{analyse, Signature};
 
@@ -32,7 +34,7 @@ pub struct EvalArgs {
     /// At most this many pairs per split.
     #[arg(long)]
     pub limit: Option<usize>,
-    /// Model sampler: ddpm or ddim.
+    /// Model sampler: ddpm (all training steps) or ddim (deterministic, eta 0).
     #[arg(long, default_value = "ddim")]
     pub sampler: String,
     /// DDIM steps.
@@ -60,13 +62,13 @@ pub fn generator(model: &str, sampler: &str, steps: usize) -> Result<Box<dyn Gen
     if model == "ground-truth" {
         return Ok(Box::new(GroundTruthGenerator));
     }
-    if !matches!(sampler, "ddpm" | "ddim") || steps == 0 {
-        bail!("--sampler must be ddpm or ddim and --steps positive");
-    }
-    // The diffusion model (branch `model`) is not merged into this build: its Generator adapter is the glue left.
-    Err(anyhow!(
-        "--model {model}: this build has no diffusion model stage yet (it lands with the `model` branch); use --model ground-truth"
-    ))
+    let sampler = match sampler {
+        "ddpm" => SamplerKind::Ddpm,
+        "ddim" if steps > 0 => SamplerKind::Ddim { steps, eta: 0.0 },
+        _ => bail!("--sampler must be ddpm or ddim (with --steps > 0), got '{sampler}'"),
+    };
+    let model = DiffusionModel::load(Path::new(model))?;
+    Ok(Box::new(ModelGenerator { model, sampler }))
 }
 
 fn splits(s: &str) -> Result<Vec<SplitName>> {
