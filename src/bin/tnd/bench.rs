@@ -27,6 +27,8 @@ pub struct BenchArgs {
 pub enum BenchCommand {
     /// Ray casting (rays/s) and full synthetic pairs (pairs/s).
     Sim(SimBenchArgs),
+    /// SE(2) registration from K starts: wall time and pose errors (optionally the peer's saved problem).
+    Pose(super::bench_pose::PoseBenchArgs),
     /// U-Net forward and training step against `../shared/peers/unet_torch.py`.
     Unet(crate::bench_unet::UnetBenchArgs),
 }
@@ -53,6 +55,7 @@ pub struct SimBenchArgs {
 pub fn run(a: BenchArgs) -> Result<()> {
     match a.command {
         BenchCommand::Sim(s) => bench_sim(&s),
+        BenchCommand::Pose(p) => super::bench_pose::run(&p),
         BenchCommand::Unet(u) => crate::bench_unet::run(&u),
     }
 }

@@ -2,10 +2,13 @@
 
 mod args;
 mod bench;
+mod bench_pose;
 mod bench_unet;
 mod dataset_cmd;
+mod eval_cmd;
 mod model_cmd;
 mod objects_cmd;
+mod pose_cmd;
 mod sample_cmd;
 mod sim_cmd;
 mod train_cmd;
@@ -30,6 +33,10 @@ enum Command {
     Dataset(dataset_cmd::DatasetArgs),
     /// Benchmarks printing JSON lines.
     Bench(bench::BenchArgs),
+    /// Evaluate a generator and the threshold baseline on a dataset: the paper's Tables I and II.
+    Eval(Box<eval_cmd::EvalArgs>),
+    /// One signature end to end: samples, pose, uncertainty (CSV + KDE plot).
+    Pose(Box<pose_cmd::PoseArgs>),
     /// Diffusion model checkpoints: verify against a diffusers reference.
     Model(model_cmd::ModelArgs),
     /// De-render: draw N samples of the in-contact depth for one imprint (DDPM or DDIM).
@@ -47,6 +54,8 @@ fn main() -> std::process::ExitCode {
         Command::Objects(a) => objects_cmd::run(a),
         Command::Dataset(a) => dataset_cmd::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Eval(a) => eval_cmd::run(*a),
+        Command::Pose(a) => pose_cmd::run(*a),
         Command::Model(a) => model_cmd::run(a),
         Command::Sample(a) => sample_cmd::run(a),
         Command::Train(a) => train_cmd::run(*a),

@@ -1,0 +1,226 @@
+//! `tnd eval`: the paper's Table I (depth: L1, PSNR, SSIM) and Table II (pose: position, θ, Chamfer) for a generator
+//! and the threshold baseline over dataset splits; `--report DIR` adds a markdown file and KDE plots for a few pairs.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use anyhow::{anyhow, bail, Result};
+use clap::Args;
+use kdam::BarExt;
+use serde_json::json;
+use tactile_derender::dataset::{Dataset, SplitName};
+use tactile_derender::metrics::evaluate::{
+    EvalConfig, EvalReport, Evaluator, Generator, GroundTruthGenerator, MethodSummary, PairSource,
+};
+use tactile_derender::metrics::model_generator::ModelGenerator;
+use tactile_derender::metrics::sources::DatasetSource;
+use tactile_derender::metrics::MeanStd;
+use tactile_derender::model::{DiffusionModel, SamplerKind};
+use tactile_derender::pose::threshold_contact;
+use tactile_derender::uncertainty::analysis::{analyse, Signature};
+
+#[derive(Args, Debug)]
+pub struct EvalArgs {
+    /// The generator: a model checkpoint, or `ground-truth` (the true X0: tests everything but the model).
+    #[arg(long)]
+    pub model: String,
+    /// Dataset directory (`tnd dataset gen`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// unseen_poses, unseen_objects, train or all (= unseen_poses and unseen_objects).
+    #[arg(long, default_value = "all")]
+    pub split: String,
+    /// At most this many pairs per split.
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// Model sampler: ddpm (all training steps) or ddim (deterministic, eta 0).
+    #[arg(long, default_value = "ddim")]
+    pub sampler: String,
+    /// DDIM steps.
+    #[arg(long, default_value_t = 25)]
+    pub steps: usize,
+    /// Seed of the sampler and the registration starts.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print one JSON object per split (otherwise a markdown table).
+    #[arg(long)]
+    pub json: bool,
+    /// Also write report.md and uncertainty plots (KDE over --samples samples) for --report-pairs pairs per split.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Pairs per split with an uncertainty analysis in the report.
+    #[arg(long, default_value_t = 3)]
+    pub report_pairs: usize,
+    /// Samples per uncertainty analysis.
+    #[arg(long, default_value_t = 50)]
+    pub samples: usize,
+}
+
+/// The generator named by `--model`.
+pub fn generator(model: &str, sampler: &str, steps: usize) -> Result<Box<dyn Generator>> {
+    if model == "ground-truth" {
+        return Ok(Box::new(GroundTruthGenerator));
+    }
+    let sampler = match sampler {
+        "ddpm" => SamplerKind::Ddpm,
+        "ddim" if steps > 0 => SamplerKind::Ddim { steps, eta: 0.0 },
+        _ => bail!("--sampler must be ddpm or ddim (with --steps > 0), got '{sampler}'"),
+    };
+    let model = DiffusionModel::load(Path::new(model))?;
+    Ok(Box::new(ModelGenerator { model, sampler }))
+}
+
+fn splits(s: &str) -> Result<Vec<SplitName>> {
+    if s == "all" {
+        return Ok(vec![SplitName::UnseenPoses, SplitName::UnseenObjects]);
+    }
+    Ok(vec![s.parse::<SplitName>().map_err(|e| anyhow!(e))?])
+}
+
+pub fn run(a: EvalArgs) -> Result<()> {
+    let gen = generator(&a.model, &a.sampler, a.steps)?;
+    let dataset = Dataset::open(&a.data)?;
+    let evaluator = Evaluator::new(EvalConfig::default());
+    let mut markdown = String::new();
+    for split in splits(&a.split)? {
+        let source = DatasetSource::new(&dataset, split, a.limit)?;
+        if source.is_empty() {
+            eprintln!("{}: split {split} has no pairs; skipped", a.data.display());
+            continue;
+        }
+        let bar = Mutex::new(
+            kdam::Bar::builder()
+                .total(source.len())
+                .desc(format!("eval {split}"))
+                .unit(" pairs")
+                .build()
+                .map_err(|e| anyhow!(e))?,
+        );
+        let report = evaluator.evaluate(&source, gen.as_ref(), a.seed, &mut |done, _| {
+            if let Ok(mut b) = bar.lock() {
+                let _ = b.update_to(done);
+            }
+            true
+        })?;
+        eprintln!();
+        let table = markdown_table(split.as_str(), &report);
+        if a.json {
+            println!(
+                "{}",
+                json!({"split": split.as_str(), "generator": report.generator, "pairs": report.pairs,
+                       "model": report.model, "baseline": report.baseline})
+            );
+        } else {
+            println!("{table}");
+        }
+        markdown.push_str(&table);
+        if let Some(dir) = &a.report {
+            uncertainty_plots(
+                dir,
+                split,
+                &source,
+                &evaluator,
+                gen.as_ref(),
+                &a,
+                &mut markdown,
+            )?;
+        }
+    }
+    if let Some(dir) = &a.report {
+        std::fs::create_dir_all(dir)?;
+        let mut text = format!(
+            "# Evaluation\n\nGenerator `{}`, dataset `{}`, seed {}. Metric definitions: README, section Evaluation.\n\n",
+            gen.name(),
+            a.data.display(),
+            a.seed
+        );
+        text.push_str(&markdown);
+        let path = dir.join("report.md");
+        tactile_derender::io::write_atomic(&path, text.as_bytes())
+            .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
+        eprintln!("report: {}", path.display());
+    }
+    Ok(())
+}
+
+fn cell(m: &MeanStd, scale: f64, digits: usize) -> String {
+    if m.n == 0 {
+        format!("– (excl. {})", m.excluded)
+    } else if m.excluded > 0 {
+        format!(
+            "{:.digits$} ± {:.digits$} (excl. {})",
+            m.mean * scale,
+            m.std * scale,
+            m.excluded
+        )
+    } else {
+        format!("{:.digits$} ± {:.digits$}", m.mean * scale, m.std * scale)
+    }
+}
+
+fn row(name: &str, s: &MethodSummary) -> String {
+    format!(
+        "| {name} | {} | {} | {} | {} | {} | {} | {} | {} / {} / {} |\n",
+        cell(&s.l1_mm, 1.0, 3),
+        cell(&s.l1_union_mm, 1.0, 3),
+        cell(&s.psnr_db, 1.0, 2),
+        cell(&s.ssim, 1.0, 4),
+        cell(&s.position_mm, 1.0, 3),
+        cell(&s.theta_rad, 180.0 / std::f64::consts::PI, 2),
+        cell(&s.chamfer_m2, 1e6, 3),
+        s.no_contact,
+        s.theta_excluded_symmetry,
+        s.position_axis_excluded,
+    )
+}
+
+/// Table I and II rows of one split as markdown.
+pub fn markdown_table(split: &str, r: &EvalReport) -> String {
+    let mut s = format!("## {split} ({} pairs)\n\n", r.pairs);
+    s.push_str("| method | L1 [mm] | L1 on masks [mm] | PSNR [dB] | SSIM | position [mm] | θ [deg] | Chamfer [mm²] | no contact / θ excl. / axis excl. |\n");
+    s.push_str("| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+    s.push_str(&row(&r.generator, &r.model));
+    s.push_str(&row("threshold baseline", &r.baseline));
+    s.push('\n');
+    s
+}
+
+fn uncertainty_plots(
+    dir: &Path,
+    split: SplitName,
+    source: &DatasetSource<'_>,
+    evaluator: &Evaluator,
+    gen: &dyn Generator,
+    a: &EvalArgs,
+    markdown: &mut String,
+) -> Result<()> {
+    let ctx = source.context();
+    for i in 0..a.report_pairs.min(source.len()) {
+        let pair = source.pair(i)?;
+        let samples = gen.generate(&pair, a.samples, a.seed.wrapping_add(i as u64))?;
+        let base = threshold_contact(&pair.signature, &pair.imprint, &evaluator.config.baseline);
+        let object = evaluator.object(&ctx.objects, &pair.object)?;
+        let sig = Signature {
+            t_world_camera: pair.t_world_camera,
+            samples: &samples,
+            baseline: Some(&base),
+            truth: Some(pair.object_pose),
+            init: None,
+        };
+        let r = analyse(evaluator, &object, ctx, &sig, a.seed)?;
+        let sub = dir.join(format!("{split}_{i}"));
+        r.write(&sub)?;
+        let _ = writeln!(
+            markdown,
+            "Uncertainty, {} ({}): {} samples from the fixed start ({:.4}, {:.4}, {:.3}); ![]({split}_{i}/uncertainty.png)\n",
+            pair.name,
+            pair.object,
+            r.samples.len(),
+            r.init.x,
+            r.init.y,
+            r.init.theta
+        );
+    }
+    Ok(())
+}

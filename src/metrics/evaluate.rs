@@ -1,0 +1,375 @@
+//! The **evaluation loop** behind the paper's Tables I and II (V.C, V.D): for every pair of a [`PairSource`], a
+//! [`Generator`] produces the in-contact depth X̂0 (the model, or the ground truth as the ideal generator), the
+//! threshold baseline produces its own from the signature, and both are scored with the depth metrics and — after
+//! back-projection and registration from K random starts — the pose metrics.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+use glam::{DAffine3, DVec3};
+use serde::{Deserialize, Serialize};
+
+use super::depth::{depth_metrics, DepthMetrics, DepthMetricsConfig};
+use super::pose::{pose_errors, PoseErrors};
+use super::summary::MeanStd;
+use super::MetricsError;
+use crate::image::Image;
+use crate::mesh::Mesh;
+use crate::objects::{ObjectError, ObjectSet, Symmetry};
+use crate::pose::{
+    register, sample_surface, threshold_contact, BaselineConfig, Hypothesis, InitStrategy,
+    PoseError, RegistrationProblem, SdfRegistration, SdfRegistrationConfig,
+};
+use crate::recon::{back_project, free_space_points, FreeSpaceConfig};
+use crate::sensor::{Intrinsics, Se2};
+
+/// Errors of the evaluation; each names its source.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    #[error("pair source: {0}")]
+    Source(String),
+    #[error("generator: {0}")]
+    Generator(String),
+    #[error("object '{object}': {source}")]
+    Pose {
+        object: String,
+        #[source]
+        source: PoseError,
+    },
+    #[error(transparent)]
+    Object(#[from] ObjectError),
+    #[error(transparent)]
+    Metrics(#[from] MetricsError),
+    #[error("cancelled")]
+    Cancelled,
+}
+
+/// One evaluation pair: the images the methods see and the truth they are scored against (metres).
+#[derive(Clone, Debug)]
+pub struct EvalPair {
+    /// Display name, e.g. `unseen_poses/12`.
+    pub name: String,
+    /// Object name in the source's object set.
+    pub object: String,
+    /// True pose `t_world_object`.
+    pub object_pose: Se2,
+    /// `t_world_camera` of the sensor camera.
+    pub t_world_camera: DAffine3,
+    /// X0, the true in-contact depth.
+    pub target: Image,
+    /// S, the signature.
+    pub signature: Image,
+    /// Y, the imprint (the model's condition).
+    pub imprint: Image,
+}
+
+/// What every pair of a source shares: the camera, the undeformed membrane depth E (free-space evidence) and the
+/// objects.
+#[derive(Clone, Debug)]
+pub struct EvalContext {
+    pub intrinsics: Intrinsics,
+    /// E: depth of the undeformed membrane, metres (0 where not seen).
+    pub membrane: Image,
+    pub objects: ObjectSet,
+}
+
+/// A source of evaluation pairs (a dataset split, or pairs simulated on the fly).
+pub trait PairSource: Sync {
+    /// Number of pairs.
+    fn len(&self) -> usize;
+    /// True when there are no pairs.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Pair `index` (< len).
+    fn pair(&self, index: usize) -> Result<EvalPair, EvalError>;
+    /// Camera, membrane and objects.
+    fn context(&self) -> &EvalContext;
+}
+
+/// Produces in-contact depth images X̂0 for a pair: the model (conditioned on the imprint), or the ground truth.
+pub trait Generator: Sync {
+    /// Name for reports.
+    fn name(&self) -> String;
+    /// `n` samples of X̂0 (metres) for `pair`, reproducible from `seed`.
+    fn generate(&self, pair: &EvalPair, n: usize, seed: u64) -> Result<Vec<Image>, EvalError>;
+}
+
+/// The ideal generator: returns the true X0 (tests the rest of the pipeline; Table I becomes trivially perfect).
+pub struct GroundTruthGenerator;
+
+impl Generator for GroundTruthGenerator {
+    fn name(&self) -> String {
+        "ground-truth".into()
+    }
+    fn generate(&self, pair: &EvalPair, n: usize, _seed: u64) -> Result<Vec<Image>, EvalError> {
+        Ok(vec![pair.target.clone(); n])
+    }
+}
+
+/// Settings of the evaluation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct EvalConfig {
+    pub depth: DepthMetricsConfig,
+    pub registration: SdfRegistrationConfig,
+    pub free_space: FreeSpaceConfig,
+    pub baseline: BaselineConfig,
+    /// Random starts per registration (default 10, the paper's).
+    pub inits: usize,
+    /// Random starts are within this distance of the contact centroid, metres (default 10 mm).
+    pub init_radius_m: f64,
+    /// Points sampled on each object for the Chamfer distance (default 1000).
+    pub chamfer_points: usize,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        Self {
+            depth: DepthMetricsConfig::default(),
+            registration: SdfRegistrationConfig::default(),
+            free_space: FreeSpaceConfig::default(),
+            baseline: BaselineConfig::default(),
+            inits: 10,
+            init_radius_m: 0.01,
+            chamfer_points: 1000,
+        }
+    }
+}
+
+/// An object prepared for registration and scoring.
+pub struct ObjectModel {
+    pub registration: SdfRegistration,
+    /// Surface samples (object frame) for the Chamfer distance.
+    pub cloud: Vec<DVec3>,
+    pub symmetry: Symmetry,
+}
+
+/// Scores of one method on one pair.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MethodResult {
+    pub depth: DepthMetrics,
+    /// Best registered pose; `None` when the method found no contact.
+    pub estimate: Option<Se2>,
+    /// Pose errors of `estimate`.
+    pub pose: Option<PoseErrors>,
+}
+
+/// Both methods on one pair.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PairRecord {
+    pub name: String,
+    pub object: String,
+    pub truth: Se2,
+    pub model: MethodResult,
+    pub baseline: MethodResult,
+}
+
+/// Table I and Table II rows of one method (mean ± population std), with exclusion counts.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MethodSummary {
+    pub l1_mm: MeanStd,
+    pub l1_union_mm: MeanStd,
+    pub psnr_db: MeanStd,
+    pub ssim: MeanStd,
+    pub position_mm: MeanStd,
+    pub theta_rad: MeanStd,
+    pub chamfer_m2: MeanStd,
+    /// Pairs where the method found no contact (no pose: excluded from Table II).
+    pub no_contact: usize,
+    /// Pairs whose θ error is excluded (continuous rotational symmetry).
+    pub theta_excluded_symmetry: usize,
+    /// Pairs whose position error excludes a translation axis (lying cylinders, prisms).
+    pub position_axis_excluded: usize,
+}
+
+impl MethodSummary {
+    /// Aggregate per-pair results.
+    pub fn of<'a>(results: impl Iterator<Item = &'a MethodResult> + Clone) -> Self {
+        let poses = results.clone().filter_map(|r| r.pose);
+        Self {
+            l1_mm: MeanStd::of(results.clone().map(|r| Some(r.depth.l1_mm))),
+            l1_union_mm: MeanStd::of(results.clone().map(|r| r.depth.l1_union_mm)),
+            psnr_db: MeanStd::of(results.clone().map(|r| Some(r.depth.psnr_db))),
+            ssim: MeanStd::of(results.clone().map(|r| Some(r.depth.ssim))),
+            position_mm: MeanStd::of(results.clone().map(|r| r.pose.map(|p| p.position_mm))),
+            theta_rad: MeanStd::of(results.clone().map(|r| r.pose.and_then(|p| p.theta_rad))),
+            chamfer_m2: MeanStd::of(results.clone().map(|r| r.pose.map(|p| p.chamfer_m2))),
+            no_contact: results.clone().filter(|r| r.pose.is_none()).count(),
+            theta_excluded_symmetry: poses.clone().filter(|p| p.theta_rad.is_none()).count(),
+            position_axis_excluded: poses.filter(|p| p.position_axis_excluded).count(),
+        }
+    }
+}
+
+/// The evaluation of one source.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EvalReport {
+    pub generator: String,
+    pub pairs: usize,
+    pub model: MethodSummary,
+    pub baseline: MethodSummary,
+    pub records: Vec<PairRecord>,
+}
+
+/// Runs the evaluation; caches one [`ObjectModel`] per object.
+pub struct Evaluator {
+    pub config: EvalConfig,
+    objects: Mutex<HashMap<String, Arc<ObjectModel>>>,
+}
+
+impl Evaluator {
+    pub fn new(config: EvalConfig) -> Self {
+        Self {
+            config,
+            objects: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// The prepared object `name` of `set` (built on first use).
+    pub fn object(&self, set: &ObjectSet, name: &str) -> Result<Arc<ObjectModel>, EvalError> {
+        if let Some(m) = self.objects.lock().ok().and_then(|m| m.get(name).cloned()) {
+            return Ok(m);
+        }
+        let mesh = set.mesh(name)?;
+        let symmetry = set.find(name).map(|e| e.symmetry).unwrap_or_default();
+        self.object_from_mesh(name, &mesh, symmetry)
+    }
+
+    /// Prepare (and cache under `name`) an object given by its mesh (object frame, resting pose) and symmetry.
+    pub fn object_from_mesh(
+        &self,
+        name: &str,
+        mesh: &Mesh,
+        symmetry: Symmetry,
+    ) -> Result<Arc<ObjectModel>, EvalError> {
+        let registration =
+            SdfRegistration::new(mesh, self.config.registration.clone()).map_err(|source| {
+                EvalError::Pose {
+                    object: name.to_string(),
+                    source,
+                }
+            })?;
+        let model = Arc::new(ObjectModel {
+            registration,
+            cloud: sample_surface(mesh, self.config.chamfer_points, 0),
+            symmetry,
+        });
+        if let Ok(mut m) = self.objects.lock() {
+            m.insert(name.to_string(), model.clone());
+        }
+        Ok(model)
+    }
+
+    /// Register `object` to an in-contact depth image: every hypothesis, best first; `None` without contact.
+    pub fn register_depth(
+        &self,
+        object: &ObjectModel,
+        x0: &Image,
+        ctx: &EvalContext,
+        t_world_camera: &DAffine3,
+        strategy: &InitStrategy,
+        seed: u64,
+    ) -> Result<Option<Vec<Hypothesis>>, PoseError> {
+        let surface = back_project(x0, &ctx.intrinsics, t_world_camera).p_world;
+        if surface.is_empty() {
+            return Ok(None);
+        }
+        let free = free_space_points(
+            x0,
+            &ctx.membrane,
+            &ctx.intrinsics,
+            t_world_camera,
+            &self.config.free_space,
+            seed,
+        );
+        let problem = RegistrationProblem {
+            surface: &surface,
+            free: &free,
+        };
+        register(&object.registration, &problem, strategy).map(Some)
+    }
+
+    /// Score one in-contact depth estimate of `pair`.
+    pub fn score(
+        &self,
+        pair: &EvalPair,
+        estimate: &Image,
+        ctx: &EvalContext,
+        seed: u64,
+    ) -> Result<MethodResult, EvalError> {
+        let depth = depth_metrics(estimate, &pair.target, &self.config.depth)?;
+        let object = self.object(&ctx.objects, &pair.object)?;
+        let strategy = InitStrategy::Random {
+            count: self.config.inits,
+            radius_m: self.config.init_radius_m,
+            seed,
+        };
+        let hyps = self
+            .register_depth(
+                &object,
+                estimate,
+                ctx,
+                &pair.t_world_camera,
+                &strategy,
+                seed,
+            )
+            .map_err(|source| EvalError::Pose {
+                object: pair.object.clone(),
+                source,
+            })?;
+        let estimate = hyps.and_then(|h| h.first().map(|b| b.pose));
+        let pose = estimate
+            .map(|e| pose_errors(e, pair.object_pose, &object.symmetry, &object.cloud))
+            .transpose()?;
+        Ok(MethodResult {
+            depth,
+            estimate,
+            pose,
+        })
+    }
+
+    /// Evaluate every pair of `source` with `generator` and the baseline. `progress(done, total)` returns false to
+    /// cancel.
+    pub fn evaluate(
+        &self,
+        source: &dyn PairSource,
+        generator: &dyn Generator,
+        seed: u64,
+        progress: &mut dyn FnMut(usize, usize) -> bool,
+    ) -> Result<EvalReport, EvalError> {
+        let ctx = source.context();
+        let mut records = Vec::with_capacity(source.len());
+        for i in 0..source.len() {
+            let pair = source.pair(i)?;
+            let pair_seed = seed
+                .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                .wrapping_add(i as u64);
+            let generated = generator
+                .generate(&pair, 1, pair_seed)?
+                .into_iter()
+                .next()
+                .ok_or_else(|| EvalError::Generator("returned no sample".into()))?;
+            let model = self.score(&pair, &generated, ctx, pair_seed)?;
+            let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.baseline);
+            let baseline = self.score(&pair, &base_x0, ctx, pair_seed)?;
+            records.push(PairRecord {
+                name: pair.name.clone(),
+                object: pair.object.clone(),
+                truth: pair.object_pose,
+                model,
+                baseline,
+            });
+            if !progress(i + 1, source.len()) {
+                return Err(EvalError::Cancelled);
+            }
+        }
+        Ok(EvalReport {
+            generator: generator.name(),
+            pairs: records.len(),
+            model: MethodSummary::of(records.iter().map(|r| &r.model)),
+            baseline: MethodSummary::of(records.iter().map(|r| &r.baseline)),
+            records,
+        })
+    }
+}

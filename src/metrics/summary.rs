@@ -1,0 +1,64 @@
+//! Aggregation of per-pair metrics into the mean ± std rows of the paper's tables, with counts of what was excluded.
+
+use serde::{Deserialize, Serialize};
+
+/// Mean and population standard deviation (ddof = 0, as numpy's default) of the finite values of a metric, with the
+/// number of values used and excluded (`None`: excluded by a symmetry or undefined; non-finite, e.g. an infinite
+/// PSNR of identical images).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MeanStd {
+    /// Mean of the used values (NaN when none; serialised as null).
+    pub mean: f64,
+    /// Population standard deviation of the used values.
+    pub std: f64,
+    /// Number of values used.
+    pub n: usize,
+    /// Number of values excluded (undefined or non-finite).
+    pub excluded: usize,
+}
+
+impl MeanStd {
+    /// Aggregate `values` (see the type docs).
+    pub fn of(values: impl IntoIterator<Item = Option<f64>>) -> Self {
+        let mut used = Vec::new();
+        let mut excluded = 0;
+        for v in values {
+            match v {
+                Some(x) if x.is_finite() => used.push(x),
+                _ => excluded += 1,
+            }
+        }
+        if used.is_empty() {
+            return Self {
+                mean: f64::NAN,
+                std: f64::NAN,
+                n: 0,
+                excluded,
+            };
+        }
+        let n = used.len() as f64;
+        let mean = used.iter().sum::<f64>() / n;
+        let var = used.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n;
+        Self {
+            mean,
+            std: var.sqrt(),
+            n: used.len(),
+            excluded,
+        }
+    }
+}
+
+/// Named [`MeanStd`] rows, in insertion order.
+pub type Summary = Vec<(String, MeanStd)>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_std_excludes_undefined_values() {
+        let m = MeanStd::of([Some(1.0), Some(3.0), None, Some(f64::INFINITY)]);
+        assert_eq!((m.mean, m.std, m.n, m.excluded), (2.0, 1.0, 2, 2));
+        assert!(MeanStd::of([None]).mean.is_nan());
+    }
+}

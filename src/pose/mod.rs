@@ -1,0 +1,34 @@
+//! **SE(2) pose estimation** (paper IV.C, V.D): the object signed distance ([`sdf`], [`sdf_grid`]), registration of
+//! the object to reconstructed contact points with free-space evidence ([`register`]: the [`Registration`] trait and
+//! its driver; [`sdf_register`]: the CHSEL-inspired Gauss–Newton/Levenberg–Marquardt implementation), and the
+//! threshold baseline ([`baseline`]).
+//!
+//! Poses are [`crate::sensor::Se2`] `t_world_object`: the object's resting frame placed at `(x, y)` with yaw `theta`
+//! about the table normal, metres and radians.
+
+pub mod baseline;
+pub mod register;
+pub mod sdf;
+pub mod sdf_grid;
+pub mod sdf_register;
+
+pub use baseline::{threshold_contact, BaselineConfig};
+pub use register::{
+    initial_poses, register, Hypothesis, InitStrategy, Registration, RegistrationProblem,
+};
+pub use sdf::{sample_surface, ExactSdf, ObjectSdf};
+pub use sdf_grid::{SdfGrid, SdfGridConfig};
+pub use sdf_register::{RobustLoss, SdfRegistration, SdfRegistrationConfig};
+
+/// Errors of the pose stage; each says what to change.
+#[derive(Debug, thiserror::Error)]
+pub enum PoseError {
+    #[error("object mesh: {0}")]
+    Mesh(String),
+    #[error("registration config: {0}")]
+    Config(String),
+    #[error("no contact points to register (the contact region is empty); nothing to estimate a pose from")]
+    NoContact,
+    #[error("{what} contains a non-finite value at index {index}")]
+    NonFinite { what: &'static str, index: usize },
+}

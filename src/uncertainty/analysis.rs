@@ -1,0 +1,102 @@
+//! The uncertainty analysis of one signature (paper V.D): register every generated sample from one fixed start and
+//! collect the errors (see the module docs of [`super`]).
+
+use glam::DAffine3;
+
+use super::{SampleError, UncertaintyReport};
+use crate::image::Image;
+use crate::metrics::evaluate::{EvalContext, EvalError, Evaluator, ObjectModel};
+use crate::pose::InitStrategy;
+use crate::sensor::Se2;
+
+/// Inputs of one analysis.
+pub struct Signature<'a> {
+    /// `t_world_camera` of the sensor camera.
+    pub t_world_camera: DAffine3,
+    /// The generated samples of X̂0 (metres).
+    pub samples: &'a [Image],
+    /// The baseline's in-contact depth, if a signature is available.
+    pub baseline: Option<&'a Image>,
+    /// The true pose, when known.
+    pub truth: Option<Se2>,
+    /// The fixed start; `None`: the best of a K-start registration of the first sample with contact.
+    pub init: Option<Se2>,
+}
+
+/// Register each sample from the fixed start and measure the errors against the truth (or, without it, against the
+/// fixed start's source estimate). Samples without contact are skipped.
+pub fn analyse(
+    evaluator: &Evaluator,
+    object: &ObjectModel,
+    ctx: &EvalContext,
+    sig: &Signature<'_>,
+    seed: u64,
+) -> Result<UncertaintyReport, EvalError> {
+    let pose_err = |source| EvalError::Pose {
+        object: "uncertainty".into(),
+        source,
+    };
+    let init = match sig.init {
+        Some(i) => i,
+        None => {
+            let strategy = InitStrategy::Random {
+                count: evaluator.config.inits,
+                radius_m: evaluator.config.init_radius_m,
+                seed,
+            };
+            let mut found = None;
+            for s in sig.samples {
+                if let Some(h) = evaluator
+                    .register_depth(object, s, ctx, &sig.t_world_camera, &strategy, seed)
+                    .map_err(pose_err)?
+                {
+                    found = h.first().map(|b| b.pose);
+                    break;
+                }
+            }
+            found.ok_or_else(|| {
+                EvalError::Generator(
+                    "no generated sample has any contact; nothing to register".into(),
+                )
+            })?
+        }
+    };
+    let reference = sig.truth.unwrap_or(init);
+    let fixed = InitStrategy::Fixed(init);
+    let mut samples = Vec::with_capacity(sig.samples.len());
+    for (i, s) in sig.samples.iter().enumerate() {
+        let hyps = evaluator
+            .register_depth(
+                object,
+                s,
+                ctx,
+                &sig.t_world_camera,
+                &fixed,
+                seed.wrapping_add(i as u64),
+            )
+            .map_err(pose_err)?;
+        if let Some(best) = hyps.as_ref().and_then(|h| h.first()) {
+            samples.push(SampleError::new(
+                best.pose,
+                best.cost,
+                reference,
+                &object.symmetry,
+            ));
+        }
+    }
+    let baseline = match sig.baseline {
+        Some(b) => evaluator
+            .register_depth(object, b, ctx, &sig.t_world_camera, &fixed, seed)
+            .map_err(pose_err)?
+            .and_then(|h| h.first().copied())
+            .map(|best| SampleError::new(best.pose, best.cost, reference, &object.symmetry)),
+        None => None,
+    };
+    Ok(UncertaintyReport::new(
+        reference,
+        sig.truth.is_some(),
+        init,
+        samples,
+        baseline,
+    ))
+}

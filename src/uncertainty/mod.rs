@@ -1,0 +1,259 @@
+//! **Uncertainty** of the pose estimate (paper V.D, last paragraph): for one tactile signature, N samples of the
+//! in-contact depth from the model (default 50), each registered from one fixed initialisation; the distribution of
+//! their position and θ errors as Gaussian KDEs ([`kde`], Scott's rule), with the baseline's errors as points;
+//! exported as CSV and a PNG plot ([`plot`]).
+//!
+//! Errors are taken against a reference pose: the true pose when it is known (evaluation), otherwise the estimate
+//! of the first sample's K-start registration (then they measure the spread of the estimates). The position error is
+//! [`crate::metrics::pose::position_error_m`] (mm, translation axis excluded); the θ error is signed, wrapped to
+//! (−P/2, P/2] with P the symmetry period, in degrees, and absent for continuous symmetry.
+
+pub mod analysis;
+pub mod kde;
+pub mod plot;
+
+pub use kde::{GaussianKde, KdeError};
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::metrics::pose::position_error_m;
+use crate::objects::Symmetry;
+use crate::sensor::Se2;
+
+/// Errors writing the uncertainty outputs.
+#[derive(Debug, thiserror::Error)]
+pub enum UncertaintyError {
+    #[error("{path}: cannot write: {source}")]
+    Write {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// One registered estimate and its errors.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SampleError {
+    /// Estimated pose `t_world_object`.
+    pub pose: Se2,
+    /// Registration cost.
+    pub cost: f64,
+    /// Position error, mm.
+    pub position_mm: f64,
+    /// Signed θ error, degrees (`None`: continuous symmetry).
+    pub theta_deg: Option<f64>,
+}
+
+impl SampleError {
+    /// Errors of `pose` against `reference` for an object with `symmetry`.
+    pub fn new(pose: Se2, cost: f64, reference: Se2, symmetry: &Symmetry) -> Self {
+        let theta_deg = symmetry.rotation.period_rad().map(|p| {
+            let e = (pose.theta - reference.theta).rem_euclid(p);
+            (if e > p / 2.0 { e - p } else { e }).to_degrees()
+        });
+        Self {
+            pose,
+            cost,
+            position_mm: position_error_m(pose, reference, symmetry) * 1e3,
+            theta_deg,
+        }
+    }
+}
+
+/// The analysis of one signature: sample errors, the baseline's, and the KDE curves.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct UncertaintyReport {
+    /// Reference pose the errors are measured against.
+    pub reference: Se2,
+    /// Whether `reference` is the true pose.
+    pub reference_is_truth: bool,
+    /// The fixed initialisation every sample was registered from.
+    pub init: Se2,
+    /// One entry per model sample.
+    pub samples: Vec<SampleError>,
+    /// The threshold baseline's estimate, if it had contact.
+    pub baseline: Option<SampleError>,
+    /// KDE of the position errors, `(mm, density)`; empty when it cannot be fitted (fewer than 2 distinct values).
+    pub position_kde: Vec<(f64, f64)>,
+    /// KDE of the θ errors, `(deg, density)`; empty when it cannot be fitted or θ is excluded.
+    pub theta_kde: Vec<(f64, f64)>,
+}
+
+/// A KDE curve of `values` on `points` evenly spaced points spanning the values ± 3 bandwidths; empty when no KDE
+/// can be fitted.
+pub fn kde_curve(values: &[f64], points: usize) -> Vec<(f64, f64)> {
+    let Ok(kde) = GaussianKde::scott_1d(values) else {
+        return Vec::new();
+    };
+    let bw = kde.bandwidth();
+    let lo = values.iter().copied().fold(f64::INFINITY, f64::min) - 3.0 * bw;
+    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max) + 3.0 * bw;
+    let n = points.max(2);
+    (0..n)
+        .map(|i| {
+            let x = lo + (hi - lo) * i as f64 / (n - 1) as f64;
+            (x, kde.density(&[x]))
+        })
+        .collect()
+}
+
+impl UncertaintyReport {
+    /// Build the report and fit the KDEs (200 points per curve).
+    pub fn new(
+        reference: Se2,
+        reference_is_truth: bool,
+        init: Se2,
+        samples: Vec<SampleError>,
+        baseline: Option<SampleError>,
+    ) -> Self {
+        let pos: Vec<f64> = samples.iter().map(|s| s.position_mm).collect();
+        let theta: Vec<f64> = samples.iter().filter_map(|s| s.theta_deg).collect();
+        Self {
+            reference,
+            reference_is_truth,
+            init,
+            position_kde: kde_curve(&pos, 200),
+            theta_kde: kde_curve(&theta, 200),
+            samples,
+            baseline,
+        }
+    }
+
+    /// `samples.csv` text: one row per sample and one for the baseline.
+    pub fn samples_csv(&self) -> String {
+        let mut s =
+            String::from("kind,index,x_m,y_m,theta_rad,cost,position_err_mm,theta_err_deg\n");
+        let row = |s: &mut String, kind: &str, i: usize, e: &SampleError| {
+            let theta = e.theta_deg.map(|t| t.to_string()).unwrap_or_default();
+            let _ = writeln!(
+                s,
+                "{kind},{i},{},{},{},{},{},{theta}",
+                e.pose.x, e.pose.y, e.pose.theta, e.cost, e.position_mm
+            );
+        };
+        for (i, e) in self.samples.iter().enumerate() {
+            row(&mut s, "sample", i, e);
+        }
+        if let Some(b) = &self.baseline {
+            row(&mut s, "baseline", 0, b);
+        }
+        s
+    }
+
+    /// `kde.csv` text: `variable,value,density`.
+    pub fn kde_csv(&self) -> String {
+        let mut s = String::from("variable,value,density\n");
+        for (name, curve) in [
+            ("position_err_mm", &self.position_kde),
+            ("theta_err_deg", &self.theta_kde),
+        ] {
+            for (x, d) in curve {
+                let _ = writeln!(s, "{name},{x},{d}");
+            }
+        }
+        s
+    }
+
+    /// Write `samples.csv`, `kde.csv` and `uncertainty.png` into `dir` (atomically).
+    pub fn write(&self, dir: &Path) -> Result<(), UncertaintyError> {
+        let err = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| UncertaintyError::Write { path, source }
+        };
+        std::fs::create_dir_all(dir).map_err(err(dir))?;
+        let p = dir.join("samples.csv");
+        crate::io::write_atomic(&p, self.samples_csv().as_bytes()).map_err(err(&p))?;
+        let p = dir.join("kde.csv");
+        crate::io::write_atomic(&p, self.kde_csv().as_bytes()).map_err(err(&p))?;
+        let pos: Vec<f64> = self.samples.iter().map(|s| s.position_mm).collect();
+        let theta: Vec<f64> = self.samples.iter().filter_map(|s| s.theta_deg).collect();
+        let mut panels = vec![plot::Panel {
+            title: "position error [mm]",
+            curve: &self.position_kde,
+            samples: &pos,
+            baseline: self.baseline.map(|b| b.position_mm),
+        }];
+        if !theta.is_empty() {
+            panels.push(plot::Panel {
+                title: "theta error [deg]",
+                curve: &self.theta_kde,
+                samples: &theta,
+                baseline: self.baseline.and_then(|b| b.theta_deg),
+            });
+        }
+        let p = dir.join("uncertainty.png");
+        crate::io::preview::save_png(&p, &plot::plot(&panels)).map_err(err(&p))?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::objects::RotationSymmetry;
+
+    #[test]
+    fn sample_errors_are_signed_and_wrapped() {
+        let sym = Symmetry {
+            rotation: RotationSymmetry::NFold(4),
+            translation_axis: None,
+        };
+        let e = SampleError::new(
+            Se2::new(0.003, 0.004, 1.6),
+            0.0,
+            Se2::new(0.0, 0.0, 0.0),
+            &sym,
+        );
+        assert!((e.position_mm - 5.0).abs() < 1e-9);
+        // 1.6 rad mod pi/2 = 0.0292 rad.
+        assert!(
+            (e.theta_deg.unwrap() - (1.6 - std::f64::consts::FRAC_PI_2).to_degrees()).abs() < 1e-9
+        );
+        let e = SampleError::new(
+            Se2::new(0.0, 0.0, -0.1),
+            0.0,
+            Se2::default(),
+            &Symmetry::default(),
+        );
+        assert!((e.theta_deg.unwrap() + 0.1f64.to_degrees()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn report_writes_csv_and_png() {
+        let samples: Vec<SampleError> = (0..20)
+            .map(|i| {
+                let x = 0.0002 * f64::from(i % 7);
+                SampleError::new(
+                    Se2::new(x, 0.0, 0.01 * f64::from(i % 5)),
+                    0.0,
+                    Se2::default(),
+                    &Symmetry::default(),
+                )
+            })
+            .collect();
+        let base = SampleError::new(
+            Se2::new(0.002, 0.0, 0.1),
+            0.0,
+            Se2::default(),
+            &Symmetry::default(),
+        );
+        let r = UncertaintyReport::new(Se2::default(), true, Se2::default(), samples, Some(base));
+        assert_eq!(r.position_kde.len(), 200);
+        let area: f64 = r
+            .position_kde
+            .windows(2)
+            .map(|w| (w[1].0 - w[0].0) * w[0].1)
+            .sum();
+        assert!((area - 1.0).abs() < 0.01, "{area}");
+        let dir = tempfile::tempdir().unwrap();
+        r.write(dir.path()).unwrap();
+        let csv = std::fs::read_to_string(dir.path().join("samples.csv")).unwrap();
+        assert_eq!(csv.lines().count(), 22);
+        assert!(csv.lines().last().unwrap().starts_with("baseline,0,0.002"));
+        let png = image::open(dir.path().join("uncertainty.png")).unwrap();
+        assert_eq!((png.width(), png.height()), (640, 240));
+    }
+}

@@ -1,0 +1,174 @@
+//! The evaluation loop on pairs made by the simulator, with the ground truth as the (ideal) generator: Table I is
+//! perfect for it, Table II recovers the simulated poses, and the exclusions follow the objects' symmetry tags.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use tactile_derender::metrics::evaluate::{
+    EvalConfig, EvalError, Evaluator, GroundTruthGenerator, PairSource,
+};
+use tactile_derender::metrics::sources::{SimSource, SimSpec};
+use tactile_derender::objects::ObjectSet;
+use tactile_derender::sensor::Se2;
+use tactile_derender::sim::SimConfig;
+
+fn source() -> SimSource {
+    let specs = vec![
+        SimSpec {
+            object: "cross_w12_s50".into(),
+            pose: Se2::new(0.003, -0.002, 0.4),
+            press: 0.006,
+            seed: 1,
+        },
+        SimSpec {
+            object: "cylinder_r15".into(),
+            pose: Se2::new(-0.002, 0.004, 1.1),
+            press: 0.006,
+            seed: 2,
+        },
+        SimSpec {
+            object: "sphere_r20".into(),
+            pose: Se2::new(0.004, 0.001, 0.0),
+            press: 0.006,
+            seed: 3,
+        },
+    ];
+    SimSource::new(SimConfig::default(), ObjectSet::builtin(), specs).unwrap()
+}
+
+#[test]
+fn ground_truth_generator_gives_perfect_depth_and_recovers_poses() {
+    let src = source();
+    assert_eq!(src.len(), 3);
+    let eval = Evaluator::new(EvalConfig::default());
+    let mut calls = 0;
+    let report = eval
+        .evaluate(&src, &GroundTruthGenerator, 7, &mut |done, total| {
+            calls += 1;
+            assert_eq!(total, 3);
+            done <= total
+        })
+        .unwrap();
+    assert_eq!(calls, 3);
+    assert_eq!(report.pairs, 3);
+    let m = &report.model;
+    assert_eq!((m.l1_mm.mean, m.l1_mm.std, m.l1_mm.n), (0.0, 0.0, 3));
+    assert_eq!(m.ssim.mean, 1.0);
+    // Identical images have an infinite PSNR: excluded and counted.
+    assert_eq!((m.psnr_db.n, m.psnr_db.excluded), (0, 3));
+    assert_eq!(m.no_contact, 0);
+    // Sphere: no theta; lying cylinder: position along its axis excluded.
+    assert_eq!(m.theta_excluded_symmetry, 1);
+    assert_eq!(m.position_axis_excluded, 1);
+    assert_eq!(m.theta_rad.n, 2);
+    for r in &report.records {
+        let p = r.model.pose.unwrap();
+        assert!(p.position_mm < 0.5, "{}: {} mm", r.name, p.position_mm);
+        assert!(
+            p.theta_rad.is_none_or(|t| t < 0.01),
+            "{}: {:?}",
+            r.name,
+            p.theta_rad
+        );
+    }
+    // The baseline sees only the noisy signature: worse depth, but it still has contact.
+    let b = &report.baseline;
+    assert!(b.l1_mm.mean > 0.0 && b.psnr_db.n == 3 && b.ssim.mean < 1.0);
+    assert_eq!(b.no_contact, 0);
+    let json = serde_json::to_string(&report).unwrap();
+    assert!(json.contains("\"generator\":\"ground-truth\""));
+}
+
+#[test]
+fn progress_can_cancel() {
+    let src = source();
+    let eval = Evaluator::new(EvalConfig::default());
+    let r = eval.evaluate(&src, &GroundTruthGenerator, 0, &mut |_, _| false);
+    assert!(matches!(r, Err(EvalError::Cancelled)));
+}
+
+#[test]
+fn dataset_split_source_feeds_the_loop() {
+    use tactile_derender::dataset::{generate, Dataset, GenConfig, SplitName};
+    use tactile_derender::metrics::sources::DatasetSource;
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = GenConfig {
+        pairs: 40,
+        seed: 5,
+        ..Default::default()
+    };
+    generate(
+        dir.path(),
+        &SimConfig::default(),
+        &ObjectSet::builtin(),
+        &cfg,
+        &|_| {},
+    )
+    .unwrap();
+    let ds = Dataset::open(dir.path()).unwrap();
+    let src = DatasetSource::new(&ds, SplitName::UnseenObjects, Some(2)).unwrap();
+    assert_eq!(src.len(), 2.min(ds.len(SplitName::UnseenObjects)));
+    let report = Evaluator::new(EvalConfig::default())
+        .evaluate(&src, &GroundTruthGenerator, 1, &mut |_, _| true)
+        .unwrap();
+    assert_eq!(report.model.l1_mm.mean, 0.0);
+    for r in &report.records {
+        // The dataset's stored pose and sensor reproduce the contact: registration lands on the truth.
+        assert!(
+            r.model.pose.unwrap().position_mm < 0.5,
+            "{}: {:?}",
+            r.name,
+            r.model.pose
+        );
+        assert_eq!(
+            r.truth,
+            src.pair(r.name.rsplit('/').next().unwrap().parse().unwrap())
+                .unwrap()
+                .object_pose
+        );
+    }
+}
+
+#[test]
+fn the_diffusion_model_is_a_generator() {
+    use glam::DAffine3;
+    use tactile_derender::image::Image;
+    use tactile_derender::metrics::evaluate::{EvalPair, Generator};
+    use tactile_derender::metrics::model_generator::ModelGenerator;
+    use tactile_derender::model::{DiffusionModel, SamplerKind};
+    // The model team's tiny 8x8 reference checkpoint (untrained weights): this checks the wiring, not the quality.
+    let path = std::path::Path::new("tests/fixtures/unet_small/unet_ref.safetensors");
+    let sampler = SamplerKind::Ddim { steps: 3, eta: 0.0 };
+    let generator = ModelGenerator {
+        model: DiffusionModel::load(path).unwrap(),
+        sampler,
+    };
+    let imprint = Image::from_vec(8, 8, (0..64).map(|i| 0.0001 * i as f32).collect()).unwrap();
+    let pair = EvalPair {
+        name: "tiny".into(),
+        object: "none".into(),
+        object_pose: Se2::default(),
+        t_world_camera: DAffine3::IDENTITY,
+        target: Image::filled(8, 8, 0.0),
+        signature: Image::filled(8, 8, 0.0),
+        imprint: imprint.clone(),
+    };
+    let a = generator.generate(&pair, 2, 9).unwrap();
+    assert_eq!(a.len(), 2);
+    assert!(a
+        .iter()
+        .all(|x| (x.width, x.height) == (8, 8) && x.data.iter().all(|v| v.is_finite())));
+    // Exactly what the model's own sampler returns for the same imprint and seed.
+    let direct = DiffusionModel::load(path)
+        .unwrap()
+        .sample(&imprint, 2, sampler, 9, &mut |_, _| true)
+        .unwrap();
+    assert_eq!(a, direct);
+    assert!(generator.name().contains("ddim 3 steps"));
+    // A wrong-size imprint is a generator error naming the checkpoint.
+    let big = EvalPair {
+        imprint: Image::filled(16, 16, 0.0),
+        ..pair
+    };
+    let err = generator.generate(&big, 1, 0).unwrap_err().to_string();
+    assert!(err.contains("unet_ref.safetensors"), "{err}");
+}
