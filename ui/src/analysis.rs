@@ -19,6 +19,8 @@ use crate::command::Command;
 use crate::dataset_view::{DatasetBrowser, DatasetMsg};
 use crate::derender::{self, InputSource, PoseContext, RunInput, RunRequest, RunResult};
 use crate::measured::PairScene;
+use crate::pose_job::{self, PoseRequest};
+use crate::pose_view::PoseAnalysis;
 use crate::state::{DerenderInput, ObjectSource, Tab};
 
 /// One shown image of a run.
@@ -47,12 +49,23 @@ pub struct DerenderView {
     pub pending_input: Option<RunInput>,
 }
 
+/// The pose analysis as the UI sees it.
+#[derive(Default)]
+pub struct PoseView {
+    pub generation: u64,
+    pub running: bool,
+    pub result: Option<Box<PoseAnalysis>>,
+    /// The sample highlighted by hovering the KDE plots.
+    pub highlight: Option<usize>,
+}
+
 /// Live state of the analysis tabs.
 #[derive(Default)]
 pub struct AnalysisViews {
     pub dataset: Option<DatasetBrowser>,
     dataset_generation: u64,
     pub derender: DerenderView,
+    pub pose: PoseView,
 }
 
 fn texture(
@@ -306,7 +319,7 @@ impl WorkbenchApp {
                     .as_ref()
                     .ok_or_else(|| anyhow!("the scene has not been simulated yet"))?;
                 let out = &sim.output;
-                InputSource::Images(RunInput {
+                InputSource::Images(Box::new(RunInput {
                     pose: Some(PoseContext {
                         object: self.state.scene.object.clone(),
                         truth: self.state.scene.object_pose,
@@ -321,11 +334,11 @@ impl WorkbenchApp {
                         self.state.scene.object.display_name(),
                         self.state.scene.press * 1e3
                     ),
-                })
+                }))
             }
             DerenderInput::DatasetPair { dir, split, index } => {
                 match &self.analysis.derender.pending_input {
-                    Some(i) => InputSource::Images(i.clone()),
+                    Some(i) => InputSource::Images(Box::new(i.clone())),
                     None => InputSource::Pair {
                         dir: dir.clone(),
                         split: *split,
@@ -379,6 +392,64 @@ impl WorkbenchApp {
         })
     }
 
+    /// Take in a finished pose analysis.
+    pub(crate) fn posed(&mut self, generation: u64, analysis: Box<PoseAnalysis>) {
+        let view = &mut self.analysis.pose;
+        if generation == view.generation {
+            view.running = false;
+            view.highlight = None;
+            view.result = Some(analysis);
+            self.errors.retain(|e| !e.starts_with("pose:"));
+        }
+    }
+
+    /// Register the current run's samples and the baseline in the background.
+    pub(crate) fn run_pose(&mut self) -> Result<()> {
+        let r = self
+            .analysis
+            .derender
+            .result
+            .as_ref()
+            .ok_or_else(|| anyhow!("run de-rendering first"))?;
+        let context = r.input.pose.clone().ok_or_else(|| {
+            anyhow!("this input has no object or sensor pose (an imported measurement); registration needs them")
+        })?;
+        let w = self
+            .worker
+            .as_ref()
+            .ok_or_else(|| anyhow!("registration needs the worker thread"))?;
+        let view = &mut self.analysis.pose;
+        view.generation += 1;
+        let req = PoseRequest {
+            generation: view.generation,
+            context,
+            imprint: r.input.imprint.clone(),
+            samples: r.samples.clone(),
+            seed: r.seed,
+        };
+        pose_job::spawn(req, w.sender(), w.context())?;
+        view.running = true;
+        view.result = None;
+        self.state.view.tab = Tab::Pose;
+        Ok(())
+    }
+
+    fn export_pose(&mut self) -> Result<()> {
+        let r = self
+            .analysis
+            .pose
+            .result
+            .as_ref()
+            .ok_or_else(|| anyhow!("register the samples first"))?;
+        let dir = self.state.view.export_dir.join("pose");
+        r.report.write(&dir)?;
+        self.notice = Some(format!(
+            "wrote samples.csv, kde.csv and uncertainty.png to {}",
+            dir.display()
+        ));
+        Ok(())
+    }
+
     /// Cancel the running run, if any.
     pub(crate) fn cancel_derender(&mut self) {
         if let Some(c) = self.analysis.derender.cancel.take() {
@@ -430,6 +501,14 @@ impl WorkbenchApp {
                 self.cancel_derender();
                 Ok(())
             }
+            Command::RunPose => self.run_pose().map_err(|e| e.context("pose")),
+            Command::CancelPose => {
+                // Registration has no cancel point: forget its result instead.
+                self.analysis.pose.generation += 1;
+                self.analysis.pose.running = false;
+                Ok(())
+            }
+            Command::ExportPose => self.export_pose().map_err(|e| e.context("export")),
             _ => Ok(()),
         };
         if let Err(e) = result {

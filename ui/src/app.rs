@@ -221,6 +221,7 @@ impl WorkbenchApp {
     pub fn busy(&self) -> bool {
         self.calibration.running
             || self.analysis.derender.running
+            || self.analysis.pose.running
             || self.worker.is_some()
                 && self.sim.as_ref().map(|s| s.generation) != Some(self.generation)
                 && !self.sim_failed_for_latest()
@@ -305,6 +306,10 @@ impl WorkbenchApp {
                 },
                 WorkerMsg::Dataset(msg) => self.dataset_message(ctx, msg),
                 WorkerMsg::Derendered(result) => self.derendered(ctx, result),
+                WorkerMsg::Posed {
+                    generation,
+                    analysis,
+                } => self.posed(generation, analysis),
                 WorkerMsg::Calibrated { generation, points } => {
                     if generation == self.calibration.generation {
                         self.calibration.running = false;
@@ -326,6 +331,8 @@ impl WorkbenchApp {
                             self.derender_failed(generation, message);
                             continue;
                         }
+                        JobKind::Pose if generation != self.analysis.pose.generation => continue,
+                        JobKind::Pose => self.analysis.pose.running = false,
                         _ => {}
                     }
                     self.error(message);

@@ -70,6 +70,12 @@ pub enum Command {
     RunDerender,
     /// Cancel the running de-rendering.
     CancelDerender,
+    /// Register the current samples and the baseline to the object.
+    RunPose,
+    /// Forget the running pose analysis.
+    CancelPose,
+    /// Write the pose numbers (`samples.csv`, `kde.csv`) and the KDE plot (`uncertainty.png`) to the export folder.
+    ExportPose,
 }
 
 impl WorkbenchApp {
@@ -177,7 +183,10 @@ impl WorkbenchApp {
             | Command::SetDerender(_)
             | Command::SetModel(_)
             | Command::RunDerender
-            | Command::CancelDerender) => self.apply_analysis(cmd),
+            | Command::CancelDerender
+            | Command::RunPose
+            | Command::CancelPose
+            | Command::ExportPose) => self.apply_analysis(cmd),
         }
     }
 

@@ -1,7 +1,7 @@
 //! De-rendering runs (paper IV.B sampling, V.C Table I metrics) for the workbench: the model is loaded once and
 //! cached, every run samples N in-contact depths X̂0 for one imprint Y on its own thread (progress and cancel through
 //! the sampler's callback), then the per-pixel mean and standard deviation and — when the input's X0 is known — the
-//! per-sample depth scores. Nothing here touches egui textures; [`crate::panels::derender_panel`] shows the result.
+//! per-sample depth metrics (L1, PSNR, SSIM of the evaluation stage). Nothing here touches egui textures; [`crate::panels::derender_panel`] shows the result.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -11,9 +11,9 @@ use std::time::Instant;
 
 use anyhow::{anyhow, Result};
 use tactile_derender::image::Image;
+use tactile_derender::metrics::{depth_metrics, DepthMetrics, DepthMetricsConfig};
 use tactile_derender::model::{DiffusionModel, ModelError, SamplerKind};
 
-use crate::scores::{depth_scores, DepthScores};
 use crate::worker::{JobKind, WorkerMsg};
 
 /// The bundled model, relative to the working directory (the repository root when run with `cargo run`).
@@ -89,7 +89,7 @@ pub struct RunInput {
 #[derive(Clone, Debug)]
 pub enum InputSource {
     /// Images already in memory (the simulated scene, the selected dataset pair).
-    Images(RunInput),
+    Images(Box<RunInput>),
     /// Pair `index` of `split` of the dataset at `dir`.
     Pair {
         dir: PathBuf,
@@ -104,7 +104,7 @@ impl InputSource {
     /// Read the input.
     pub fn resolve(self) -> Result<RunInput> {
         match self {
-            InputSource::Images(i) => Ok(i),
+            InputSource::Images(i) => Ok(*i),
             InputSource::Pair { dir, split, index } => {
                 let ds = tactile_derender::dataset::Dataset::open(&dir)?;
                 let pair = ds
@@ -155,7 +155,7 @@ pub struct RunResult {
     /// Per-pixel (population) standard deviation of the samples, metres.
     pub std: Image,
     /// Scores of each sample against the ground truth (empty without one).
-    pub scores: Vec<DepthScores>,
+    pub scores: Vec<DepthMetrics>,
     /// Sampler wall time, seconds.
     pub seconds: f64,
     pub sampler: SamplerKind,
@@ -228,8 +228,8 @@ pub fn run(
     let scores = match &input.truth {
         Some(truth) => samples
             .iter()
-            .map(|s| depth_scores(s, truth))
-            .collect::<Result<Vec<_>>>()?,
+            .map(|s| depth_metrics(s, truth, &DepthMetricsConfig::default()))
+            .collect::<Result<Vec<_>, _>>()?,
         None => Vec::new(),
     };
     Ok(RunResult {

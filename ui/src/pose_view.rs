@@ -1,12 +1,13 @@
 //! What the Pose tab shows (paper IV.C registration, V.D uncertainty): the object's top-view outline, the registered
-//! hypotheses with their costs, each sample's pose error against the truth, the threshold baseline's error, the
-//! contact points, and the KDE curves of the errors; plus the CSV export of the numbers. The numbers come from the
-//! evaluation stage ([`crate::pose_job`]); this file only holds and formats them.
+//! hypotheses with their costs, the contact points, and the evaluation stage's [`UncertaintyReport`] (each sample's
+//! pose error, the threshold baseline's, the KDE curves). The numbers come from [`crate::pose_job`].
 
 use std::collections::HashMap;
 
 use tactile_derender::mesh::Mesh;
+use tactile_derender::pose::Hypothesis;
 use tactile_derender::sensor::Se2;
+use tactile_derender::uncertainty::UncertaintyReport;
 
 /// A closed polyline in the object frame, metres.
 pub type Outline = Vec<[f64; 2]>;
@@ -69,27 +70,6 @@ pub fn placed_mm(outline: &[Outline], pose: &Se2) -> Vec<Vec<[f64; 2]>> {
         .collect()
 }
 
-/// One registration hypothesis.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct HypothesisRow {
-    pub pose: Se2,
-    /// Registration cost (the registration's own units; lower is better).
-    pub cost: f64,
-}
-
-/// The registered pose of one sample (or the baseline) and its error.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PoseRow {
-    /// Sample index (`None`: the baseline).
-    pub sample: Option<usize>,
-    pub pose: Se2,
-    pub cost: f64,
-    /// Position error against the reference pose, metres.
-    pub position_error_m: f64,
-    /// Yaw error against the reference pose (symmetries excluded), radians, signed.
-    pub theta_error_rad: f64,
-}
-
 /// Everything the Pose tab shows for one run.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PoseAnalysis {
@@ -98,33 +78,22 @@ pub struct PoseAnalysis {
     pub outline: Vec<Outline>,
     /// True pose, when known (simulated scenes, dataset pairs).
     pub truth: Option<Se2>,
-    /// Hypotheses of the K-start registration of the sample mean, best first.
-    pub hypotheses: Vec<HypothesisRow>,
-    /// Each sample's registration.
-    pub samples: Vec<PoseRow>,
-    /// The threshold baseline's registration.
-    pub baseline: Option<PoseRow>,
-    /// Contact points of the sample mean, world frame, metres.
+    /// The sample whose K-start registration gave `hypotheses` (the first with contact).
+    pub registered_sample: usize,
+    /// Hypotheses of that registration, best first.
+    pub hypotheses: Vec<Hypothesis>,
+    /// Its contact points (back-projected X̂0), world frame, metres.
     pub contacts: Vec<[f64; 2]>,
-    /// KDE of the position errors over the samples: (error mm, density per mm).
-    pub kde_position: Vec<[f64; 2]>,
-    /// KDE of the yaw errors over the samples: (error degrees, density per degree).
-    pub kde_theta: Vec<[f64; 2]>,
+    /// Per-sample errors (from the fixed start), baseline errors and KDE curves.
+    pub report: UncertaintyReport,
+    /// The sample index of each entry of `report.samples` (samples without contact are not registered).
+    pub sample_index: Vec<usize>,
 }
 
 impl PoseAnalysis {
-    /// The numbers as CSV: one row per sample, then the baseline.
-    pub fn csv(&self) -> String {
-        let mut out =
-            String::from("sample,x_m,y_m,theta_rad,cost,position_error_m,theta_error_rad\n");
-        for r in self.samples.iter().chain(&self.baseline) {
-            let name = r.sample.map_or("baseline".to_string(), |i| i.to_string());
-            out.push_str(&format!(
-                "{name},{},{},{},{},{},{}\n",
-                r.pose.x, r.pose.y, r.pose.theta, r.cost, r.position_error_m, r.theta_error_rad
-            ));
-        }
-        out
+    /// The sample index of `report.samples[k]`.
+    pub fn sample_of(&self, k: usize) -> Option<usize> {
+        self.sample_index.get(k).copied()
     }
 }
 

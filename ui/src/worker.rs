@@ -28,6 +28,7 @@ pub enum JobKind {
     Dialog,
     Dataset,
     Derender,
+    Pose,
 }
 
 /// What a file dialog was opened for; its answer comes back with it.
@@ -63,6 +64,11 @@ pub enum WorkerMsg {
     Dataset(crate::dataset_view::DatasetMsg),
     /// A finished de-rendering run.
     Derendered(Box<crate::derender::RunResult>),
+    /// A finished pose analysis.
+    Posed {
+        generation: u64,
+        analysis: Box<crate::pose_view::PoseAnalysis>,
+    },
     /// A file dialog's answer (`None`: cancelled, or no dialog available on this system).
     Dialog {
         purpose: DialogPurpose,

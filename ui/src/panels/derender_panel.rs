@@ -213,16 +213,17 @@ fn card(ui: &mut egui::Ui, img: &RunImage, data: &tactile_derender::image::Image
 }
 
 fn scores_table(ui: &mut egui::Ui, r: &derender::RunResult) {
-    let mean = |f: &dyn Fn(&crate::scores::DepthScores) -> f64| {
+    let mean = |f: &dyn Fn(&tactile_derender::metrics::DepthMetrics) -> f64| {
         r.scores.iter().map(f).sum::<f64>() / r.scores.len().max(1) as f64
     };
     ui.label(format!(
-        "mean over samples: L1 {:.3} mm · PSNR {:.2} dB",
+        "mean over samples: L1 {:.3} mm · PSNR {:.2} dB · SSIM {:.4}",
         mean(&|s| s.l1_mm),
-        mean(&|s| s.psnr_db)
+        mean(&|s| s.psnr_db),
+        mean(&|s| s.ssim)
     ));
     egui::CollapsingHeader::new("scores per sample")
-        .default_open(false)
+        .default_open(true)
         .show(ui, |ui| {
             egui::Grid::new("scores").striped(true).show(ui, |ui| {
                 ui.strong("sample");
@@ -234,7 +235,7 @@ fn scores_table(ui: &mut egui::Ui, r: &derender::RunResult) {
                     ui.label(i.to_string());
                     ui.label(format!("{:.3}", s.l1_mm));
                     ui.label(format!("{:.2}", s.psnr_db));
-                    ui.label(s.ssim.map_or("–".into(), |v| format!("{v:.4}")));
+                    ui.label(format!("{:.4}", s.ssim));
                     ui.end_row();
                 }
             });

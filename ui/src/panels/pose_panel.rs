@@ -2,7 +2,7 @@
 //! baseline) to the object, then show a top view with the object's outline at the true and estimated poses and the
 //! contact points, the registration hypotheses with their costs, and KDE curves of the position and yaw errors over
 //! the samples with the baseline's errors as points; hovering a curve highlights the nearest sample. The numbers
-//! export as CSV, the plot as PNG.
+//! export as CSV and the plot as PNG (the evaluation stage's `samples.csv`, `kde.csv`, `uncertainty.png`).
 
 use egui::Color32;
 use egui_plot::{Legend, Line, Plot, PlotPoints, Points, VLine};
@@ -24,26 +24,26 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             if ui.button("Cancel registration").clicked() {
                 cmds.push(Command::CancelPose);
             }
-            let (done, total) = pose.progress.unwrap_or((0, 1));
-            ui.add(
-                egui::ProgressBar::new(done as f32 / total.max(1) as f32)
-                    .desired_width(260.0)
-                    .text(format!("registered {done}/{total}")),
-            );
+            ui.label("registering the samples…");
         } else if ui
             .add_enabled(has_samples, egui::Button::new("Register samples"))
-            .on_disabled_hover_text("run de-rendering first: its samples are what this tab registers")
+            .on_disabled_hover_text(
+                "run de-rendering first: its samples are what this tab registers",
+            )
             .clicked()
         {
             cmds.push(Command::RunPose);
         }
-        if pose.result.is_some() {
-            if ui.button("Export CSV").clicked() {
-                cmds.push(Command::ExportPose { png: false });
-            }
-            if ui.button("Export plot PNG").clicked() {
-                cmds.push(Command::ExportPose { png: true });
-            }
+        if pose.result.is_some()
+            && ui
+                .button("Export CSV + PNG")
+                .on_hover_text("samples.csv, kde.csv and uncertainty.png in <export folder>/pose")
+                .clicked()
+        {
+            cmds.push(Command::ExportPose);
+        }
+        if pose.running {
+            ui.spinner();
         }
     });
     let Some(r) = pose.result.as_ref() else {
@@ -88,55 +88,94 @@ fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, heigh
         .y_axis_label("world y (mm)")
         .legend(Legend::default())
         .show(ui, |p| {
-            for s in &r.samples {
-                let bold = highlight == s.sample;
+            for (k, s) in r.report.samples.iter().enumerate() {
+                let bold = highlight.is_some() && highlight == r.sample_of(k);
                 for l in placed_mm(&r.outline, &s.pose) {
                     let (name, colour, width) = if bold {
                         ("highlighted sample", HIGHLIGHT_COLOUR, 2.5)
                     } else {
-                        ("sample estimates", ESTIMATE_COLOUR.gamma_multiply(0.35), 1.0)
+                        (
+                            "sample estimates",
+                            ESTIMATE_COLOUR.gamma_multiply(0.35),
+                            1.0,
+                        )
                     };
-                    p.line(Line::new(name, PlotPoints::from(l)).color(colour).width(width));
+                    p.line(
+                        Line::new(name, PlotPoints::from(l))
+                            .color(colour)
+                            .width(width),
+                    );
                 }
             }
             if let Some(best) = r.hypotheses.first() {
                 for l in placed_mm(&r.outline, &best.pose) {
-                    p.line(Line::new("best hypothesis", PlotPoints::from(l)).color(ESTIMATE_COLOUR).width(2.0));
+                    p.line(
+                        Line::new("best hypothesis", PlotPoints::from(l))
+                            .color(ESTIMATE_COLOUR)
+                            .width(2.0),
+                    );
                 }
             }
-            if let Some(b) = &r.baseline {
+            if let Some(b) = &r.report.baseline {
                 for l in placed_mm(&r.outline, &b.pose) {
-                    p.line(Line::new("baseline", PlotPoints::from(l)).color(BASELINE_COLOUR).width(1.5));
+                    p.line(
+                        Line::new("baseline", PlotPoints::from(l))
+                            .color(BASELINE_COLOUR)
+                            .width(1.5),
+                    );
                 }
             }
             if let Some(t) = &r.truth {
                 for l in placed_mm(&r.outline, t) {
-                    p.line(Line::new("true pose", PlotPoints::from(l)).color(TRUE_COLOUR).width(2.0));
+                    p.line(
+                        Line::new("true pose", PlotPoints::from(l))
+                            .color(TRUE_COLOUR)
+                            .width(2.0),
+                    );
                 }
             }
-            let contacts: Vec<[f64; 2]> = r.contacts.iter().map(|c| [c[0] * 1e3, c[1] * 1e3]).collect();
-            p.points(Points::new("contact points", PlotPoints::from(contacts)).radius(1.5).color(Color32::LIGHT_GRAY));
+            let contacts: Vec<[f64; 2]> = r
+                .contacts
+                .iter()
+                .map(|c| [c[0] * 1e3, c[1] * 1e3])
+                .collect();
+            p.points(
+                Points::new(
+                    format!("contact points (sample {})", r.registered_sample),
+                    PlotPoints::from(contacts),
+                )
+                .radius(1.5)
+                .color(Color32::LIGHT_GRAY),
+            );
         });
 }
 
 fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
-    ui.strong(format!("{} — registration hypotheses (best first)", r.object));
-    egui::ScrollArea::vertical().id_salt("hypotheses").max_height(260.0).show(ui, |ui| {
-        egui::Grid::new("hypotheses_grid").striped(true).show(ui, |ui| {
-            for h in ["#", "x (mm)", "y (mm)", "θ (deg)", "cost"] {
-                ui.strong(h);
-            }
-            ui.end_row();
-            for (i, h) in r.hypotheses.iter().enumerate() {
-                ui.label(i.to_string());
-                ui.label(format!("{:.2}", h.pose.x * 1e3));
-                ui.label(format!("{:.2}", h.pose.y * 1e3));
-                ui.label(format!("{:.1}", h.pose.theta.to_degrees()));
-                ui.label(format!("{:.4e}", h.cost));
-                ui.end_row();
-            }
+    ui.strong(format!(
+        "{}: hypotheses of sample {} (best first)",
+        r.object, r.registered_sample
+    ));
+    egui::ScrollArea::vertical()
+        .id_salt("hypotheses")
+        .max_height(260.0)
+        .show(ui, |ui| {
+            egui::Grid::new("hypotheses_grid")
+                .striped(true)
+                .show(ui, |ui| {
+                    for h in ["#", "x (mm)", "y (mm)", "θ (deg)", "cost"] {
+                        ui.strong(h);
+                    }
+                    ui.end_row();
+                    for (i, h) in r.hypotheses.iter().enumerate() {
+                        ui.label(i.to_string());
+                        ui.label(format!("{:.2}", h.pose.x * 1e3));
+                        ui.label(format!("{:.2}", h.pose.y * 1e3));
+                        ui.label(format!("{:.1}", h.pose.theta.to_degrees()));
+                        ui.label(format!("{:.4e}", h.cost));
+                        ui.end_row();
+                    }
+                });
         });
-    });
     if let Some(t) = &r.truth {
         ui.label(format!(
             "true pose: x {:.2} mm, y {:.2} mm, θ {:.1}°",
@@ -145,65 +184,97 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
             t.theta.to_degrees()
         ));
     }
-    let n = r.samples.len().max(1) as f64;
-    let mean_pos = r.samples.iter().map(|s| s.position_error_m).sum::<f64>() / n * 1e3;
-    let mean_th = r.samples.iter().map(|s| s.theta_error_rad.abs()).sum::<f64>() / n;
+    let rep = &r.report;
+    let n = rep.samples.len().max(1) as f64;
+    let mean_pos = rep.samples.iter().map(|s| s.position_mm).sum::<f64>() / n;
+    let thetas: Vec<f64> = rep.samples.iter().filter_map(|s| s.theta_deg).collect();
+    let theta = if thetas.is_empty() {
+        "θ excluded (continuous symmetry)".to_string()
+    } else {
+        format!(
+            "mean |θ error| {:.1}°",
+            thetas.iter().map(|t| t.abs()).sum::<f64>() / thetas.len() as f64
+        )
+    };
     ui.label(format!(
-        "samples: mean position error {mean_pos:.2} mm, mean |θ error| {:.1}°",
-        mean_th.to_degrees()
+        "{} of {} samples registered: mean position error {mean_pos:.2} mm, {theta}",
+        rep.samples.len(),
+        r.sample_index.len().max(rep.samples.len())
     ));
-    if let Some(b) = &r.baseline {
-        ui.label(format!(
-            "baseline: position error {:.2} mm, θ error {:.1}°",
-            b.position_error_m * 1e3,
-            b.theta_error_rad.to_degrees()
-        ));
-    }
+    match &rep.baseline {
+        Some(b) => ui.label(format!(
+            "baseline: position error {:.2} mm{}",
+            b.position_mm,
+            b.theta_deg
+                .map(|t| format!(", θ error {t:.1}°"))
+                .unwrap_or_default()
+        )),
+        None => ui.weak("baseline: no contact above the threshold"),
+    };
 }
 
 /// KDE of the position (mm) or yaw (degrees) errors, the samples as a rug, the baseline as a point; hovering picks
 /// the nearest sample.
 fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Option<usize>) {
-    let value = |s: &crate::pose_view::PoseRow| {
+    let rep = &r.report;
+    let value = |s: &tactile_derender::uncertainty::SampleError| {
         if theta {
-            s.theta_error_rad.to_degrees()
+            s.theta_deg
         } else {
-            s.position_error_m * 1e3
+            Some(s.position_mm)
         }
     };
     let (id, label, curve) = if theta {
-        ("kde_theta", "θ error (deg)", &r.kde_theta)
+        ("kde_theta", "θ error (deg)", &rep.theta_kde)
     } else {
-        ("kde_position", "position error (mm)", &r.kde_position)
+        ("kde_position", "position error (mm)", &rep.position_kde)
     };
-    let rug: Vec<[f64; 2]> = r.samples.iter().map(|s| [value(s), 0.0]).collect();
-    let shown = *highlight;
+    let curve: Vec<[f64; 2]> = curve.iter().map(|&(x, d)| [x, d]).collect();
+    let rug: Vec<[f64; 2]> = rep
+        .samples
+        .iter()
+        .filter_map(|s| value(s).map(|v| [v, 0.0]))
+        .collect();
+    if theta && rug.is_empty() {
+        ui.weak("θ error: excluded for this object's continuous symmetry");
+        return;
+    }
+    let shown = highlight.and_then(|i| {
+        let k = r.sample_index.iter().position(|&j| j == i)?;
+        rep.samples.get(k).and_then(value)
+    });
     let response = Plot::new(id)
         .height(ui.available_height().max(180.0))
         .x_axis_label(label)
         .y_axis_label("density")
         .legend(Legend::default())
         .show(ui, |p| {
-            p.line(Line::new("KDE over samples", PlotPoints::from(curve.clone())).width(2.0));
-            p.points(Points::new("samples", PlotPoints::from(rug)).radius(3.0).color(ESTIMATE_COLOUR));
-            if let Some(b) = &r.baseline {
+            p.line(Line::new("KDE over samples", PlotPoints::from(curve)).width(2.0));
+            p.points(
+                Points::new("samples", PlotPoints::from(rug))
+                    .radius(3.0)
+                    .color(ESTIMATE_COLOUR),
+            );
+            if let Some(b) = rep.baseline.as_ref().and_then(value) {
                 p.points(
-                    Points::new("baseline", PlotPoints::from(vec![[value(b), 0.0]]))
+                    Points::new("baseline", PlotPoints::from(vec![[b, 0.0]]))
                         .radius(6.0)
                         .shape(egui_plot::MarkerShape::Diamond)
                         .color(BASELINE_COLOUR),
                 );
             }
-            if let Some(s) = shown.and_then(|i| r.samples.iter().find(|s| s.sample == Some(i))) {
-                p.vline(VLine::new("highlighted sample", value(s)).color(HIGHLIGHT_COLOUR));
+            if let Some(v) = shown {
+                p.vline(VLine::new("highlighted sample", v).color(HIGHLIGHT_COLOUR));
             }
             p.pointer_coordinate()
         });
     if let Some(pos) = response.inner {
-        *highlight = r
+        *highlight = rep
             .samples
             .iter()
-            .min_by(|a, b| (value(a) - pos.x).abs().total_cmp(&(value(b) - pos.x).abs()))
-            .and_then(|s| s.sample);
+            .enumerate()
+            .filter_map(|(k, s)| value(s).map(|v| (k, (v - pos.x).abs())))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .and_then(|(k, _)| r.sample_of(k));
     }
 }
