@@ -82,6 +82,10 @@ fn texture(
     )
 }
 
+/// Narrowest colour range of the depth maps, metres: a flat contact (a box's top) would otherwise stretch float noise
+/// over the whole colour map.
+const MIN_DEPTH_SPAN: f32 = 0.004;
+
 fn depth_range(images: &[&Image]) -> (f32, f32) {
     let mut lo = f32::INFINITY;
     let mut hi = f32::NEG_INFINITY;
@@ -91,13 +95,12 @@ fn depth_range(images: &[&Image]) -> (f32, f32) {
             hi = hi.max(b);
         }
     }
-    if lo.is_finite() && hi > lo {
-        (lo, hi)
-    } else if lo.is_finite() {
-        (lo - 1e-3, lo + 1e-3)
-    } else {
-        (0.0, 0.1)
+    if !lo.is_finite() {
+        return (0.0, 0.1);
     }
+    let mid = 0.5 * (lo + hi);
+    let half = 0.5 * (hi - lo).max(MIN_DEPTH_SPAN);
+    (mid - half, mid + half)
 }
 
 /// Textures of a finished run: one depth range for truth, mean and samples so they compare by colour.

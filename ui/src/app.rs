@@ -83,6 +83,8 @@ pub struct Launch {
     pub print_timings: bool,
     /// Start a de-rendering run (the session's settings) once the scene is simulated (screenshots, timings).
     pub run_derender: bool,
+    /// Then register its samples (Pose tab screenshots).
+    pub run_pose: bool,
 }
 
 /// A pending `--screenshot`.
@@ -131,6 +133,8 @@ pub struct WorkbenchApp {
     frames: u64,
     /// A de-rendering run to start once the scene is simulated (`--run-derender`).
     auto_run: bool,
+    /// A pose analysis to start once the run's samples are there (`--run-pose`).
+    auto_pose: bool,
 }
 
 impl Default for WorkbenchApp {
@@ -167,6 +171,7 @@ impl WorkbenchApp {
             last_frame: None,
             frames: 0,
             auto_run: false,
+            auto_pose: false,
         };
         app.replace_state(state);
         app
@@ -202,7 +207,8 @@ impl WorkbenchApp {
         }
         app.persist = launch.screenshot.is_none();
         app.print_timings = launch.print_timings;
-        app.auto_run = launch.run_derender;
+        app.auto_run = launch.run_derender || launch.run_pose;
+        app.auto_pose = launch.run_pose;
         app.screenshot = launch.screenshot.map(|(out, result)| ScreenshotJob {
             out,
             requested: false,
@@ -359,6 +365,16 @@ impl WorkbenchApp {
         if self.auto_run && self.sim.is_some() && !self.busy() {
             self.auto_run = false;
             commands.push(Command::RunDerender);
+        } else if self.auto_pose && !self.auto_run && !self.busy() {
+            self.auto_pose = false;
+            if self.analysis.derender.result.is_some() {
+                let tab = self.state.view.tab;
+                commands.push(Command::RunPose);
+                commands.push(Command::SetView(crate::state::ViewState {
+                    tab,
+                    ..self.state.view.clone()
+                }));
+            }
         }
         panels::show_all(self, ui, &mut commands);
         for cmd in commands {
@@ -401,6 +417,7 @@ impl WorkbenchApp {
             && self.analysis.dataset.is_none());
         let ready = !self.busy()
             && !self.auto_run
+            && !self.auto_pose
             && !dataset_loading
             && self.sim.is_some()
             && self.frames > 4;

@@ -30,6 +30,9 @@ struct Args {
     /// De-render tab, frame timings while sampling).
     #[arg(long)]
     run_derender: bool,
+    /// Run de-rendering, then register its samples (Pose tab screenshots).
+    #[arg(long)]
+    run_pose: bool,
 }
 
 fn main() -> Result<()> {
@@ -59,6 +62,7 @@ fn main() -> Result<()> {
                 cpu_3d: args.cpu_3d,
                 print_timings: args.timings,
                 run_derender: args.run_derender,
+                run_pose: args.run_pose,
             };
             Ok(Box::new(WorkbenchApp::new(cc, launch)))
         }),

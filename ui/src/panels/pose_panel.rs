@@ -15,6 +15,7 @@ const TRUE_COLOUR: Color32 = Color32::from_rgb(90, 200, 90);
 const ESTIMATE_COLOUR: Color32 = Color32::from_rgb(240, 150, 40);
 const BASELINE_COLOUR: Color32 = Color32::from_rgb(230, 70, 70);
 const HIGHLIGHT_COLOUR: Color32 = Color32::from_rgb(80, 170, 255);
+const KDE_COLOUR: Color32 = Color32::from_rgb(200, 200, 210);
 
 pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let pose = &app.analysis.pose;
@@ -249,7 +250,11 @@ fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Op
         .y_axis_label("density")
         .legend(Legend::default())
         .show(ui, |p| {
-            p.line(Line::new("KDE over samples", PlotPoints::from(curve)).width(2.0));
+            p.line(
+                Line::new("KDE over samples", PlotPoints::from(curve))
+                    .color(KDE_COLOUR)
+                    .width(2.0),
+            );
             p.points(
                 Points::new("samples", PlotPoints::from(rug))
                     .radius(3.0)
