@@ -420,3 +420,38 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     let csv = std::fs::read_to_string(dir.path().join("out/pose/samples.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + 4 + 1, "{csv}");
 }
+
+#[test]
+fn an_imported_dataset_is_indexed_by_object_in_the_background() {
+    use tactile_derender::dataset::import::{import, ImportConfig};
+    // The dataset module's import fixture (three real-format pairs, no generation plan to read objects from).
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/dataset_import");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("real");
+    import(
+        &fixture,
+        &out,
+        &State::default().sim,
+        &ObjectSet::builtin(),
+        &ImportConfig::default(),
+    )
+    .unwrap();
+    let ds = Dataset::open(&out).unwrap();
+    assert!(ds.manifest().generation.is_none());
+
+    let mut h = harness(WorkbenchApp::default());
+    open_dataset(&mut h, &out);
+    for split in SplitName::ALL {
+        wait_for(&mut h, "the object index", |a| {
+            a.analysis
+                .dataset
+                .as_ref()
+                .is_some_and(|b| !b.indexing(split))
+        });
+        for i in 0..ds.len(split) {
+            let want = ds.pair(split, i).unwrap().meta.object;
+            let b = h.state().analysis.dataset.as_ref().unwrap();
+            assert_eq!(b.object_name(split, i), Some(want.as_str()), "{split} {i}");
+        }
+    }
+}
