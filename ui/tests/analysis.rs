@@ -175,6 +175,19 @@ fn dataset_inspector_shows_filters_and_selects_pairs() {
         .query_by_label_contains(&format!("{} of {n_train} pairs shown", want.len()))
         .is_some());
 
+    // Place the scene where pair 0 was taken: its object (from the dataset's object set) at its pose.
+    h.get_by_label("Place the scene").click();
+    h.run_ok();
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    let scene = &h.state().state.scene;
+    assert!(
+        matches!(&scene.object, tnd_workbench::state::ObjectSource::Library { name, .. } if *name == first.meta.object)
+    );
+    assert_eq!(scene.object_pose, first.meta.object_pose);
+    assert_eq!(h.state().state.view.tab, Tab::Scene);
+    h.get_by_label("Dataset").click();
+    h.run_ok();
+
     // A directory that is not a dataset: one error naming it.
     let bogus = dir.path().join("not-a-dataset");
     std::fs::create_dir_all(&bogus).unwrap();
@@ -454,4 +467,56 @@ fn an_imported_dataset_is_indexed_by_object_in_the_background() {
             assert_eq!(b.object_name(split, i), Some(want.as_str()), "{split} {i}");
         }
     }
+}
+
+#[test]
+fn an_imported_measurement_is_de_rendered_without_scores() {
+    let dir = tempfile::tempdir().unwrap();
+    let model_path = tiny_model(dir.path());
+    let npy = dir.path().join("imprint.npy");
+    let imprint = tactile_derender::image::Image::filled(64, 64, 0.001);
+    tactile_derender::io::npy::write_image(&npy, &imprint).unwrap();
+    let mut state = State::default();
+    state.view.tab = Tab::Derender;
+    state.model.path = Some(model_path.clone());
+    state.derender.ddim_steps = 2;
+    state.derender.samples = 2;
+    let mut h = harness(WorkbenchApp::with_state(state));
+    h.run_ok();
+    type_into(&mut h, "measurement", &npy.display().to_string());
+    h.get_by_label("Use measurement").click();
+    h.run_ok();
+    h.get_by_label("Run de-rendering").click();
+    wait_for(&mut h, "the samples", |a| !a.analysis.derender.running);
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    let r = h.state().analysis.derender.result.as_ref().unwrap();
+    assert_eq!(r.input.imprint, imprint);
+    assert!(r.input.truth.is_none() && r.scores.is_empty());
+    let want = DiffusionModel::load(&model_path)
+        .unwrap()
+        .sample(
+            &imprint,
+            2,
+            SamplerKind::Ddim { steps: 2, eta: 0.0 },
+            0,
+            &mut |_, _| true,
+        )
+        .unwrap();
+    assert_eq!(r.samples, want);
+    assert!(h
+        .query_by_label("no ground truth for this input: no scores")
+        .is_some());
+    // Registration needs the object and sensor pose, which a measurement does not carry.
+    h.get_by_label("Pose").click();
+    h.run_ok();
+    h.get_by_label("Register samples").click();
+    h.run_ok();
+    assert!(
+        h.state()
+            .errors
+            .iter()
+            .any(|e| e.contains("no object or sensor pose")),
+        "{:?}",
+        h.state().errors
+    );
 }
