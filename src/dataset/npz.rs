@@ -86,31 +86,6 @@ impl ArrayData {
     }
 }
 
-/// A `.npy` (format 1.0) header for a C-order array, padded so that the data starts at a multiple of 64 bytes.
-pub fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
-    let shape_str = match shape {
-        [n] => format!("({n},)"),
-        _ => format!(
-            "({})",
-            shape
-                .iter()
-                .map(|s| s.to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    };
-    let mut header =
-        format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape_str}, }}");
-    let unpadded = 10 + header.len() + 1;
-    header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
-    header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len());
-    out.extend_from_slice(b"\x93NUMPY\x01\x00");
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    out
-}
-
 /// Encode arrays as uncompressed `.npz` bytes (members `<name>.npy` in the given order, fixed 1980-01-01 timestamp).
 pub fn encode(arrays: &[ArrayData]) -> Result<Vec<u8>, String> {
     let mut zip = ZipWriter::new(Cursor::new(Vec::new()));
@@ -132,7 +107,7 @@ pub fn encode(arrays: &[ArrayData]) -> Result<Vec<u8>, String> {
         }
         zip.start_file(format!("{}.npy", a.name), options)
             .map_err(|e| e.to_string())?;
-        zip.write_all(&npy_header(a.dtype.descr(), &a.shape))
+        zip.write_all(&crate::io::npy::header(a.dtype.descr(), &a.shape))
             .map_err(|e| e.to_string())?;
         zip.write_all(&a.bytes).map_err(|e| e.to_string())?;
     }

@@ -37,8 +37,9 @@ pub struct NpyArray {
     pub data: Vec<f32>,
 }
 
-/// Encode a float32 array of the given shape as `.npy` bytes.
-pub fn encode_f32(shape: &[usize], data: &[f32]) -> Vec<u8> {
+/// A `.npy` (format 1.0) header for a C-order array of dtype `descr` (e.g. `<f4`), padded with spaces and a final
+/// `\n` so that magic(6) + version(2) + length(2) + header is a multiple of 64 bytes (the data start aligned).
+pub fn header(descr: &str, shape: &[usize]) -> Vec<u8> {
     let shape_str = match shape {
         [n] => format!("({n},)"),
         _ => format!(
@@ -50,15 +51,22 @@ pub fn encode_f32(shape: &[usize], data: &[f32]) -> Vec<u8> {
                 .join(", ")
         ),
     };
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_str}, }}");
-    // Pad so that magic(6) + version(2) + len(2) + header is a multiple of 64, ending with '\n'.
+    let mut header =
+        format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape_str}, }}");
     let unpadded = 10 + header.len() + 1;
     header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
     header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len() + data.len() * 4);
+    let mut out = Vec::with_capacity(10 + header.len());
     out.extend_from_slice(b"\x93NUMPY\x01\x00");
     out.extend_from_slice(&(header.len() as u16).to_le_bytes());
     out.extend_from_slice(header.as_bytes());
+    out
+}
+
+/// Encode a float32 array of the given shape as `.npy` bytes.
+pub fn encode_f32(shape: &[usize], data: &[f32]) -> Vec<u8> {
+    let mut out = header("<f4", shape);
+    out.reserve(data.len() * 4);
     for x in data {
         out.extend_from_slice(&x.to_le_bytes());
     }
