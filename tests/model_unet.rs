@@ -235,36 +235,126 @@ fn checkpoint_round_trip_and_errors() {
 #[test]
 fn fused_group_norm_silu_matches_candle_nn() {
     use tactile_derender::model::group_norm::GroupNorm;
-    let x = Var::from_tensor(&(rand_t(&[3, 6, 5, 4], 1) * 3.0).unwrap()).unwrap();
-    let w = Var::from_tensor(&(rand_t(&[6], 2) + 1.0).unwrap()).unwrap();
-    let b = Var::from_tensor(&rand_t(&[6], 3)).unwrap();
-    for silu in [false, true] {
-        let ours = GroupNorm {
-            weight: w.as_tensor().clone(),
-            bias: b.as_tensor().clone(),
-            groups: 3,
-            eps: 1e-5,
-        };
-        let theirs =
-            candle_nn::GroupNorm::new(w.as_tensor().clone(), b.as_tensor().clone(), 6, 3, 1e-5)
-                .unwrap();
-        let y1 = if silu {
-            ours.forward_silu(x.as_tensor())
-        } else {
-            ours.forward(x.as_tensor())
-        }
-        .unwrap();
-        let y2 = candle_core::Module::forward(&theirs, x.as_tensor()).unwrap();
-        let y2 = if silu { y2.silu().unwrap() } else { y2 };
-        assert!(max_abs(&y1, &y2) < 1e-5, "forward silu={silu}");
-        let r = rand_t(y1.dims(), 9);
-        let g1 = (&y1 * &r).unwrap().sum_all().unwrap().backward().unwrap();
-        let g2 = (&y2 * &r).unwrap().sum_all().unwrap().backward().unwrap();
-        for v in [&x, &w, &b] {
-            let d = max_abs(g1.get(v).unwrap(), g2.get(v).unwrap());
-            assert!(d < 1e-4, "gradient silu={silu}: {d}");
+    // Small planes (scalar tails only) and 2 × 9 × 19 = 342 values per group (vector lanes, blocks and tails).
+    for (shape, groups) in [([3, 6, 5, 4], 3), ([2, 8, 9, 19], 4)] {
+        let c = shape[1];
+        let x = Var::from_tensor(&((rand_t(&shape, 1) * 3.0).unwrap() + 0.5).unwrap()).unwrap();
+        let w = Var::from_tensor(&(rand_t(&[c], 2) + 1.0).unwrap()).unwrap();
+        let b = Var::from_tensor(&rand_t(&[c], 3)).unwrap();
+        for silu in [false, true] {
+            let ours = GroupNorm {
+                weight: w.as_tensor().clone(),
+                bias: b.as_tensor().clone(),
+                groups,
+                eps: 1e-5,
+            };
+            let theirs = candle_nn::GroupNorm::new(
+                w.as_tensor().clone(),
+                b.as_tensor().clone(),
+                c,
+                groups,
+                1e-5,
+            )
+            .unwrap();
+            let y1 = if silu {
+                ours.forward_silu(x.as_tensor())
+            } else {
+                ours.forward(x.as_tensor())
+            }
+            .unwrap();
+            let y2 = candle_core::Module::forward(&theirs, x.as_tensor()).unwrap();
+            let y2 = if silu { y2.silu().unwrap() } else { y2 };
+            assert!(max_abs(&y1, &y2) < 1e-5, "forward silu={silu}");
+            let r = rand_t(y1.dims(), 9);
+            let g1 = (&y1 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+            let g2 = (&y2 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+            for v in [&x, &w, &b] {
+                let d = max_abs(g1.get(v).unwrap(), g2.get(v).unwrap());
+                assert!(d < 1e-4, "gradient silu={silu} {shape:?}: {d}");
+            }
         }
     }
+}
+
+#[test]
+fn group_norm_with_time_shift_matches_broadcast_add() {
+    // silu(GroupNorm(x + t[:, :, None, None])) fused vs candle: broadcast_add, candle-nn GroupNorm, silu.
+    use tactile_derender::model::group_norm::GroupNorm;
+    let shape = [3, 8, 7, 13];
+    let x = Var::from_tensor(&(rand_t(&shape, 11) * 2.0).unwrap()).unwrap();
+    let t = Var::from_tensor(&(rand_t(&[3, 8], 12) * 3.0).unwrap()).unwrap();
+    let w = Var::from_tensor(&(rand_t(&[8], 13) + 1.0).unwrap()).unwrap();
+    let b = Var::from_tensor(&rand_t(&[8], 14)).unwrap();
+    let ours = GroupNorm {
+        weight: w.as_tensor().clone(),
+        bias: b.as_tensor().clone(),
+        groups: 4,
+        eps: 1e-5,
+    };
+    let theirs =
+        candle_nn::GroupNorm::new(w.as_tensor().clone(), b.as_tensor().clone(), 8, 4, 1e-5)
+            .unwrap();
+    let y1 = ours
+        .forward_shift_silu(x.as_tensor(), t.as_tensor())
+        .unwrap();
+    let xt = x
+        .as_tensor()
+        .broadcast_add(&t.as_tensor().unsqueeze(2).unwrap().unsqueeze(3).unwrap())
+        .unwrap();
+    let y2 = candle_core::Module::forward(&theirs, &xt)
+        .unwrap()
+        .silu()
+        .unwrap();
+    assert!(max_abs(&y1, &y2) < 1e-5);
+    let r = rand_t(y1.dims(), 15);
+    let g1 = (&y1 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+    let g2 = (&y2 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+    for v in [&x, &t, &w, &b] {
+        let d = max_abs(g1.get(v).unwrap(), g2.get(v).unwrap());
+        assert!(d < 1e-4, "gradient {:?}: {d}", v.dims());
+    }
+    assert!(ours
+        .forward_shift_silu(x.as_tensor(), &rand_t(&[3, 7], 1))
+        .is_err());
+}
+
+#[test]
+fn upsample_op_matches_broadcast_reshape() {
+    // Reference: nearest × 2 as candle broadcast + reshape (its backward sums the 2 × 2 cells) and candle's own
+    // upsample_nearest2d for the values.
+    use tactile_derender::model::resnet::upsample_nearest_x2;
+    let x = Var::from_tensor(&rand_t(&[2, 3, 5, 7], 21)).unwrap();
+    let y1 = upsample_nearest_x2(x.as_tensor()).unwrap();
+    let y2 = x
+        .as_tensor()
+        .reshape((2, 3, 5, 1, 7, 1))
+        .unwrap()
+        .broadcast_as((2, 3, 5, 2, 7, 2))
+        .unwrap()
+        .reshape((2, 3, 10, 14))
+        .unwrap();
+    assert_eq!(y1.dims(), &[2, 3, 10, 14]);
+    assert_eq!(max_abs(&y1, &y2), 0.0);
+    let y3 = x.as_tensor().upsample_nearest2d(10, 14).unwrap();
+    assert_eq!(max_abs(&y1, &y3), 0.0);
+    let r = rand_t(y1.dims(), 22);
+    let g1 = (&y1 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+    let g2 = (&y2 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+    assert!(max_abs(g1.get(&x).unwrap(), g2.get(&x).unwrap()) < 1e-6);
+}
+
+#[test]
+fn scaled_softmax_matches_candle_softmax() {
+    use tactile_derender::model::attention::scaled_softmax;
+    let x = Var::from_tensor(&(rand_t(&[2, 3, 5, 37], 31) * 4.0).unwrap()).unwrap();
+    let y1 = scaled_softmax(x.as_tensor(), 0.35).unwrap();
+    let y2 =
+        candle_nn::ops::softmax(&(x.as_tensor() * 0.35).unwrap(), candle_core::D::Minus1).unwrap();
+    assert!(max_abs(&y1, &y2) < 1e-6);
+    let r = rand_t(y1.dims(), 32);
+    let g1 = (&y1 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+    let g2 = (&y2 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+    assert!(max_abs(g1.get(&x).unwrap(), g2.get(&x).unwrap()) < 1e-6);
 }
 
 #[test]

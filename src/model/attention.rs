@@ -2,10 +2,11 @@
 //! `AttnDownBlock2D` / `UNetMidBlock2D` (`_from_deprecated_attn_block=True`, `residual_connection=True`), run by
 //! `AttnProcessor2_0` (`diffusers/models/attention_processor.py`).
 
-use candle_core::{Module, Result, Tensor, D};
+use candle_core::{CpuStorage, CustomOp1, Layout, Module, Result, Shape, Tensor};
 use candle_nn::{linear, Linear, VarBuilder};
+use rayon::prelude::*;
 
-use super::group_norm::{group_norm, GroupNorm};
+use super::group_norm::{exp_f32, group_norm, GroupNorm};
 
 /// Keys `group_norm`, `to_q`, `to_k`, `to_v`, `to_out.0`:
 /// `out = (x + to_out(softmax(q kᵀ / √d) v)) / rescale_output_factor` over the H·W tokens, `heads` heads of `d`.
@@ -61,8 +62,7 @@ impl Module for Attention {
         let q = split(self.to_q.forward(&tokens)?)?;
         let k = split(self.to_k.forward(&tokens)?)?;
         let v = split(self.to_v.forward(&tokens)?)?;
-        let scores = (q.matmul(&k.t()?)? * (1.0 / (d as f64).sqrt()))?;
-        let attn = candle_nn::ops::softmax(&scores, D::Minus1)?;
+        let attn = scaled_softmax(&q.matmul(&k.t()?)?, 1.0 / (d as f32).sqrt())?;
         let o = attn.matmul(&v)?.transpose(1, 2)?.reshape((b, n, c))?; // [B, N, C]
         let o = self
             .to_out
@@ -75,5 +75,84 @@ impl Module for Attention {
         } else {
             out.affine(1.0 / self.rescale_output_factor, 0.0)
         }
+    }
+}
+
+/// `softmax(scale · x)` over the last dimension as one op (candle-nn's differentiable softmax is five tensor ops
+/// plus the scaling, each a pass over the `[B, heads, N, N]` scores forward and backward). Backward:
+/// `dx = scale · y ⊙ (dy − Σ dy ⊙ y)`.
+pub fn scaled_softmax(x: &Tensor, scale: f32) -> Result<Tensor> {
+    x.contiguous()?.apply_op1(ScaledSoftmax { scale })
+}
+
+#[derive(Clone, Copy, Debug)]
+struct ScaledSoftmax {
+    scale: f32,
+}
+
+/// Backward of [`ScaledSoftmax`] on `(y, dy)` packed as `[2, …]`.
+#[derive(Clone, Copy, Debug)]
+struct ScaledSoftmaxBackward {
+    scale: f32,
+}
+
+fn f32_slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
+    match l.contiguous_offsets() {
+        Some((a, b)) => Ok(&s.as_slice::<f32>()?[a..b]),
+        None => candle_core::bail!("softmax: input must be contiguous"),
+    }
+}
+
+impl CustomOp1 for ScaledSoftmax {
+    fn name(&self) -> &'static str {
+        "scaled-softmax"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
+        let x = f32_slice(s, l)?;
+        let n = l.shape().dims().last().copied().unwrap_or(1).max(1);
+        let mut y = vec![0f32; x.len()];
+        y.par_chunks_mut(n)
+            .zip(x.par_chunks(n))
+            .for_each(|(yr, xr)| {
+                let max = xr.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+                let mut sum = 0f32;
+                for (o, &v) in yr.iter_mut().zip(xr) {
+                    *o = exp_f32((v - max) * self.scale);
+                    sum += *o;
+                }
+                let inv = 1.0 / sum;
+                yr.iter_mut().for_each(|o| *o *= inv);
+            });
+        Ok((CpuStorage::F32(y), l.shape().clone()))
+    }
+
+    fn bwd(&self, _x: &Tensor, y: &Tensor, dy: &Tensor) -> Result<Option<Tensor>> {
+        let packed = Tensor::stack(&[y, &dy.contiguous()?], 0)?;
+        let dx = packed.apply_op1_no_bwd(&ScaledSoftmaxBackward { scale: self.scale })?;
+        Ok(Some(dx.reshape(y.shape())?))
+    }
+}
+
+impl CustomOp1 for ScaledSoftmaxBackward {
+    fn name(&self) -> &'static str {
+        "scaled-softmax-backward"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
+        let both = f32_slice(s, l)?;
+        let dims = &l.shape().dims()[1..];
+        let n = dims.last().copied().unwrap_or(1).max(1);
+        let (y, dy) = both.split_at(both.len() / 2);
+        let mut dx = vec![0f32; y.len()];
+        dx.par_chunks_mut(n)
+            .zip(y.par_chunks(n).zip(dy.par_chunks(n)))
+            .for_each(|(dxr, (yr, dyr))| {
+                let dot: f32 = yr.iter().zip(dyr).map(|(a, b)| a * b).sum();
+                for ((o, &yv), &g) in dxr.iter_mut().zip(yr).zip(dyr) {
+                    *o = self.scale * yv * (g - dot);
+                }
+            });
+        Ok((CpuStorage::F32(dx), Shape::from(dims)))
     }
 }

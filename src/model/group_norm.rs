@@ -40,13 +40,34 @@ impl GroupNorm {
         self.apply(x, true)
     }
 
+    /// `silu(GroupNorm(x + shift))` with `shift` `[B, C]` broadcast over the pixels (the ResNet block's time
+    /// embedding projection), in one pass: no `[B, C, H, W]` sum is materialised, forward or backward.
+    pub fn forward_shift_silu(&self, x: &Tensor, shift: &Tensor) -> Result<Tensor> {
+        let (b, c) = (x.dim(0)?, x.dim(1)?);
+        if shift.dims() != [b, c] {
+            candle_core::bail!(
+                "GroupNorm shift {:?} does not fit input {:?}",
+                shift.dims(),
+                x.dims()
+            );
+        }
+        self.apply_op(x, shift.contiguous()?, true, true)
+    }
+
     fn apply(&self, x: &Tensor, silu: bool) -> Result<Tensor> {
+        let zeros = Tensor::zeros((x.dim(0)?, x.dim(1)?), x.dtype(), x.device())?;
+        self.apply_op(x, zeros, silu, false)
+    }
+
+    fn apply_op(&self, x: &Tensor, shift: Tensor, silu: bool, has_shift: bool) -> Result<Tensor> {
         let op = GnOp {
             groups: self.groups,
             eps: self.eps as f32,
             silu,
+            has_shift,
         };
-        x.contiguous()?.apply_op3(&self.weight, &self.bias, op)
+        let wb = Tensor::cat(&[&self.weight, &self.bias], 0)?;
+        x.contiguous()?.apply_op3(&wb, &shift, op)
     }
 }
 
@@ -55,9 +76,12 @@ struct GnOp {
     groups: usize,
     eps: f32,
     silu: bool,
+    /// Whether the shift input `[B, C]` needs a gradient (otherwise it is zeros).
+    has_shift: bool,
 }
 
-/// The backward as a separate op on `(x, grad, [weight; bias])`, returning `[dx…, dweight…, dbias…]` flat.
+/// The backward as a separate op on `(x, grad, [weight; bias; shift])`, returning
+/// `[dx…, dweight…, dbias…, dshift…]` flat.
 #[derive(Clone, Copy, Debug)]
 struct GnBackward(GnOp);
 
@@ -68,21 +92,237 @@ fn slice<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
     }
 }
 
-#[inline]
-fn sigmoid(z: f32) -> f32 {
-    1.0 / (1.0 + (-z).exp())
+/// Values summed in f32 lanes before each flush into an f64 total (keeps f32 rounding negligible).
+const BLOCK: usize = 64;
+/// f32 lanes of the vectorisable loops (one AVX register).
+const LANES: usize = 8;
+
+/// `exp(x)` for f32 without a library call, so that loops using it vectorise: Cody–Waite range reduction
+/// `x = n ln2 + r` and a degree-7 Taylor polynomial on |r| ≤ ln2/2 (truncation ≤ 5e-9; the result is within f32
+/// rounding of `f32::exp`).
+#[inline(always)]
+pub(crate) fn exp_f32(x: f32) -> f32 {
+    let x = x.clamp(-87.0, 88.0);
+    // Round x/ln2 to the nearest integer with the 1.5·2²³ trick (branch-free, vectorises without SSE4.1).
+    let t = x * std::f32::consts::LOG2_E + 12_582_912.0;
+    let n = t - 12_582_912.0;
+    let r = x - n * 0.693_145_75 - n * 1.428_606_8e-6;
+    let p = 1.0
+        + r * (1.0
+            + r * (0.5
+                + r * (1.0 / 6.0
+                    + r * (1.0 / 24.0
+                        + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
+    p * f32::from_bits(((n as i32 + 127) as u32) << 23)
 }
 
-/// Mean and 1/σ of one group's values.
-fn stats(v: &[f32], eps: f32) -> (f32, f32) {
+#[inline(always)]
+fn sigmoid(z: f32) -> f32 {
+    1.0 / (1.0 + exp_f32(-z))
+}
+
+/// Σ v (f32 lanes flushed into f64 every [`BLOCK`] values).
+#[inline(always)]
+fn sum_lanes(v: &[f32], shift: f32) -> (f64, f64) {
+    let (mut s, mut s2) = (0f64, 0f64);
+    for blk in v.chunks(BLOCK) {
+        let (mut a, mut a2) = ([0f32; LANES], [0f32; LANES]);
+        let mut it = blk.chunks_exact(LANES);
+        for c in &mut it {
+            for l in 0..LANES {
+                let d = c[l] - shift;
+                a[l] += d;
+                a2[l] += d * d;
+            }
+        }
+        for &x in it.remainder() {
+            let d = x - shift;
+            s += f64::from(d);
+            s2 += f64::from(d * d);
+        }
+        s += a.iter().map(|&x| f64::from(x)).sum::<f64>();
+        s2 += a2.iter().map(|&x| f64::from(x)).sum::<f64>();
+    }
+    (s, s2)
+}
+
+/// Mean and 1/σ of one group's values `v + t_k` (channel rows of `hw` values, `t` one shift per channel; two passes:
+/// mean, then squared deviations).
+#[inline(always)]
+fn stats(v: &[f32], hw: usize, t: &[f32], eps: f32) -> (f32, f32) {
     let n = v.len() as f64;
-    let mean = v.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
-    let var = v
-        .iter()
-        .map(|&x| (f64::from(x) - mean).powi(2))
-        .sum::<f64>()
-        / n;
-    (mean as f32, (1.0 / (var + f64::from(eps)).sqrt()) as f32)
+    let rows = || v.chunks(hw).zip(t);
+    let mean = (rows().map(|(r, &tk)| sum_lanes(r, -tk).0).sum::<f64>() / n) as f32;
+    let (mut d, mut d2) = (0f64, 0f64);
+    for (r, &tk) in rows() {
+        let (a, a2) = sum_lanes(r, mean - tk);
+        d += a;
+        d2 += a2;
+    }
+    let var = (d2 - d * d / n) / n;
+    (mean, (1.0 / (var.max(0.0) + f64::from(eps)).sqrt()) as f32)
+}
+
+/// Forward of one group `xg` (+ per-channel shifts `tg`) -> `yg` (`cpg` channels of `hw` values starting at channel
+/// `c0`).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn fwd_group(
+    op: GnOp,
+    w: &[f32],
+    b: &[f32],
+    tg: &[f32],
+    c0: usize,
+    hw: usize,
+    xg: &[f32],
+    yg: &mut [f32],
+) {
+    let (mean, rstd) = stats(xg, hw, tg, op.eps);
+    for (k, (ys, xs)) in yg.chunks_mut(hw).zip(xg.chunks(hw)).enumerate() {
+        let mean_k = mean - tg[k];
+        let (sc, sh) = (w[c0 + k] * rstd, b[c0 + k] - mean_k * rstd * w[c0 + k]);
+        if op.silu {
+            for (o, &v) in ys.iter_mut().zip(xs) {
+                let z = v * sc + sh;
+                *o = z * sigmoid(z);
+            }
+        } else {
+            for (o, &v) in ys.iter_mut().zip(xs) {
+                *o = v * sc + sh;
+            }
+        }
+    }
+}
+
+/// Backward of one group: writes `dxg`, returns per channel `[Σ dz·x̂, Σ dz, Σ dx]` (dL/dweight, dL/dbias,
+/// dL/dshift) into `pg`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn bwd_group(
+    op: GnOp,
+    w: &[f32],
+    b: &[f32],
+    tg: &[f32],
+    c0: usize,
+    hw: usize,
+    xg: &[f32],
+    dyg: &[f32],
+    dxg: &mut [f32],
+    pg: &mut [[f64; 3]],
+) {
+    let (mean, rstd) = stats(xg, hw, tg, op.eps);
+    // dz = dL/dz at z = x̂ w + b (through the SiLU when fused); dx̂ = dz w. Σ dx̂ = Σ_k w_k Σ dz and
+    // Σ dx̂ x̂ = Σ_k w_k Σ dz x̂ follow from the per-channel sums.
+    let (mut s1, mut s2) = (0f64, 0f64);
+    for (k, p) in pg.iter_mut().enumerate() {
+        let (wk, bk, mean) = (w[c0 + k], b[c0 + k], mean - tg[k]);
+        let (xs, dys) = (&xg[k * hw..(k + 1) * hw], &dyg[k * hw..(k + 1) * hw]);
+        let dxs = &mut dxg[k * hw..(k + 1) * hw];
+        let dz_at = |x: f32, dy: f32| -> (f32, f32) {
+            let xh = (x - mean) * rstd;
+            let dz = if op.silu {
+                let z = xh * wk + bk;
+                let s = sigmoid(z);
+                dy * (s * (1.0 + z * (1.0 - s)))
+            } else {
+                dy
+            };
+            (xh, dz)
+        };
+        let (mut dwk, mut dbk) = (0f64, 0f64);
+        for ((xb, dyb), dxb) in xs
+            .chunks(BLOCK)
+            .zip(dys.chunks(BLOCK))
+            .zip(dxs.chunks_mut(BLOCK))
+        {
+            let (mut aw, mut ab) = ([0f32; LANES], [0f32; LANES]);
+            let mut xi = xb.chunks_exact(LANES);
+            let mut di = dyb.chunks_exact(LANES);
+            let mut oi = dxb.chunks_exact_mut(LANES);
+            for ((xc, dc), oc) in (&mut xi).zip(&mut di).zip(&mut oi) {
+                for l in 0..LANES {
+                    let (xh, dz) = dz_at(xc[l], dc[l]);
+                    aw[l] += dz * xh;
+                    ab[l] += dz;
+                    oc[l] = dz * wk; // stash dx̂; finished below
+                }
+            }
+            let rem = xi.remainder().iter().zip(di.remainder());
+            for ((&x, &dy), o) in rem.zip(oi.into_remainder()) {
+                let (xh, dz) = dz_at(x, dy);
+                dwk += f64::from(dz * xh);
+                dbk += f64::from(dz);
+                *o = dz * wk;
+            }
+            dwk += aw.iter().map(|&v| f64::from(v)).sum::<f64>();
+            dbk += ab.iter().map(|&v| f64::from(v)).sum::<f64>();
+        }
+        *p = [dwk, dbk, 0.0];
+        s1 += f64::from(wk) * dbk;
+        s2 += f64::from(wk) * dwk;
+    }
+    let m = (pg.len() * hw) as f64;
+    let (m1, m2) = ((s1 / m) as f32, (s2 / m) as f32);
+    for (k, (ds, xs)) in dxg.chunks_mut(hw).zip(xg.chunks(hw)).enumerate() {
+        let mean = mean - tg[k];
+        for (d, &x) in ds.iter_mut().zip(xs) {
+            let xh = (x - mean) * rstd;
+            *d = rstd * (*d - m1 - xh * m2);
+        }
+        if op.has_shift {
+            pg[k][2] = sum_lanes(ds, 0.0).0;
+        }
+    }
+}
+
+/// [`fwd_group`] and [`bwd_group`] compiled for AVX2 + FMA (8 f32 lanes), chosen at run time; the portable
+/// versions run elsewhere. Same operations in the same order either way (Rust never contracts to FMA by itself).
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::GnOp;
+
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) unsafe fn fwd_group(
+        op: GnOp,
+        w: &[f32],
+        b: &[f32],
+        tg: &[f32],
+        c0: usize,
+        hw: usize,
+        xg: &[f32],
+        yg: &mut [f32],
+    ) {
+        super::fwd_group(op, w, b, tg, c0, hw, xg, yg)
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) unsafe fn bwd_group(
+        op: GnOp,
+        w: &[f32],
+        b: &[f32],
+        tg: &[f32],
+        c0: usize,
+        hw: usize,
+        xg: &[f32],
+        dyg: &[f32],
+        dxg: &mut [f32],
+        pg: &mut [[f64; 3]],
+    ) {
+        super::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg)
+    }
+}
+
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
 }
 
 impl CustomOp3 for GnOp {
@@ -100,32 +340,32 @@ impl CustomOp3 for GnOp {
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let x = slice(s1, l1, "x")?;
-        let (w, b) = (slice(s2, l2, "weight")?, slice(s3, l3, "bias")?);
+        let wb = slice(s2, l2, "weight/bias")?;
+        let t = slice(s3, l3, "shift")?;
         let dims = l1.shape().dims();
         let c = dims[1];
         let hw: usize = dims[2..].iter().product();
         let cpg = c / self.groups;
+        if wb.len() != 2 * c || t.len() != dims[0] * c {
+            candle_core::bail!("group_norm: parameters do not fit input {dims:?}");
+        }
+        let (w, b) = wb.split_at(c);
         let mut y = vec![0f32; x.len()];
+        let (op, fast) = (*self, has_avx2());
         y.par_chunks_mut(cpg * hw)
             .zip(x.par_chunks(cpg * hw))
+            .zip(t.par_chunks(cpg))
             .enumerate()
-            .for_each(|(bg, (yg, xg))| {
-                let (mean, rstd) = stats(xg, self.eps);
-                let c0 = (bg % self.groups) * cpg;
-                for k in 0..cpg {
-                    let (sc, sh) = (w[c0 + k] * rstd, b[c0 + k] - mean * rstd * w[c0 + k]);
-                    let (ys, xs) = (&mut yg[k * hw..(k + 1) * hw], &xg[k * hw..(k + 1) * hw]);
-                    if self.silu {
-                        for (o, &v) in ys.iter_mut().zip(xs) {
-                            let z = v * sc + sh;
-                            *o = z * sigmoid(z);
-                        }
-                    } else {
-                        for (o, &v) in ys.iter_mut().zip(xs) {
-                            *o = v * sc + sh;
-                        }
-                    }
+            .for_each(|(bg, ((yg, xg), tg))| {
+                let c0 = (bg % op.groups) * cpg;
+                #[cfg(target_arch = "x86_64")]
+                if fast {
+                    // SAFETY: the CPU supports AVX2 and FMA (checked above).
+                    unsafe { avx2::fwd_group(op, w, b, tg, c0, hw, xg, yg) };
+                    return;
                 }
+                let _ = fast;
+                fwd_group(op, w, b, tg, c0, hw, xg, yg);
             });
         Ok((CpuStorage::F32(y), l1.shape().clone()))
     }
@@ -133,21 +373,24 @@ impl CustomOp3 for GnOp {
     fn bwd(
         &self,
         x: &Tensor,
-        w: &Tensor,
-        b: &Tensor,
+        wb: &Tensor,
+        t: &Tensor,
         _res: &Tensor,
         grad: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
-        let c = w.dim(0)?;
-        let n = x.elem_count();
-        let wb = Tensor::cat(&[w, b], 0)?;
+        let (n, c2, nt) = (x.elem_count(), wb.elem_count(), t.elem_count());
+        let params = Tensor::cat(&[wb, &t.flatten_all()?], 0)?;
         let packed =
             x.contiguous()?
-                .apply_op3_no_bwd(&grad.contiguous()?, &wb, &GnBackward(*self))?;
+                .apply_op3_no_bwd(&grad.contiguous()?, &params, &GnBackward(*self))?;
         let dx = packed.narrow(0, 0, n)?.reshape(x.shape())?;
-        let dw = packed.narrow(0, n, c)?;
-        let db = packed.narrow(0, n + c, c)?;
-        Ok((Some(dx), Some(dw), Some(db)))
+        let dwb = packed.narrow(0, n, c2)?;
+        let dt = if self.has_shift {
+            Some(packed.narrow(0, n + c2, nt)?.reshape(t.shape())?)
+        } else {
+            None
+        };
+        Ok((Some(dx), Some(dwb), dt))
     }
 }
 
@@ -168,53 +411,38 @@ impl CustomOp3 for GnBackward {
         let op = self.0;
         let x = slice(s1, l1, "x")?;
         let dy = slice(s2, l2, "grad")?;
-        let wb = slice(s3, l3, "weight/bias")?;
+        let params = slice(s3, l3, "weight/bias/shift")?;
         let dims = l1.shape().dims();
         let (bsz, c) = (dims[0], dims[1]);
-        let (w, b) = wb.split_at(c);
+        if params.len() != 2 * c + bsz * c {
+            candle_core::bail!("group_norm backward: parameters do not fit input {dims:?}");
+        }
+        let (w, rest) = params.split_at(c);
+        let (b, t) = rest.split_at(c);
         let hw: usize = dims[2..].iter().product();
         let cpg = c / op.groups;
         let n = x.len();
-        let mut out = vec![0f32; n + 2 * c];
+        let mut out = vec![0f32; n + 2 * c + bsz * c];
         let (dx, _) = out.split_at_mut(n);
-        // Per (sample, channel) partial sums of dL/dw and dL/db.
-        let mut partial = vec![[0f64; 2]; bsz * c];
+        // Per (sample, channel) sums of dL/dw, dL/db and dL/dshift.
+        let mut partial = vec![[0f64; 3]; bsz * c];
+        let fast = has_avx2();
         dx.par_chunks_mut(cpg * hw)
             .zip(partial.par_chunks_mut(cpg))
+            .zip(t.par_chunks(cpg))
             .enumerate()
-            .for_each(|(bg, (dxg, pg))| {
+            .for_each(|(bg, ((dxg, pg), tg))| {
                 let off = bg * cpg * hw;
                 let (xg, dyg) = (&x[off..off + cpg * hw], &dy[off..off + cpg * hw]);
-                let (mean, rstd) = stats(xg, op.eps);
                 let c0 = (bg % op.groups) * cpg;
-                // dz (gradient before the affine map's output, i.e. at z = x̂ w + b), then dx̂ = dz w.
-                let (mut s1, mut s2) = (0f64, 0f64); // Σ dx̂, Σ dx̂ x̂
-                for k in 0..cpg {
-                    let (wk, bk) = (w[c0 + k], b[c0 + k]);
-                    let (mut dwk, mut dbk) = (0f64, 0f64);
-                    for i in k * hw..(k + 1) * hw {
-                        let xh = (xg[i] - mean) * rstd;
-                        let mut dz = dyg[i];
-                        if op.silu {
-                            let z = xh * wk + bk;
-                            let s = sigmoid(z);
-                            dz *= s * (1.0 + z * (1.0 - s));
-                        }
-                        dwk += f64::from(dz * xh);
-                        dbk += f64::from(dz);
-                        let dxh = dz * wk;
-                        dxg[i] = dxh; // stash dx̂; finished below
-                        s1 += f64::from(dxh);
-                        s2 += f64::from(dxh * xh);
-                    }
-                    pg[k] = [dwk, dbk];
+                #[cfg(target_arch = "x86_64")]
+                if fast {
+                    // SAFETY: the CPU supports AVX2 and FMA (checked above).
+                    unsafe { avx2::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg) };
+                    return;
                 }
-                let m = (cpg * hw) as f64;
-                let (m1, m2) = ((s1 / m) as f32, (s2 / m) as f32);
-                for (i, d) in dxg.iter_mut().enumerate() {
-                    let xh = (xg[i] - mean) * rstd;
-                    *d = rstd * (*d - m1 - xh * m2);
-                }
+                let _ = fast;
+                bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg);
             });
         for ch in 0..c {
             let (mut dw, mut db) = (0f64, 0f64);
@@ -225,6 +453,45 @@ impl CustomOp3 for GnBackward {
             out[n + ch] = dw as f32;
             out[n + c + ch] = db as f32;
         }
-        Ok((CpuStorage::F32(out), Shape::from(n + 2 * c)))
+        for (o, p) in out[n + 2 * c..].iter_mut().zip(&partial) {
+            *o = p[2] as f32;
+        }
+        let len = out.len();
+        Ok((CpuStorage::F32(out), Shape::from(len)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exp_f32_is_within_rounding_of_std() {
+        let mut worst = 0f32;
+        for i in -8700..=8790 {
+            let x = i as f32 * 0.01 + 0.003;
+            let (a, b) = (exp_f32(x), x.exp());
+            worst = worst.max((a - b).abs() / b);
+        }
+        assert!(worst < 4e-7, "relative error {worst}");
+        assert!(sigmoid(-200.0) >= 0.0 && sigmoid(-200.0) < 1e-30);
+        assert!((sigmoid(200.0) - 1.0).abs() < 1e-7);
+    }
+
+    #[test]
+    fn stats_match_f64_two_pass() {
+        let v: Vec<f32> = (0..1000)
+            .map(|i| ((i * 37 % 101) as f32) * 0.1 + 5.0)
+            .collect();
+        let n = v.len() as f64;
+        let mean = v.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
+        let var = v
+            .iter()
+            .map(|&x| (f64::from(x) - mean).powi(2))
+            .sum::<f64>()
+            / n;
+        let (m, r) = stats(&v, 100, &[0.0; 10], 1e-5);
+        assert!((f64::from(m) - mean).abs() < 1e-5);
+        assert!((f64::from(r) - 1.0 / (var + 1e-5).sqrt()).abs() < 1e-6 * f64::from(r));
     }
 }

@@ -1,7 +1,7 @@
 //! ResNet blocks and resampling of Ho et al.'s U-Net (paper IV.B): diffusers `ResnetBlock2D`, `Downsample2D` and
 //! `Upsample2D` (`diffusers/models/resnet.py`, `downsampling.py`, `upsampling.py`).
 
-use candle_core::{Module, Result, Tensor};
+use candle_core::{CpuStorage, CustomOp1, Layout, Module, Result, Shape, Tensor};
 use candle_nn::{linear, Linear, VarBuilder};
 
 use super::group_norm::{group_norm, GroupNorm};
@@ -64,12 +64,8 @@ impl ResnetBlock2D {
     /// `x` `[B, Cin, H, W]`, `temb` `[B, T]` -> `[B, Cout, H, W]`; dropout only when `train`.
     pub fn forward(&self, x: &Tensor, temb: &Tensor, train: bool) -> Result<Tensor> {
         let h = self.conv1.forward(&self.norm1.forward_silu(x)?)?;
-        let t = self
-            .time_emb_proj
-            .forward(&temb.silu()?)?
-            .unsqueeze(2)?
-            .unsqueeze(3)?;
-        let h = self.norm2.forward_silu(&h.broadcast_add(&t)?)?;
+        let t = self.time_emb_proj.forward(&temb.silu()?)?;
+        let h = self.norm2.forward_shift_silu(&h, &t)?;
         let h = if train && self.dropout > 0.0 {
             candle_nn::ops::dropout(&h, self.dropout)?
         } else {
@@ -132,12 +128,75 @@ impl Upsample2D {
     }
 }
 
-/// Nearest-neighbour × 2 up-sampling built from broadcast + reshape (differentiable: the backward sums 2 × 2 cells).
+/// Nearest-neighbour × 2 up-sampling `[B, C, H, W]` -> `[B, C, 2H, 2W]` (`F.interpolate(scale_factor=2,
+/// mode="nearest")`) as one op whose backward sums each 2 × 2 cell (candle's broadcast + reshape version copies a
+/// strided view forward and reduces a 6-D strided gradient backward).
 pub fn upsample_nearest_x2(x: &Tensor) -> Result<Tensor> {
-    let (b, c, h, w) = x.dims4()?;
-    x.reshape((b, c, h, 1, w, 1))?
-        .broadcast_as((b, c, h, 2, w, 2))?
-        .reshape((b, c, 2 * h, 2 * w))
+    x.dims4()?;
+    x.contiguous()?.apply_op1(UpsampleX2)
+}
+
+#[derive(Clone, Copy, Debug)]
+struct UpsampleX2;
+
+/// The adjoint of [`UpsampleX2`]: `[B, C, 2H, 2W]` -> `[B, C, H, W]`, each output the sum of its 2 × 2 cell.
+#[derive(Clone, Copy, Debug)]
+struct SumPoolX2;
+
+fn f32_slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
+    match l.contiguous_offsets() {
+        Some((a, b)) => Ok(&s.as_slice::<f32>()?[a..b]),
+        None => candle_core::bail!("upsample: input must be contiguous"),
+    }
+}
+
+impl CustomOp1 for UpsampleX2 {
+    fn name(&self) -> &'static str {
+        "upsample-nearest-x2"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
+        let x = f32_slice(s, l)?;
+        let (b, c, h, w) = l.shape().dims4()?;
+        let mut y = vec![0f32; 4 * x.len()];
+        for (src, dst) in x.chunks(w).zip(y.chunks_mut(4 * w)) {
+            let (top, bottom) = dst.split_at_mut(2 * w);
+            for (pair, &v) in top.chunks_exact_mut(2).zip(src) {
+                pair[0] = v;
+                pair[1] = v;
+            }
+            bottom.copy_from_slice(top);
+        }
+        Ok((CpuStorage::F32(y), Shape::from((b, c, 2 * h, 2 * w))))
+    }
+
+    fn bwd(&self, _arg: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
+        Ok(Some(grad.contiguous()?.apply_op1_no_bwd(&SumPoolX2)?))
+    }
+}
+
+impl CustomOp1 for SumPoolX2 {
+    fn name(&self) -> &'static str {
+        "sum-pool-x2"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
+        let g = f32_slice(s, l)?;
+        let (b, c, h2, w2) = l.shape().dims4()?;
+        let (h, w) = (h2 / 2, w2 / 2);
+        let mut x = vec![0f32; b * c * h * w];
+        for (dst, src) in x.chunks_mut(w).zip(g.chunks(4 * w)) {
+            let (top, bottom) = src.split_at(2 * w);
+            for ((o, t), u) in dst
+                .iter_mut()
+                .zip(top.chunks_exact(2))
+                .zip(bottom.chunks_exact(2))
+            {
+                *o = (t[0] + t[1]) + (u[0] + u[1]);
+            }
+        }
+        Ok((CpuStorage::F32(x), Shape::from((b, c, h, w))))
+    }
 }
 
 impl Module for Upsample2D {
