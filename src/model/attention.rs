@@ -96,20 +96,13 @@ struct ScaledSoftmaxBackward {
     scale: f32,
 }
 
-fn f32_slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&s.as_slice::<f32>()?[a..b]),
-        None => candle_core::bail!("softmax: input must be contiguous"),
-    }
-}
-
 impl CustomOp1 for ScaledSoftmax {
     fn name(&self) -> &'static str {
         "scaled-softmax"
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        let x = f32_slice(s, l)?;
+        let x = super::contiguous_f32(s, l, "softmax: input")?;
         let n = l.shape().dims().last().copied().unwrap_or(1).max(1);
         let mut y = vec![0f32; x.len()];
         y.par_chunks_mut(n)
@@ -140,7 +133,7 @@ impl CustomOp1 for ScaledSoftmaxBackward {
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        let both = f32_slice(s, l)?;
+        let both = super::contiguous_f32(s, l, "softmax: input")?;
         let dims = &l.shape().dims()[1..];
         let n = dims.last().copied().unwrap_or(1).max(1);
         let (y, dy) = both.split_at(both.len() / 2);

@@ -179,21 +179,13 @@ pub struct Col2Im {
     pub dims: (usize, usize, usize, usize),
 }
 
-fn f32_slice<'a>(storage: &'a CpuStorage, layout: &Layout, op: &str) -> Result<&'a [f32]> {
-    let data = storage.as_slice::<f32>()?;
-    match layout.contiguous_offsets() {
-        Some((start, end)) => Ok(&data[start..end]),
-        None => candle_core::bail!("{op}: input must be contiguous"),
-    }
-}
-
 impl CustomOp1 for Im2Col {
     fn name(&self) -> &'static str {
         "im2col"
     }
 
     fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> Result<(CpuStorage, Shape)> {
-        let x = f32_slice(storage, layout, "im2col")?;
+        let x = super::contiguous_f32(storage, layout, "im2col: input")?;
         let (b, c, h, w) = layout.shape().dims4()?;
         let g = self.geom;
         let (k, s, p) = (g.kernel, g.stride, g.pad_begin as isize);
@@ -250,7 +242,7 @@ impl CustomOp1 for Col2Im {
     }
 
     fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> Result<(CpuStorage, Shape)> {
-        let cols = f32_slice(storage, layout, "col2im")?;
+        let cols = super::contiguous_f32(storage, layout, "col2im: input")?;
         let (b, c, h, w) = self.dims;
         let g = self.geom;
         let (k, s, p) = (g.kernel, g.stride, g.pad_begin as isize);

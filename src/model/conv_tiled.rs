@@ -72,13 +72,6 @@ impl Dims {
     }
 }
 
-fn slice<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&s.as_slice::<f32>()?[a..b]),
-        None => candle_core::bail!("conv: {what} must be contiguous"),
-    }
-}
-
 /// im2col of output pixels `p0..p0+t` of one sample `x` `[C, H, W]` into `cols` `[K, t]`.
 fn im2col_tile(x: &[f32], d: &Dims, g: ConvGeom, p0: usize, t: usize, cols: &mut [f32]) {
     let (k, s, p) = (g.kernel, g.stride, g.pad_begin as isize);
@@ -197,9 +190,9 @@ impl CustomOp3 for TiledConv {
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let g = self.geom;
-        let x = slice(s1, l1, "input")?;
-        let w = slice(s2, l2, "weight")?;
-        let bias = slice(s3, l3, "bias")?;
+        let x = super::contiguous_f32(s1, l1, "conv: input")?;
+        let w = super::contiguous_f32(s2, l2, "conv: weight")?;
+        let bias = super::contiguous_f32(s3, l3, "conv: bias")?;
         let co = l2.shape().dims()[0];
         let d = Dims::new(l1.shape().dims(), g)?;
         if w.len() != co * d.k || bias.len() != co {
@@ -293,9 +286,9 @@ impl CustomOp3 for TiledConvBackward {
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let g = self.geom;
-        let x = slice(s1, l1, "input")?;
-        let w = slice(s2, l2, "weight")?;
-        let dy = slice(s3, l3, "output gradient")?;
+        let x = super::contiguous_f32(s1, l1, "conv: input")?;
+        let w = super::contiguous_f32(s2, l2, "conv: weight")?;
+        let dy = super::contiguous_f32(s3, l3, "conv: output gradient")?;
         let co = l2.shape().dims()[0];
         let d = Dims::new(l1.shape().dims(), g)?;
         let hw = d.ho * d.wo;

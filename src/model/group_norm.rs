@@ -85,13 +85,6 @@ struct GnOp {
 #[derive(Clone, Copy, Debug)]
 struct GnBackward(GnOp);
 
-fn slice<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&s.as_slice::<f32>()?[a..b]),
-        None => candle_core::bail!("group_norm: {what} must be contiguous"),
-    }
-}
-
 /// Values summed in f32 lanes before each flush into an f64 total (keeps f32 rounding negligible).
 const BLOCK: usize = 64;
 /// f32 lanes of the vectorisable loops (one AVX register).
@@ -339,9 +332,9 @@ impl CustomOp3 for GnOp {
         s3: &CpuStorage,
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
-        let x = slice(s1, l1, "x")?;
-        let wb = slice(s2, l2, "weight/bias")?;
-        let t = slice(s3, l3, "shift")?;
+        let x = super::contiguous_f32(s1, l1, "group_norm: x")?;
+        let wb = super::contiguous_f32(s2, l2, "group_norm: weight/bias")?;
+        let t = super::contiguous_f32(s3, l3, "group_norm: shift")?;
         let dims = l1.shape().dims();
         let c = dims[1];
         let hw: usize = dims[2..].iter().product();
@@ -409,9 +402,9 @@ impl CustomOp3 for GnBackward {
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let op = self.0;
-        let x = slice(s1, l1, "x")?;
-        let dy = slice(s2, l2, "grad")?;
-        let params = slice(s3, l3, "weight/bias/shift")?;
+        let x = super::contiguous_f32(s1, l1, "group_norm: x")?;
+        let dy = super::contiguous_f32(s2, l2, "group_norm: grad")?;
+        let params = super::contiguous_f32(s3, l3, "group_norm: weight/bias/shift")?;
         let dims = l1.shape().dims();
         let (bsz, c) = (dims[0], dims[1]);
         if params.len() != 2 * c + bsz * c {

@@ -143,20 +143,13 @@ struct UpsampleX2;
 #[derive(Clone, Copy, Debug)]
 struct SumPoolX2;
 
-fn f32_slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&s.as_slice::<f32>()?[a..b]),
-        None => candle_core::bail!("upsample: input must be contiguous"),
-    }
-}
-
 impl CustomOp1 for UpsampleX2 {
     fn name(&self) -> &'static str {
         "upsample-nearest-x2"
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        let x = f32_slice(s, l)?;
+        let x = super::contiguous_f32(s, l, "upsample: input")?;
         let (b, c, h, w) = l.shape().dims4()?;
         let mut y = vec![0f32; 4 * x.len()];
         for (src, dst) in x.chunks(w).zip(y.chunks_mut(4 * w)) {
@@ -181,7 +174,7 @@ impl CustomOp1 for SumPoolX2 {
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        let g = f32_slice(s, l)?;
+        let g = super::contiguous_f32(s, l, "upsample: input")?;
         let (b, c, h2, w2) = l.shape().dims4()?;
         let (h, w) = (h2 / 2, w2 / 2);
         let mut x = vec![0f32; b * c * h * w];
