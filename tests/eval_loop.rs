@@ -87,6 +87,48 @@ fn progress_can_cancel() {
 }
 
 #[test]
+fn uncertainty_analysis_reports_each_registration_and_can_cancel() {
+    use tactile_derender::pose::threshold_contact;
+    use tactile_derender::uncertainty::analysis::{analyse_with_progress, Signature};
+    let src = source();
+    let eval = Evaluator::new(EvalConfig::default());
+    let pair = src.pair(0).unwrap();
+    let ctx = src.context();
+    let object = eval.object(&ctx.objects, &pair.object).unwrap();
+    let base = threshold_contact(&pair.signature, &pair.imprint, &eval.config.baseline);
+    let samples = vec![pair.target.clone(), pair.target.clone()];
+    let sig = Signature {
+        t_world_camera: pair.t_world_camera,
+        samples: &samples,
+        baseline: Some(&base),
+        truth: Some(pair.object_pose),
+        init: None,
+    };
+    // K-start search + 2 samples + baseline.
+    let mut seen = Vec::new();
+    let report = analyse_with_progress(&eval, &object, ctx, &sig, 3, &mut |d, t| {
+        seen.push((d, t));
+        true
+    })
+    .unwrap();
+    assert_eq!(seen, vec![(1, 4), (2, 4), (3, 4), (4, 4)]);
+    assert_eq!(report.samples.len(), 2);
+    assert!(
+        report.samples.iter().all(|s| s.position_mm < 0.5),
+        "{:?}",
+        report.samples
+    );
+    // Stopping after the second registration: no report, and no further registration ran.
+    let mut calls = 0;
+    let r = analyse_with_progress(&eval, &object, ctx, &sig, 3, &mut |d, _| {
+        calls += 1;
+        d < 2
+    });
+    assert!(matches!(r, Err(EvalError::Cancelled)));
+    assert_eq!(calls, 2);
+}
+
+#[test]
 fn dataset_split_source_feeds_the_loop() {
     use tactile_derender::dataset::{generate, Dataset, GenConfig, SplitName};
     use tactile_derender::metrics::sources::DatasetSource;

@@ -32,6 +32,30 @@ pub fn analyse(
     sig: &Signature<'_>,
     seed: u64,
 ) -> Result<UncertaintyReport, EvalError> {
+    analyse_with_progress(evaluator, object, ctx, sig, seed, &mut |_, _| true)
+}
+
+/// [`analyse`] reporting `progress(done, total)` after each registration (the K-start search when `sig.init` is
+/// `None`, every sample, the baseline); returning `false` stops it with [`EvalError::Cancelled`].
+pub fn analyse_with_progress(
+    evaluator: &Evaluator,
+    object: &ObjectModel,
+    ctx: &EvalContext,
+    sig: &Signature<'_>,
+    seed: u64,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+) -> Result<UncertaintyReport, EvalError> {
+    let total =
+        usize::from(sig.init.is_none()) + sig.samples.len() + usize::from(sig.baseline.is_some());
+    let mut done = 0;
+    let mut step = |done: &mut usize| {
+        *done += 1;
+        if progress(*done, total) {
+            Ok(())
+        } else {
+            Err(EvalError::Cancelled)
+        }
+    };
     let pose_err = |source| EvalError::Pose {
         object: "uncertainty".into(),
         source,
@@ -54,11 +78,13 @@ pub fn analyse(
                     break;
                 }
             }
-            found.ok_or_else(|| {
+            let found = found.ok_or_else(|| {
                 EvalError::Generator(
                     "no generated sample has any contact; nothing to register".into(),
                 )
-            })?
+            })?;
+            step(&mut done)?;
+            found
         }
     };
     let reference = sig.truth.unwrap_or(init);
@@ -83,6 +109,7 @@ pub fn analyse(
                 &object.symmetry,
             ));
         }
+        step(&mut done)?;
     }
     let baseline = match sig.baseline {
         Some(b) => evaluator
@@ -92,6 +119,9 @@ pub fn analyse(
             .map(|best| SampleError::new(best.pose, best.cost, reference, &object.symmetry)),
         None => None,
     };
+    if sig.baseline.is_some() {
+        step(&mut done)?;
+    }
     Ok(UncertaintyReport::new(
         reference,
         sig.truth.is_some(),

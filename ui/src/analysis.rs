@@ -54,6 +54,10 @@ pub struct DerenderView {
 pub struct PoseView {
     pub generation: u64,
     pub running: bool,
+    /// `(done, total)` registrations of the running analysis.
+    pub progress: Option<(usize, usize)>,
+    /// Set to stop the running analysis at its next registration.
+    pub cancel: Option<Arc<AtomicBool>>,
     pub result: Option<Box<PoseAnalysis>>,
     /// The sample highlighted by hovering the KDE plots.
     pub highlight: Option<usize>,
@@ -400,6 +404,7 @@ impl WorkbenchApp {
         let view = &mut self.analysis.pose;
         if generation == view.generation {
             view.running = false;
+            view.cancel = None;
             view.highlight = None;
             view.result = Some(analysis);
             self.errors.retain(|e| !e.starts_with("pose:"));
@@ -430,7 +435,13 @@ impl WorkbenchApp {
             samples: r.samples.clone(),
             seed: r.seed,
         };
-        pose_job::spawn(req, w.sender(), w.context())?;
+        if let Some(c) = view.cancel.take() {
+            c.store(true, Ordering::Relaxed);
+        }
+        let cancel = Arc::new(AtomicBool::new(false));
+        pose_job::spawn(req, cancel.clone(), w.sender(), w.context())?;
+        view.cancel = Some(cancel);
+        view.progress = None;
         view.running = true;
         view.result = None;
         self.state.view.tab = Tab::Pose;
@@ -506,9 +517,14 @@ impl WorkbenchApp {
             }
             Command::RunPose => self.run_pose().map_err(|e| e.context("pose")),
             Command::CancelPose => {
-                // Registration has no cancel point: forget its result instead.
-                self.analysis.pose.generation += 1;
-                self.analysis.pose.running = false;
+                let view = &mut self.analysis.pose;
+                if let Some(c) = view.cancel.take() {
+                    c.store(true, Ordering::Relaxed);
+                }
+                // The thread stops at its next registration; its answer (an error "cancelled") is then stale.
+                view.generation += 1;
+                view.running = false;
+                view.progress = None;
                 Ok(())
             }
             Command::ExportPose => self.export_pose().map_err(|e| e.context("export")),

@@ -308,6 +308,9 @@ impl WorkbenchApp {
                 WorkerMsg::Progress { job, done, total } => match job {
                     JobKind::Calibration => self.calibration.progress = Some((done, total)),
                     JobKind::Derender => self.analysis.derender.progress = Some((done, total)),
+                    JobKind::Pose if self.analysis.pose.running => {
+                        self.analysis.pose.progress = Some((done, total))
+                    }
                     _ => {}
                 },
                 WorkerMsg::Dataset(msg) => self.dataset_message(ctx, msg),
@@ -338,7 +341,10 @@ impl WorkbenchApp {
                             continue;
                         }
                         JobKind::Pose if generation != self.analysis.pose.generation => continue,
-                        JobKind::Pose => self.analysis.pose.running = false,
+                        JobKind::Pose => {
+                            self.analysis.pose.running = false;
+                            self.analysis.pose.cancel = None;
+                        }
                         _ => {}
                     }
                     self.error(message);

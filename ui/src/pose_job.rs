@@ -3,16 +3,19 @@
 //! cost), then the uncertainty analysis ([`tactile_derender::uncertainty::analysis::analyse`]): every sample and the
 //! threshold baseline registered from that start, errors against the true pose, KDE curves.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Sender;
+use std::sync::Arc;
+use std::time::Instant;
 
 use anyhow::{anyhow, Context, Result};
 use tactile_derender::image::Image;
-use tactile_derender::metrics::evaluate::{EvalConfig, EvalContext, Evaluator};
+use tactile_derender::metrics::evaluate::{EvalConfig, EvalContext, EvalError, Evaluator};
 use tactile_derender::objects::{ObjectSet, Symmetry};
 use tactile_derender::pose::{threshold_contact, InitStrategy};
 use tactile_derender::recon::{back_project, is_valid_depth};
 use tactile_derender::sim::Simulator;
-use tactile_derender::uncertainty::analysis::{analyse, Signature};
+use tactile_derender::uncertainty::analysis::{analyse_with_progress, Signature};
 
 use crate::derender::PoseContext;
 use crate::pose_view::{outline, PoseAnalysis};
@@ -30,8 +33,13 @@ pub struct PoseRequest {
     pub seed: u64,
 }
 
-/// Register the samples and the baseline (see the module docs).
-pub fn run(req: &PoseRequest) -> Result<PoseAnalysis> {
+/// Register the samples and the baseline (see the module docs), reporting `progress(done, total)` after each
+/// registration; `cancel` stops it at the next one.
+pub fn run(
+    req: &PoseRequest,
+    cancel: &AtomicBool,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<PoseAnalysis> {
     let c = &req.context;
     let sim = Simulator::new(c.sim.clone()).context("sensor configuration")?;
     let (name, objects, mesh, symmetry) = match &c.object {
@@ -85,6 +93,12 @@ pub fn run(req: &PoseRequest) -> Result<PoseAnalysis> {
         )
         .with_context(|| format!("registering sample {first}"))?
         .unwrap_or_default();
+    // Step 1 of 1 + samples + baseline: the K-start search above; `analyse` reports the rest.
+    let total = 2 + req.samples.len();
+    progress(1, total);
+    if cancel.load(Ordering::Relaxed) {
+        return Err(anyhow!("cancelled"));
+    }
     let baseline = threshold_contact(&c.signature, &req.imprint, &evaluator.config.baseline);
     let sig = Signature {
         t_world_camera: c.t_world_camera,
@@ -93,7 +107,15 @@ pub fn run(req: &PoseRequest) -> Result<PoseAnalysis> {
         truth: Some(c.truth),
         init: hypotheses.first().map(|h| h.pose),
     };
-    let report = analyse(&evaluator, &object, &ctx, &sig, req.seed)?;
+    let report =
+        analyse_with_progress(&evaluator, &object, &ctx, &sig, req.seed, &mut |done, _| {
+            progress(1 + done, total);
+            !cancel.load(Ordering::Relaxed)
+        })
+        .map_err(|e| match e {
+            EvalError::Cancelled => anyhow!("cancelled"),
+            e => anyhow!(e),
+        })?;
     let contacts = back_project(&req.samples[first], &ctx.intrinsics, &c.t_world_camera)
         .p_world
         .iter()
@@ -111,13 +133,32 @@ pub fn run(req: &PoseRequest) -> Result<PoseAnalysis> {
     })
 }
 
-/// Run `req` on its own thread, reporting through `tx`.
-pub fn spawn(req: PoseRequest, tx: Sender<WorkerMsg>, ctx: egui::Context) -> Result<()> {
+/// Run `req` on its own thread, reporting progress and the result through `tx`; setting `cancel` stops it.
+pub fn spawn(
+    req: PoseRequest,
+    cancel: Arc<AtomicBool>,
+    tx: Sender<WorkerMsg>,
+    ctx: egui::Context,
+) -> Result<()> {
     std::thread::Builder::new()
         .name("tnd-pose".into())
         .spawn(move || {
             let generation = req.generation;
-            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(&req)));
+            let mut last = Instant::now();
+            let mut progress = |done: usize, total: usize| {
+                if done == total || last.elapsed().as_millis() >= 16 {
+                    last = Instant::now();
+                    let _ = tx.send(WorkerMsg::Progress {
+                        job: JobKind::Pose,
+                        done,
+                        total,
+                    });
+                    ctx.request_repaint();
+                }
+            };
+            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                run(&req, &cancel, &mut progress)
+            }));
             let msg = match result {
                 Ok(Ok(a)) => WorkerMsg::Posed {
                     generation,

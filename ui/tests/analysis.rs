@@ -415,6 +415,39 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
         .query_by_label_contains("4 of 4 samples registered")
         .is_some());
 
+    // Hovering the position KDE highlights the sample nearest to the pointer: near its left end (below every error:
+    // the curve extends past the samples; the first ~10 % of the widget is the y axis) it picks the smallest error,
+    // near its right end the largest.
+    let by_error = |pick_max: bool| {
+        let r = h.state().analysis.pose.result.as_ref().unwrap();
+        let k = (0..r.report.samples.len())
+            .max_by(|&a, &b| {
+                let (ea, eb) = (
+                    r.report.samples[a].position_mm,
+                    r.report.samples[b].position_mm,
+                );
+                if pick_max {
+                    ea.total_cmp(&eb)
+                } else {
+                    eb.total_cmp(&ea)
+                }
+            })
+            .unwrap();
+        r.sample_of(k)
+    };
+    let (smallest, largest) = (by_error(false), by_error(true));
+    assert_ne!(
+        smallest, largest,
+        "the four samples should have distinct errors"
+    );
+    let rect = h.get_by_label("position error (mm) KDE").rect();
+    let at = |f: f32| rect.left() + f * rect.width();
+    for (x, want) in [(at(0.15), smallest), (at(0.95), largest)] {
+        h.hover_at(egui::pos2(x, rect.center().y));
+        h.run_ok();
+        assert_eq!(h.state().analysis.pose.highlight, want, "hover at x = {x}");
+    }
+
     // Export: the evaluation stage's CSV and PNG.
     let mut v = h.state().state.view.clone();
     v.export_dir = dir.path().join("out");
@@ -432,6 +465,23 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     }
     let csv = std::fs::read_to_string(dir.path().join("out/pose/samples.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + 4 + 1, "{csv}");
+
+    // A cancelled registration leaves no result (even if its thread was about to finish) and no error.
+    h.get_by_label("Register samples").click();
+    h.run_ok();
+    assert!(h.state().analysis.pose.running);
+    h.get_by_label("Cancel registration").click();
+    h.run_ok();
+    assert!(!h.state().analysis.pose.running);
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(3) {
+        h.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    h.run_ok();
+    assert!(h.state().analysis.pose.result.is_none());
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    assert!(h.query_by_label("Register samples").is_some());
 }
 
 #[test]

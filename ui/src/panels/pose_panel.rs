@@ -25,7 +25,18 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             if ui.button("Cancel registration").clicked() {
                 cmds.push(Command::CancelPose);
             }
-            ui.label("registering the samples…");
+            match pose.progress {
+                Some((done, total)) => {
+                    ui.add(
+                        egui::ProgressBar::new(done as f32 / total.max(1) as f32)
+                            .desired_width(220.0)
+                            .text(format!("registered {done} / {total}")),
+                    );
+                }
+                None => {
+                    ui.label("registering the samples…");
+                }
+            }
         } else if ui
             .add_enabled(has_samples, egui::Button::new("Register samples"))
             .on_disabled_hover_text(
@@ -273,7 +284,17 @@ fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Op
             }
             p.pointer_coordinate()
         });
-    if let Some(pos) = response.inner {
+    // Name the plot for screen readers (and for tests, which hover it by this label).
+    let name = format!("{label} KDE");
+    response
+        .response
+        .widget_info(|| egui::WidgetInfo::labeled(egui::accesskit::Role::Figure, true, &name));
+    // `pointer_coordinate` is the pointer anywhere on screen in this plot's coordinates: only act while it is over
+    // this plot (else the other KDE plot's answer is overwritten every frame).
+    if let Some(pos) = response
+        .inner
+        .filter(|_| response.response.contains_pointer())
+    {
         *highlight = rep
             .samples
             .iter()
