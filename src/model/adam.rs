@@ -53,9 +53,41 @@ impl Adam {
             let denom = ((v.sqrt()? / bc2.sqrt())? + self.eps)?;
             let update = ((&m / denom)? * (self.lr / bc1))?;
             var.set(&(var.as_tensor() - update)?)?;
-            self.m[i] = m;
-            self.v[i] = v;
+            // Plain values: the moments must not carry an op graph from one step into the next.
+            self.m[i] = m.detach();
+            self.v[i] = v.detach();
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::Device;
+
+    #[test]
+    fn first_step_moves_each_weight_by_lr_against_its_gradient_and_keeps_plain_moments() {
+        let w = Var::from_slice(&[1.0f32, -2.0], 2, &Device::Cpu).unwrap();
+        let mut adam = Adam::new(vec![("w".into(), w.clone())], 0.1).unwrap();
+        for _ in 0..2 {
+            // f = Σ w², ∇f = 2w.
+            let grads = w
+                .as_tensor()
+                .sqr()
+                .unwrap()
+                .sum_all()
+                .unwrap()
+                .backward()
+                .unwrap();
+            adam.step(&grads).unwrap();
+        }
+        // Step 1: m̂ = g, v̂ = g², so w moves by lr·g/(|g| + ε) = ±0.1. Step 2 (same sign) moves another ~0.1.
+        let got = w.as_tensor().to_vec1::<f32>().unwrap();
+        assert!(
+            (got[0] - 0.8).abs() < 1e-3 && (got[1] + 1.8).abs() < 1e-3,
+            "{got:?}"
+        );
+        assert!(adam.m.iter().chain(&adam.v).all(|t| !t.track_op()));
     }
 }

@@ -129,6 +129,12 @@ pub struct TactileConfig {
     pub imprint: Normalisation,
     /// Target (in-contact depth X0) normalisation.
     pub target: Normalisation,
+    /// Decoded sample pixels shallower than this are "no contact" (0 m), metres. The model never outputs the
+    /// no-contact code (0 m, −1 with the default normalisation) exactly, and a background pixel decoded to, say,
+    /// 7 mm would back-project to a point just in front of the camera. The default, 0.05 m, is the middle of the
+    /// default target range (model value 0): in-contact depths of the default sensor are 0.076–0.090 m (model
+    /// 0.52–0.80), so the cut has a wide margin on both sides.
+    pub contact_min_depth_m: f32,
     /// Diffusion steps T of the training schedule (the paper: 250).
     pub num_train_timesteps: usize,
     /// diffusers `beta_schedule`; only `"squaredcos_cap_v2"` (Nichol & Dhariwal's cosine schedule) is supported.
@@ -140,6 +146,7 @@ impl Default for TactileConfig {
         Self {
             imprint: Normalisation::default_imprint(),
             target: Normalisation::default_target(),
+            contact_min_depth_m: 0.05,
             num_train_timesteps: 250,
             beta_schedule: "squaredcos_cap_v2".into(),
         }
@@ -289,6 +296,15 @@ impl UNet2DConfig {
         }
         self.tactile_derender.imprint.validate("imprint", source)?;
         self.tactile_derender.target.validate("target", source)?;
+        let cut = self.tactile_derender.contact_min_depth_m;
+        if !(cut.is_finite() && cut >= 0.0) {
+            return Err(ModelError::Config {
+                source_name: source.into(),
+                message: format!(
+                    "tactile_derender.contact_min_depth_m must be finite and not negative (found {cut})"
+                ),
+            });
+        }
         Ok(())
     }
 }

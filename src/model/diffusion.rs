@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::checkpoint::{assign, build, locate, ModelVars};
-use super::config::UNet2DConfig;
+use super::config::{TactileConfig, UNet2DConfig};
 use super::sampler::{self, SamplerKind};
 use super::schedule::NoiseSchedule;
 use super::unet::UNet2DModel;
@@ -144,8 +144,37 @@ impl DiffusionModel {
             .map(|s| Image {
                 width: w,
                 height: h,
-                data: s[..h * w].iter().map(|&v| norm.target.inverse(v)).collect(),
+                data: s[..h * w].iter().map(|&v| decode_depth(norm, v)).collect(),
             })
             .collect())
+    }
+}
+
+/// A model output (model units) as an in-contact depth in metres: the target normalisation inverted, and 0 (no
+/// contact) below `contact_min_depth_m`.
+pub fn decode_depth(cfg: &TactileConfig, model: f32) -> f32 {
+    let d = cfg.target.inverse(model);
+    if d < cfg.contact_min_depth_m {
+        0.0
+    } else {
+        d
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decoding_maps_the_no_contact_side_to_zero() {
+        let cfg = TactileConfig::default();
+        // The no-contact code and values near it: exactly 0 m.
+        for v in [-1.0f32, -0.86, -0.2, -0.001] {
+            assert_eq!(decode_depth(&cfg, v), 0.0, "{v}");
+        }
+        // In-contact codes decode through the normalisation: (v · 0.05 + 0.05) m.
+        for (v, m) in [(0.0f32, 0.05f32), (0.52, 0.076), (0.8, 0.09)] {
+            assert!((decode_depth(&cfg, v) - m).abs() < 1e-6, "{v}");
+        }
     }
 }

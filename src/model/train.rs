@@ -214,11 +214,7 @@ pub fn train(
         let grads = loss.backward()?;
         run.adam.step(&grads)?;
         if let (Some(d), Some(ema)) = (tc.ema, run.ema.as_mut()) {
-            for (name, var) in &run.adam.vars {
-                if let Some(e) = ema.get_mut(name) {
-                    *e = ((&*e * d)? + (var.as_tensor() * (1.0 - d))?)?;
-                }
-            }
+            update_ema(ema, &run.adam.vars, d)?;
         }
         run.step += 1;
         last_loss = value;
@@ -262,6 +258,22 @@ pub fn train(
 }
 
 /// The ε-prediction loss on batch `b` with the randomness of `step` (`u64::MAX`: the fixed validation draw).
+/// `ema ← d·ema + (1 − d)·w` for every named weight. The result is detached: `w` is a tracked variable, so
+/// otherwise every step's EMA would keep the previous one (and its intermediates) alive through the op graph — a leak
+/// of 13 MB a step for the default model, which ran a 24 GiB machine out of memory within an hour.
+fn update_ema(
+    ema: &mut BTreeMap<String, Tensor>,
+    vars: &[(String, candle_core::Var)],
+    d: f64,
+) -> Result<(), ModelError> {
+    for (name, var) in vars {
+        if let Some(e) = ema.get_mut(name) {
+            *e = ((&*e * d)? + (var.as_tensor() * (1.0 - d))?)?.detach();
+        }
+    }
+    Ok(())
+}
+
 fn loss_on(
     run: &Run,
     schedule: &NoiseSchedule,
@@ -529,4 +541,29 @@ fn truncate_log(run_dir: &Path, step: u64) -> Result<(), ModelError> {
         })?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::{Device, Var};
+
+    #[test]
+    fn ema_update_is_the_weighted_mean_and_holds_no_graph() {
+        let w = Var::from_slice(&[1.0f32, 3.0], 2, &Device::Cpu).unwrap();
+        let vars = vec![("w".to_string(), w)];
+        let mut ema = BTreeMap::new();
+        ema.insert(
+            "w".to_string(),
+            Tensor::new(&[0.0f32, 1.0], &Device::Cpu).unwrap(),
+        );
+        for _ in 0..3 {
+            update_ema(&mut ema, &vars, 0.5).unwrap();
+        }
+        // 0 → 0.5 → 0.75 → 0.875 and 1 → 2 → 2.5 → 2.75.
+        let e = &ema["w"];
+        assert_eq!(e.to_vec1::<f32>().unwrap(), vec![0.875, 2.75]);
+        // A tracked result would chain every previous EMA tensor (the leak this guards against).
+        assert!(!e.track_op());
+    }
 }
