@@ -1,0 +1,270 @@
+//! Single-precision GEMM for the tiled convolution (paper IV.B, speed on the CPU).
+//!
+//! [`super::conv_tiled`] needs three row-major products per tile: the forward `Y[co, t] += W[co, k] · cols[k, t]`,
+//! the input gradient `dcols[k, t] = Wᵀ[k, co] · dY[co, t]` (both [`PackedA::matmul`]: A is the weight, packed
+//! once per convolution) and the weight gradient `dW[co, k] (+)= dY[co, t] · cols[k, t]ᵀ` ([`matmul_nt`]).
+//! On CPUs with AVX-512 they run our kernels in [`avx512`]; elsewhere (other architectures, older x86, or
+//! [`GemmBackend::GemmCrate`] asked for explicitly) the `gemm` crate, whose x86 kernel on stable Rust is AVX2.
+//! The choice is made once per process ([`GemmBackend::detect`]). Both backends sum every output element in an
+//! order fixed by the sizes, so re-runs on the same machine are bit-identical.
+
+#[cfg(target_arch = "x86_64")]
+pub mod avx512;
+
+use std::sync::OnceLock;
+
+use candle_core::Result;
+use gemm::{gemm, Parallelism};
+
+/// Which GEMM implementation runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GemmBackend {
+    /// Our AVX-512 kernels (x86-64 with `avx512f` only).
+    Avx512,
+    /// The `gemm` crate (portable; AVX2 + FMA on x86-64).
+    GemmCrate,
+}
+
+impl GemmBackend {
+    /// The fastest backend this CPU runs, detected on first use and cached.
+    pub fn detect() -> Self {
+        static DETECTED: OnceLock<GemmBackend> = OnceLock::new();
+        *DETECTED.get_or_init(|| {
+            if Self::Avx512.is_available() {
+                Self::Avx512
+            } else {
+                Self::GemmCrate
+            }
+        })
+    }
+
+    /// Whether this CPU can run the backend.
+    pub fn is_available(self) -> bool {
+        match self {
+            Self::GemmCrate => true,
+            #[cfg(target_arch = "x86_64")]
+            Self::Avx512 => std::arch::is_x86_feature_detected!("avx512f"),
+            #[cfg(not(target_arch = "x86_64"))]
+            Self::Avx512 => false,
+        }
+    }
+
+    /// `self` if this CPU runs it, else the `gemm` crate.
+    fn usable(self) -> Self {
+        if self.is_available() {
+            self
+        } else {
+            Self::GemmCrate
+        }
+    }
+}
+
+/// Whether a row-major `rows × cols` matrix at row stride `ld` fits in `len` floats.
+fn fits(len: usize, rows: usize, cols: usize, ld: usize) -> bool {
+    rows == 0 || cols == 0 || ((rows - 1) * ld + cols <= len && (rows == 1 || ld >= cols))
+}
+
+/// The left operand `A` (`m × k`) of `C = A · B`, laid out once for the backend (the weight of a convolution is
+/// packed once per call and shared by every tile and thread).
+#[derive(Clone, Debug)]
+pub struct PackedA {
+    backend: GemmBackend,
+    m: usize,
+    k: usize,
+    /// AVX-512: panels of [`avx512::MR`] rows; `gemm` crate: row-major `m × k`.
+    data: Vec<f32>,
+}
+
+impl PackedA {
+    /// Packs `A[i, p] = a[i · rs + p · cs]` for the detected backend (`rs = k, cs = 1` for a row-major A,
+    /// `rs = 1, cs = m` for the transpose of a row-major `k × m` matrix).
+    pub fn new(m: usize, k: usize, a: &[f32], rs: usize, cs: usize) -> Result<Self> {
+        Self::with_backend(GemmBackend::detect(), m, k, a, rs, cs)
+    }
+
+    /// As [`PackedA::new`] for a given backend (the `gemm` crate where the CPU lacks the one asked for).
+    pub fn with_backend(
+        backend: GemmBackend,
+        m: usize,
+        k: usize,
+        a: &[f32],
+        rs: usize,
+        cs: usize,
+    ) -> Result<Self> {
+        if m > 0 && k > 0 && (m - 1) * rs + (k - 1) * cs >= a.len() {
+            candle_core::bail!(
+                "sgemm: A of {m}x{k} (strides {rs}, {cs}) does not fit {} floats",
+                a.len()
+            );
+        }
+        let backend = backend.usable();
+        let data = match backend {
+            #[cfg(target_arch = "x86_64")]
+            GemmBackend::Avx512 => avx512::pack_a(m, k, a, rs, cs),
+            _ => {
+                let mut d = Vec::with_capacity(m * k);
+                for i in 0..m {
+                    d.extend((0..k).map(|p| a[i * rs + p * cs]));
+                }
+                d
+            }
+        };
+        Ok(Self {
+            backend,
+            m,
+            k,
+            data,
+        })
+    }
+
+    /// The backend this operand was packed for.
+    pub fn backend(&self) -> GemmBackend {
+        self.backend
+    }
+
+    /// `C[m, n] = (accumulate ? C : 0) + A · B[k, n]`, B and C row-major at row strides `ldb` and `ldc`.
+    pub fn matmul(
+        &self,
+        n: usize,
+        b: &[f32],
+        ldb: usize,
+        c: &mut [f32],
+        ldc: usize,
+        accumulate: bool,
+    ) -> Result<()> {
+        if !fits(c.len(), self.m, n, ldc) {
+            candle_core::bail!("sgemm: C of {}x{n} (stride {ldc}) does not fit", self.m);
+        }
+        // SAFETY: C was checked to lie inside the exclusively borrowed slice.
+        unsafe { self.matmul_raw(n, b, ldb, c.as_mut_ptr(), ldc, accumulate) }
+    }
+
+    /// As [`PackedA::matmul`] with C given by pointer, for outputs that several threads fill in disjoint blocks.
+    ///
+    /// # Safety
+    /// `c` points to `m` rows of `n` floats at stride `ldc`, valid for reads and writes, and no one else reads or
+    /// writes those elements during the call.
+    pub unsafe fn matmul_raw(
+        &self,
+        n: usize,
+        b: &[f32],
+        ldb: usize,
+        c: *mut f32,
+        ldc: usize,
+        accumulate: bool,
+    ) -> Result<()> {
+        let (m, k) = (self.m, self.k);
+        if !fits(b.len(), k, n, ldb) {
+            candle_core::bail!(
+                "sgemm: B of {k}x{n} (stride {ldb}) does not fit {} floats",
+                b.len()
+            );
+        }
+        if m == 0 || n == 0 {
+            return Ok(());
+        }
+        match self.backend {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: the backend is usable (checked when packing); sizes checked above and by the caller.
+            GemmBackend::Avx512 => {
+                avx512::gemm_packed(m, n, k, &self.data, b.as_ptr(), ldb, c, ldc, accumulate)
+            }
+            // SAFETY: as above; A is row-major m × k.
+            _ => gemm(
+                m,
+                n,
+                k,
+                c,
+                1,
+                ldc as isize,
+                accumulate,
+                self.data.as_ptr(),
+                1,
+                k as isize,
+                b.as_ptr(),
+                1,
+                ldb as isize,
+                1.0,
+                1.0,
+                false,
+                false,
+                false,
+                Parallelism::None,
+            ),
+        }
+        Ok(())
+    }
+}
+
+/// `C[m, n] = (accumulate ? C : 0) + A[m, k] · B[n, k]ᵀ`, all row-major (strides `lda`, `ldb`, `ldc`): the weight
+/// gradient `dY · colsᵀ`, with both operands contiguous along the summed dimension.
+#[allow(clippy::too_many_arguments)]
+pub fn matmul_nt(
+    backend: GemmBackend,
+    (m, n, k): (usize, usize, usize),
+    a: &[f32],
+    lda: usize,
+    b: &[f32],
+    ldb: usize,
+    c: &mut [f32],
+    ldc: usize,
+    accumulate: bool,
+) -> Result<()> {
+    if !fits(a.len(), m, k, lda) || !fits(b.len(), n, k, ldb) || !fits(c.len(), m, n, ldc) {
+        candle_core::bail!(
+            "sgemm: A·Bᵀ of {m}x{k} · ({n}x{k})ᵀ does not fit its buffers ({}, {}, {} floats)",
+            a.len(),
+            b.len(),
+            c.len()
+        );
+    }
+    if m == 0 || n == 0 {
+        return Ok(());
+    }
+    match backend.usable() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: avx512f present (usable); every matrix checked to lie inside its slice.
+        GemmBackend::Avx512 => unsafe {
+            avx512::gemm_nt(
+                m,
+                n,
+                k,
+                a.as_ptr(),
+                lda,
+                b.as_ptr(),
+                ldb,
+                c.as_mut_ptr(),
+                ldc,
+                accumulate,
+            )
+        },
+        // SAFETY: every matrix checked to lie inside its slice; B is read as its transpose (column stride ldb).
+        _ => unsafe {
+            gemm(
+                m,
+                n,
+                k,
+                c.as_mut_ptr(),
+                1,
+                ldc as isize,
+                accumulate,
+                a.as_ptr(),
+                1,
+                lda as isize,
+                b.as_ptr(),
+                ldb as isize,
+                1,
+                1.0,
+                1.0,
+                false,
+                false,
+                false,
+                Parallelism::None,
+            )
+        },
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;
