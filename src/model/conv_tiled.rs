@@ -4,7 +4,7 @@
 //! the plain im2col path ([`super::conv`]) is memory-bound at the U-Net's small channel counts. Here each work item
 //! is one sample × one tile of output pixels: its im2col block (`K × T`, ≤ 512 KB) stays in cache and goes straight
 //! into a GEMM ([`super::sgemm`]: AVX-512 kernels where the CPU has them, else the `gemm` crate) that writes the NCHW
-//! output in place (bias pre-filled, no transpose). The backward, per sample, re-forms each tile's block to
+//! output in place (each row started from its bias, no transpose). The backward, per sample, re-forms each tile's block to
 //! accumulate `dWᵀ += cols·dYᵀ` and scatters `Wᵀ·dY` back (col2im). Work is split by
 //! sample (and by tile for a single-sample forward) with a fixed summation order, so results are deterministic.
 
@@ -12,7 +12,7 @@ use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
 
 use super::conv::ConvGeom;
-use super::sgemm::{matmul_nt, PackedA};
+use super::sgemm::{matmul_nt, Init, PackedA};
 
 /// Forward op on `(x [B,Cin,H,W], w [Cout,Cin,k,k], bias [Cout])`.
 #[derive(Clone, Copy, Debug)]
@@ -205,11 +205,8 @@ impl CustomOp3 for TiledConv {
             );
         }
         let hw = d.ho * d.wo;
-        // Pre-fill with the bias; the GEMM accumulates onto it.
-        let mut y = Vec::with_capacity(d.b * co * hw);
-        for i in 0..d.b * co {
-            y.resize(y.len() + hw, bias[i % co]);
-        }
+        // The GEMM starts every output row from its bias (no pre-filled output to read back).
+        let mut y = vec![0f32; d.b * co * hw];
         let yp = SendPtr(y.as_mut_ptr());
         let w_packed = PackedA::new(co, d.k, w, d.k, 1)?;
         let items: Vec<(usize, usize)> = (0..d.b)
@@ -231,7 +228,7 @@ impl CustomOp3 for TiledConv {
                         t,
                         yp.ptr().add(b * co * hw + p0),
                         hw,
-                        true,
+                        Init::RowBias(bias),
                     )
                 }
             },
@@ -318,7 +315,7 @@ impl CustomOp3 for TiledConvBackward {
                             tile > 0,
                         )?;
                         // dcols[k, t] = Wᵀ[k, co] · dY[co, p0..p0+t]
-                        wt_packed.matmul(t, &dyb[p0..], hw, &mut dcols[..k * t], t, false)?;
+                        wt_packed.matmul(t, &dyb[p0..], hw, &mut dcols[..k * t], t, Init::Zero)?;
                         col2im_tile(&dcols[..k * t], &d, g, p0, t, dxb);
                     }
                     Ok(())

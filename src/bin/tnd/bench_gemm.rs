@@ -7,7 +7,7 @@ use clap::Args;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
-use tactile_derender::model::sgemm::{matmul_nt, GemmBackend, PackedA};
+use tactile_derender::model::sgemm::{matmul_nt, GemmBackend, Init, PackedA};
 
 use crate::bench::median_time;
 
@@ -21,16 +21,19 @@ pub struct GemmBenchArgs {
     pub runs: usize,
 }
 
-/// `(co, k, t, hw)` of tiles of the default model at 64 × 64 (tile `t` = 131072 / k clamped to the image, as in
-/// `conv_tiled`), from the first 3 × 3 convolution down to the 8 × 8 up block's concatenated input.
-const SHAPES: [(usize, usize, usize, usize); 7] = [
+/// `(co, k, t, hw)` of the default model's convolutions at 64 × 64 that take the most time in a training step
+/// (tile `t` = 131072 / k clamped to the image, as in `conv_tiled`), plus its first and last layers (`conv_in`,
+/// and `conv_out` with one output channel).
+const SHAPES: [(usize, usize, usize, usize); 9] = [
     (16, 18, 4096, 4096),
     (16, 144, 910, 4096),
+    (16, 288, 455, 4096),
+    (16, 432, 303, 4096),
     (32, 288, 455, 1024),
+    (32, 864, 151, 1024),
     (64, 576, 227, 256),
     (64, 1152, 64, 64),
-    (16, 288, 455, 4096),
-    (64, 128, 256, 256),
+    (1, 144, 910, 4096),
 ];
 
 fn random(rng: &mut ChaCha8Rng, n: usize) -> Vec<f32> {
@@ -71,11 +74,11 @@ pub fn run(a: &GemmBenchArgs) -> Result<()> {
                 });
                 s / reps as f64
             };
-            let forward = time(&mut || pw.matmul(t, &cols, t, &mut y, hw, true));
+            let forward = time(&mut || pw.matmul(t, &cols, t, &mut y, hw, Init::Accumulate));
             // dWᵀ[k, co] += cols[k, t] · dY[co, t]ᵀ (the convolution's orientation).
             let weight_grad =
                 time(&mut || matmul_nt(backend, (k, co, t), &cols, t, &dy, hw, &mut dw, co, true));
-            let input_grad = time(&mut || pwt.matmul(t, &dy, hw, &mut dcols, t, false));
+            let input_grad = time(&mut || pwt.matmul(t, &dy, hw, &mut dcols, t, Init::Zero));
             if let Some(e) = err {
                 return Err(e.into());
             }

@@ -15,6 +15,7 @@
 //! Every output element is summed in an order fixed by the sizes alone (no threads here, no run-time
 //! heuristics), so repeated runs are bit-identical.
 
+use super::Init;
 use core::arch::x86_64::{
     __m512, __mmask16, _mm512_castpd_ps, _mm512_castps_pd, _mm512_fmadd_ps, _mm512_loadu_ps,
     _mm512_mask_storeu_ps, _mm512_maskz_loadu_ps, _mm512_set1_ps, _mm512_setzero_ps,
@@ -54,14 +55,40 @@ fn lane_mask(w: usize) -> __mmask16 {
     }
 }
 
-/// One `R × (16 · NV)` block: `C = (load_c ? C : 0) + A[R, kc] · B[kc, 16 · NV]`, where row `r` of A is read
+/// How a register block of C starts before the products are added.
+#[derive(Clone, Copy)]
+enum Start {
+    /// From zero.
+    Zero,
+    /// From the values in C (accumulate, or a later block of K).
+    LoadC,
+    /// Row `r` from `init[r]` (a per-row bias), without reading C.
+    Row(*const f32),
+}
+
+impl Start {
+    /// The start of the first block of K for `Init` at rows from `row0`, and `LoadC` for later blocks.
+    ///
+    /// # Safety
+    /// For `Init::RowBias`, `row0` is inside the bias.
+    unsafe fn first(init: Init, row0: usize, k0: usize) -> Self {
+        match init {
+            _ if k0 > 0 => Self::LoadC,
+            Init::Zero => Self::Zero,
+            Init::Accumulate => Self::LoadC,
+            Init::RowBias(bias) => Self::Row(bias.as_ptr().add(row0)),
+        }
+    }
+}
+
+/// One `R × (16 · NV)` block: `C = start + A[R, kc] · B[kc, 16 · NV]`, where row `r` of A is read
 /// at `a[r] + p · a_step`, the last vector of each row of B and C covers only the lanes in `mask`, and only the
 /// first `mr` rows of C are read and written.
 ///
 /// # Safety
 /// avx512f; `a[r] + p · a_step` is readable for `p < kc`; for every `p < kc`, `b + p · ldb` holds
-/// `16 · (NV - 1)` floats plus the lanes in `mask`; `c + r · ldc` likewise for `r < mr`, valid for reads (when
-/// `load_c`) and writes.
+/// `16 · (NV - 1)` floats plus the lanes in `mask`; `c + r · ldc` likewise for `r < mr`, valid for reads (for
+/// `Start::LoadC`) and writes; `Start::Row(init)` has `mr` readable values.
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
 unsafe fn kernel<const R: usize, const NV: usize>(
@@ -74,15 +101,25 @@ unsafe fn kernel<const R: usize, const NV: usize>(
     ldc: usize,
     mr: usize,
     mask: __mmask16,
-    load_c: bool,
+    start: Start,
 ) {
     let mut acc = [[_mm512_setzero_ps(); NV]; R];
-    if load_c {
-        for r in 0..R {
-            if r < mr {
-                for v in 0..NV {
-                    let m = if v + 1 == NV { mask } else { 0xFFFF };
-                    acc[r][v] = _mm512_maskz_loadu_ps(m, c.add(r * ldc + 16 * v));
+    match start {
+        Start::Zero => {}
+        Start::LoadC => {
+            for r in 0..R {
+                if r < mr {
+                    for v in 0..NV {
+                        let m = if v + 1 == NV { mask } else { 0xFFFF };
+                        acc[r][v] = _mm512_maskz_loadu_ps(m, c.add(r * ldc + 16 * v));
+                    }
+                }
+            }
+        }
+        Start::Row(init) => {
+            for r in 0..R {
+                if r < mr {
+                    acc[r] = [_mm512_set1_ps(*init.add(r)); NV];
                 }
             }
         }
@@ -119,12 +156,11 @@ unsafe fn kernel<const R: usize, const NV: usize>(
     }
 }
 
-/// `C[m, n] = (accumulate ? C : 0) + A · B` with A packed by [`pack_a`] (`m × k`) and B row-major (`k × n`, row
-/// stride `ldb`).
+/// `C[m, n] = init + A · B` with A packed by [`pack_a`] (`m × k`) and B row-major (`k × n`, row stride `ldb`).
 ///
 /// # Safety
-/// avx512f must be available; `pa` comes from [`pack_a`] with these `m`, `k`; `b` holds rows `0..k` of `n`
-/// floats at stride `ldb`; `c` points to `m` rows of `n` floats at stride `ldc`, valid for reads and writes and
+/// avx512f must be available; `pa` comes from [`pack_a`] with these `m`, `k`; an `Init::RowBias` holds `m`
+/// values; `b` holds rows `0..k` of `n` floats at stride `ldb`; `c` points to `m` rows of `n` floats at stride `ldc`, valid for reads and writes and
 /// not accessed by anyone else during the call.
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments)]
@@ -137,12 +173,15 @@ pub unsafe fn gemm_packed(
     ldb: usize,
     c: *mut f32,
     ldc: usize,
-    accumulate: bool,
+    init: Init,
 ) {
     if k == 0 {
-        if !accumulate {
-            for i in 0..m {
-                core::ptr::write_bytes(c.add(i * ldc), 0, n);
+        for i in 0..m {
+            let row = core::slice::from_raw_parts_mut(c.add(i * ldc), n);
+            match init {
+                Init::Zero => row.fill(0.0),
+                Init::Accumulate => {}
+                Init::RowBias(bias) => row.fill(bias[i]),
             }
         }
         return;
@@ -160,11 +199,11 @@ pub unsafe fn gemm_packed(
                 let panel = pa.as_ptr().add((ib * k + k0) * MR);
                 let ap: [*const f32; MR] = core::array::from_fn(|r| panel.add(r));
                 let cp = c.add(ib * MR * ldc + j0);
-                let load_c = accumulate || k0 > 0;
+                let start = Start::first(init, ib * MR, k0);
                 match nv {
-                    1 => kernel::<MR, 1>(kc, &ap, MR, bp, ldb, cp, ldc, mr, mask, load_c),
-                    2 => kernel::<MR, 2>(kc, &ap, MR, bp, ldb, cp, ldc, mr, mask, load_c),
-                    _ => kernel::<MR, 3>(kc, &ap, MR, bp, ldb, cp, ldc, mr, mask, load_c),
+                    1 => kernel::<MR, 1>(kc, &ap, MR, bp, ldb, cp, ldc, mr, mask, start),
+                    2 => kernel::<MR, 2>(kc, &ap, MR, bp, ldb, cp, ldc, mr, mask, start),
+                    _ => kernel::<MR, 3>(kc, &ap, MR, bp, ldb, cp, ldc, mr, mask, start),
                 }
             }
         }
@@ -229,7 +268,11 @@ pub unsafe fn gemm_nt(
             for k0 in (0..k).step_by(KC) {
                 let kc = KC.min(k - k0);
                 let bp = bt.as_ptr().add(k0 * n + j0);
-                let load_c = accumulate || k0 > 0;
+                let start = if accumulate || k0 > 0 {
+                    Start::LoadC
+                } else {
+                    Start::Zero
+                };
                 match nv {
                     1 => nt_rows::<24, 1>(
                         (m, kc),
@@ -237,7 +280,7 @@ pub unsafe fn gemm_nt(
                         (bp, n),
                         (c.add(j0), ldc),
                         mask,
-                        load_c,
+                        start,
                     ),
                     2 => nt_rows::<12, 2>(
                         (m, kc),
@@ -245,7 +288,7 @@ pub unsafe fn gemm_nt(
                         (bp, n),
                         (c.add(j0), ldc),
                         mask,
-                        load_c,
+                        start,
                     ),
                     _ => nt_rows::<8, 3>(
                         (m, kc),
@@ -253,7 +296,7 @@ pub unsafe fn gemm_nt(
                         (bp, n),
                         (c.add(j0), ldc),
                         mask,
-                        load_c,
+                        start,
                     ),
                 }
             }
@@ -283,12 +326,12 @@ unsafe fn nt_rows<const R: usize, const NV: usize>(
     (b, ldb): (*const f32, usize),
     (c, ldc): (*mut f32, usize),
     mask: __mmask16,
-    load_c: bool,
+    start: Start,
 ) {
     for i0 in (0..m).step_by(R) {
         let mr = R.min(m - i0);
         let ap: [*const f32; R] = core::array::from_fn(|r| a.add((i0 + r.min(mr - 1)) * lda));
-        kernel::<R, NV>(kc, &ap, 1, b, ldb, c.add(i0 * ldc), ldc, mr, mask, load_c);
+        kernel::<R, NV>(kc, &ap, 1, b, ldb, c.add(i0 * ldc), ldc, mr, mask, start);
     }
 }
 

@@ -78,16 +78,17 @@ fn run_nn(
     let (b, ldb) = (random(rng, k * (n + 3)), n + 3);
     let ldc = n + 5;
     let c0 = random(rng, m * ldc);
-    for accumulate in [true, false] {
+    let bias = random(rng, m);
+    for init in [Init::Accumulate, Init::Zero, Init::RowBias(&bias)] {
         let mut want = vec![0f64; m * n];
         for i in 0..m {
             for j in 0..n {
-                let init = if accumulate {
-                    f64::from(c0[i * ldc + j])
-                } else {
-                    0.0
+                let start = match init {
+                    Init::Accumulate => f64::from(c0[i * ldc + j]),
+                    Init::Zero => 0.0,
+                    Init::RowBias(bias) => f64::from(bias[i]),
                 };
-                want[i * n + j] = init
+                want[i * n + j] = start
                     + (0..k)
                         .map(|p| f64::from(a[i * rs + p * cs]) * f64::from(b[p * ldb + j]))
                         .sum::<f64>();
@@ -96,12 +97,12 @@ fn run_nn(
         let pa = PackedA::with_backend(backend, m, k, &a, rs, cs).unwrap();
         assert_eq!(pa.backend(), backend);
         let mut c = c0.clone();
-        pa.matmul(n, &b, ldb, &mut c, ldc, accumulate).unwrap();
-        let what = format!("{backend:?} nn transposed={transposed} accumulate={accumulate}");
+        pa.matmul(n, &b, ldb, &mut c, ldc, init).unwrap();
+        let what = format!("{backend:?} nn transposed={transposed} {init:?}");
         check(&c, &c0, &want, (m, n, k, ldc), &what);
         // Same inputs, same bits (fixed summation order).
         let mut again = c0.clone();
-        pa.matmul(n, &b, ldb, &mut again, ldc, accumulate).unwrap();
+        pa.matmul(n, &b, ldb, &mut again, ldc, init).unwrap();
         assert!(
             c.iter()
                 .zip(&again)
@@ -204,11 +205,14 @@ fn short_buffers_are_errors() {
     assert!(PackedA::new(4, 4, &a, 4, 1).is_err());
     let pa = PackedA::new(3, 4, &a, 4, 1).unwrap();
     let mut c = vec![0f32; 3 * 5];
-    assert!(pa.matmul(5, &[0f32; 19], 5, &mut c, 5, false).is_err());
+    assert!(pa.matmul(5, &[0f32; 19], 5, &mut c, 5, Init::Zero).is_err());
     assert!(pa
-        .matmul(5, &[0f32; 20], 5, &mut c[..14], 5, false)
+        .matmul(5, &[0f32; 20], 5, &mut c[..14], 5, Init::Zero)
         .is_err());
-    assert!(pa.matmul(5, &[0f32; 20], 5, &mut c, 5, false).is_ok());
+    assert!(pa
+        .matmul(5, &[0f32; 20], 5, &mut c, 5, Init::RowBias(&[0.0; 2]))
+        .is_err());
+    assert!(pa.matmul(5, &[0f32; 20], 5, &mut c, 5, Init::Zero).is_ok());
     assert!(matmul_nt(
         GemmBackend::detect(),
         (3, 2, 4),
