@@ -48,9 +48,9 @@ fn check(
     }
 }
 
-/// Sizes (m, n, k) with tails: rows not a multiple of the register blocks (8, 4), columns not a multiple of 16,
-/// 48 or 6, k = 1, k = 0, k beyond one K block (128) and beyond one chunk (1024).
-const SIZES: [(usize, usize, usize); 12] = [
+/// Sizes (m, n, k) with tails: rows not a multiple of the 8-row register block, columns not a multiple of 16 or
+/// 48, k beyond one K block (128), and small sizes (k = 0, 1; m, n < 8) that go to the gemm crate.
+const SIZES: [(usize, usize, usize); 14] = [
     (1, 1, 1),
     (16, 113, 1152),
     (18, 227, 64),
@@ -63,6 +63,8 @@ const SIZES: [(usize, usize, usize); 12] = [
     (128, 64, 2049),
     (5, 6, 16),
     (10, 100, 0),
+    (33, 8, 8),
+    (8, 31, 9),
 ];
 
 /// Runs `PackedA::matmul` for A given as `a[i·rs + p·cs]` and compares with the f64 reference, for
@@ -95,7 +97,12 @@ fn run_nn(
             }
         }
         let pa = PackedA::with_backend(backend, m, k, &a, rs, cs).unwrap();
-        assert_eq!(pa.backend(), backend);
+        let expected = if m.min(k) < SMALL_DIM {
+            GemmBackend::GemmCrate
+        } else {
+            backend
+        };
+        assert_eq!(pa.backend(), expected);
         let mut c = c0.clone();
         pa.matmul(n, &b, ldb, &mut c, ldc, init).unwrap();
         let what = format!("{backend:?} nn transposed={transposed} {init:?}");
