@@ -3,9 +3,9 @@
 //! Measured first: a full im2col of a batch-16 64 × 64 layer is 75–250 MB, written, zeroed and read again, so
 //! the plain im2col path ([`super::conv`]) is memory-bound at the U-Net's small channel counts. Here each work item
 //! is one sample × one tile of output pixels: its im2col block (`K × T`, ≤ 512 KB) stays in cache and goes straight
-//! into a GEMM ([`super::sgemm`]: AVX-512 kernels where the CPU has them, else the `gemm` crate) that writes the NCHW
-//! output in place (each row started from its bias, no transpose). The backward, per sample, re-forms each tile's block to
-//! accumulate `dWᵀ += cols·dYᵀ` and scatters `Wᵀ·dY` back (col2im). Work is split by
+//! into a GEMM ([`super::sgemm`]: AVX-512 kernels where the CPU has them, else the `gemm` crate) that writes the
+//! NCHW output in place (each row started from its bias, no transpose). The backward, per sample, re-forms each
+//! tile's block to accumulate `dWᵀ += cols·dYᵀ` and scatters `Wᵀ·dY` back (col2im). Work is split by
 //! sample (and by tile for a single-sample forward) with a fixed summation order, so results are deterministic.
 
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};

@@ -1,7 +1,7 @@
 //! AVX-512 single-precision GEMM kernels for the tiled convolution (paper IV.B, speed on the CPU).
 //!
 //! Two register-blocked kernels, chosen by [`super`] at run time when the CPU has `avx512f`:
-//! - [`gemm_packed`]: `C[m, n] (+)= A[m, k] · B[k, n]`, with A packed into panels of [`MR`] rows
+//! - [`gemm_packed`]: `C[m, n] = init + A[m, k] · B[k, n]`, with A packed into panels of [`MR`] rows
 //!   (`[m / MR][k][MR]`) and B read in place, row by row. An [`MR`] × 48 block of C lives in 24 zmm
 //!   registers; each step broadcasts [`MR`] values of A and loads three vectors of one B row. K is split in blocks
 //!   of [`KC`] so a `KC × 48` strip of B stays in L1 while every row block of A passes over it. Column tails use
@@ -10,7 +10,7 @@
 //!   computed as `dWᵀ = cols · dYᵀ`): the small B (`n` = output channels) is transposed once per call with
 //!   16 × 16 register transposes, then the same register kernel runs with A broadcast straight from its rows
 //!   (blocks of 8 × 48, 12 × 32 or 24 × 16 by the width of C). Measured against 4 × 6 blocks of 16-lane dot
-//!   products reduced at the end: 2–4× faster except for the 18-wide first layer (equal).
+//!   products reduced at the end: 2.2–4× faster except for the 18-wide first layer (equal).
 //!
 //! Every output element is summed in an order fixed by the sizes alone (no threads here, no run-time
 //! heuristics), so repeated runs are bit-identical.
@@ -160,8 +160,8 @@ unsafe fn kernel<const R: usize, const NV: usize>(
 ///
 /// # Safety
 /// avx512f must be available; `pa` comes from [`pack_a`] with these `m`, `k`; an `Init::RowBias` holds `m`
-/// values; `b` holds rows `0..k` of `n` floats at stride `ldb`; `c` points to `m` rows of `n` floats at stride `ldc`, valid for reads and writes and
-/// not accessed by anyone else during the call.
+/// values; `b` holds rows `0..k` of `n` floats at stride `ldb`; `c` points to `m` rows of `n` floats at stride
+/// `ldc`, valid for reads and writes and not accessed by anyone else during the call.
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments)]
 pub unsafe fn gemm_packed(
@@ -257,8 +257,10 @@ pub unsafe fn gemm_nt(
         return;
     }
     let run = |bt: &mut Vec<f32>| {
-        bt.clear();
-        bt.resize(k * n, 0.0);
+        // Every element of bt[..k·n] is written by the transpose: grow the scratch, never clear it.
+        if bt.len() < k * n {
+            bt.resize(k * n, 0.0);
+        }
         transpose(n, k, b, ldb, bt.as_mut_ptr());
         let mut j0 = 0;
         while j0 < n {

@@ -1,12 +1,14 @@
 //! Single-precision GEMM for the tiled convolution (paper IV.B, speed on the CPU).
 //!
-//! [`super::conv_tiled`] needs three row-major products per tile: the forward `Y[co, t] += W[co, k] · cols[k, t]`,
-//! the input gradient `dcols[k, t] = Wᵀ[k, co] · dY[co, t]` (both [`PackedA::matmul`]: A is the weight, packed
-//! once per convolution) and the weight gradient `dW[co, k] (+)= dY[co, t] · cols[k, t]ᵀ` ([`matmul_nt`]).
-//! On CPUs with AVX-512 they run our kernels in [`avx512`]; elsewhere (other architectures, older x86, or
-//! [`GemmBackend::GemmCrate`] asked for explicitly) the `gemm` crate, whose x86 kernel on stable Rust is AVX2.
-//! The choice is made once per process ([`GemmBackend::detect`]). Both backends sum every output element in an
-//! order fixed by the sizes, so re-runs on the same machine are bit-identical.
+//! [`super::conv_tiled`] needs three row-major products per tile: the forward
+//! `Y[co, t] = bias + W[co, k] · cols[k, t]`, the input gradient `dcols[k, t] = Wᵀ[k, co] · dY[co, t]` (both
+//! [`PackedA::matmul`]: A is the weight, packed once per convolution) and the weight gradient, taken as
+//! `dWᵀ[k, co] (+)= cols[k, t] · dY[co, t]ᵀ` ([`matmul_nt`]) so that the long pixel axis is the summed one. On CPUs
+//! with AVX-512 they run our kernels in [`avx512`] (about twice the `gemm` crate's GFLOP/s: `tnd bench gemm`);
+//! elsewhere (other architectures, older x86, [`GemmBackend::GemmCrate`] asked for explicitly, or a dimension below
+//! [`SMALL_DIM`]) the `gemm` crate, whose x86 kernel on stable Rust is AVX2. The CPU is probed once per process
+//! ([`GemmBackend::detect`]). Both backends sum every output element in an order fixed by the sizes, so re-runs on
+//! the same machine are bit-identical.
 
 #[cfg(target_arch = "x86_64")]
 pub mod avx512;
