@@ -1,13 +1,14 @@
 //! `tnd bench gemm`: the three single-precision GEMM patterns of the tiled convolution (paper IV.B, speed on the
 //! CPU) on one thread, for each backend (our AVX-512 kernels, the `gemm` crate), on the default U-Net's layer
-//! shapes. One JSON line per (pattern, shape, backend) with the median time and GFLOP/s.
+//! shapes. One JSON line per (pattern, shape, backend) with the median time, GFLOP/s and the backend the product
+//! really ran on (`ran_on`: dimensions below `SMALL_DIM` go to the gemm crate).
 
 use anyhow::Result;
 use clap::Args;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
-use tactile_derender::model::sgemm::{matmul_nt, GemmBackend, Init, PackedA};
+use tactile_derender::model::sgemm::{matmul_nt, GemmBackend, Init, PackedA, SMALL_DIM};
 
 use crate::bench::median_time;
 
@@ -82,14 +83,21 @@ pub fn run(a: &GemmBenchArgs) -> Result<()> {
             if let Some(e) = err {
                 return Err(e.into());
             }
-            for (pattern, s) in [
-                ("forward W·cols", forward),
-                ("weight_grad dY·colsT", weight_grad),
-                ("input_grad WT·dY", input_grad),
+            // The backend each product really ran on (small dimensions go to the gemm crate).
+            let nt_backend = if co < SMALL_DIM {
+                GemmBackend::GemmCrate
+            } else {
+                backend
+            };
+            for (pattern, s, ran_on) in [
+                ("forward W·cols", forward, pw.backend()),
+                ("weight_grad cols·dYT", weight_grad, nt_backend),
+                ("input_grad WT·dY", input_grad, pwt.backend()),
             ] {
                 println!(
                     "{}",
                     json!({"bench": "sgemm", "pattern": pattern, "backend": format!("{backend:?}"),
+                        "ran_on": format!("{ran_on:?}"),
                         "co": co, "k": k, "t": t, "median_s": s, "gflops": flops / s / 1e9,
                         "runs": a.runs})
                 );
