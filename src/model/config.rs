@@ -288,7 +288,7 @@ impl UNet2DConfig {
             }
         }
         let factor = 1usize << (n - 1);
-        if self.sample_size == 0 || self.sample_size % factor != 0 {
+        if self.sample_size == 0 || !self.sample_size.is_multiple_of(factor) {
             return bad(format!(
                 "sample_size {} must be a positive multiple of {factor} (2^(levels-1))",
                 self.sample_size

@@ -3,15 +3,16 @@
 //! Measured first: a full im2col of a batch-16 64 × 64 layer is 75–250 MB, written, zeroed and read again, so
 //! the plain im2col path ([`super::conv`]) is memory-bound at the U-Net's small channel counts. Here each work item
 //! is one sample × one tile of output pixels: its im2col block (`K × T`, ≤ 512 KB) stays in cache and goes straight
-//! into a `gemm` call that writes the NCHW output in place (bias pre-filled, no transpose). The backward, per sample,
-//! re-forms each tile's block to accumulate `dW += dY·colsᵀ` and scatters `Wᵀ·dY` back (col2im). Work is split by
+//! into a GEMM ([`super::sgemm`]: AVX-512 kernels where the CPU has them, else the `gemm` crate) that writes the
+//! NCHW output in place (each row started from its bias, no transpose). The backward, per sample, re-forms each
+//! tile's block to accumulate `dWᵀ += cols·dYᵀ` and scatters `Wᵀ·dY` back (col2im). Work is split by
 //! sample (and by tile for a single-sample forward) with a fixed summation order, so results are deterministic.
 
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
-use gemm::{gemm, Parallelism};
 use rayon::prelude::*;
 
 use super::conv::ConvGeom;
+use super::sgemm::{matmul_nt, Init, PackedA};
 
 /// Forward op on `(x [B,Cin,H,W], w [Cout,Cin,k,k], bias [Cout])`.
 #[derive(Clone, Copy, Debug)]
@@ -204,49 +205,34 @@ impl CustomOp3 for TiledConv {
             );
         }
         let hw = d.ho * d.wo;
-        // Pre-fill with the bias; the GEMM accumulates onto it.
-        let mut y = Vec::with_capacity(d.b * co * hw);
-        for i in 0..d.b * co {
-            y.resize(y.len() + hw, bias[i % co]);
-        }
+        // The GEMM starts every output row from its bias (no pre-filled output to read back).
+        let mut y = vec![0f32; d.b * co * hw];
         let yp = SendPtr(y.as_mut_ptr());
+        let w_packed = PackedA::new(co, d.k, w, d.k, 1)?;
         let items: Vec<(usize, usize)> = (0..d.b)
             .flat_map(|b| (0..d.tiles()).map(move |t| (b, t)))
             .collect();
-        items.par_iter().for_each_init(
+        items.par_iter().try_for_each_init(
             || vec![0f32; d.k * d.tile],
             |cols, &(b, tile)| {
                 let p0 = tile * d.tile;
                 let t = d.tile.min(hw - p0);
                 let xb = &x[b * d.c * d.h * d.w..(b + 1) * d.c * d.h * d.w];
                 im2col_tile(xb, &d, g, p0, t, &mut cols[..d.k * t]);
-                // SAFETY: dst is columns p0..p0+t of sample b's [Cout, HW] block, disjoint across work items; all
-                // pointers stay inside their buffers for the given strides and sizes.
+                // SAFETY: C is columns p0..p0+t of sample b's [Cout, HW] block of `y` (row stride hw), inside `y`
+                // and disjoint across work items.
                 unsafe {
-                    gemm(
-                        co,
+                    w_packed.matmul_raw(
                         t,
-                        d.k,
+                        &cols[..d.k * t],
+                        t,
                         yp.ptr().add(b * co * hw + p0),
-                        1,
-                        hw as isize,
-                        true,
-                        w.as_ptr(),
-                        1,
-                        d.k as isize,
-                        cols.as_ptr(),
-                        1,
-                        t as isize,
-                        1.0,
-                        1.0,
-                        false,
-                        false,
-                        false,
-                        Parallelism::None,
-                    );
+                        hw,
+                        Init::RowBias(bias),
+                    )
                 }
             },
-        );
+        )?;
         Ok((CpuStorage::F32(y), Shape::from((d.b, co, d.ho, d.wo))))
     }
 
@@ -297,77 +283,53 @@ impl CustomOp3 for TiledConvBackward {
             candle_core::bail!("conv backward: gradient {:?} does not fit", l3.shape());
         }
         let mut dx = vec![0f32; d.b * in_len];
-        let mut dw_parts = vec![0f32; d.b * co * k];
+        // Per sample dWᵀ [K, Cout]: cols · dYᵀ keeps the long pixel axis as the summed one and the small channel
+        // axis as C's rows, the shape the GEMM kernels run fastest (see `sgemm::avx512::gemm_nt`).
+        let mut dwt_parts = vec![0f32; d.b * k * co];
+        // A = Wᵀ [K, Cout] read in place from W [Cout, K].
+        let wt_packed = PackedA::new(k, co, w, 1, k)?;
+        let backend = wt_packed.backend();
         dx.par_chunks_mut(in_len)
-            .zip(dw_parts.par_chunks_mut(co * k))
+            .zip(dwt_parts.par_chunks_mut(k * co))
             .enumerate()
-            .for_each_init(
+            .try_for_each_init(
                 || (vec![0f32; k * d.tile], vec![0f32; k * d.tile]),
-                |(cols, dcols), (b, (dxb, dwb))| {
+                |(cols, dcols), (b, (dxb, dwtb))| -> Result<()> {
                     let xb = &x[b * in_len..(b + 1) * in_len];
                     let dyb = &dy[b * co * hw..(b + 1) * co * hw];
                     for tile in 0..d.tiles() {
                         let p0 = tile * d.tile;
                         let t = d.tile.min(hw - p0);
-                        im2col_tile(xb, &d, g, p0, t, &mut cols[..k * t]);
-                        // SAFETY: all matrices lie inside their buffers for these sizes and strides.
-                        unsafe {
-                            // dW_b[co, k] += dY[co, p0..p0+t] · cols[k, t]ᵀ
-                            gemm(
-                                co,
-                                k,
-                                t,
-                                dwb.as_mut_ptr(),
-                                1,
-                                k as isize,
-                                tile > 0,
-                                dyb.as_ptr().add(p0),
-                                1,
-                                hw as isize,
-                                cols.as_ptr(),
-                                t as isize,
-                                1,
-                                1.0,
-                                1.0,
-                                false,
-                                false,
-                                false,
-                                Parallelism::None,
-                            );
-                            // dcols[k, t] = Wᵀ[k, co] · dY[co, p0..p0+t]
-                            gemm(
-                                k,
-                                t,
-                                co,
-                                dcols.as_mut_ptr(),
-                                1,
-                                t as isize,
-                                false,
-                                w.as_ptr(),
-                                k as isize,
-                                1,
-                                dyb.as_ptr().add(p0),
-                                1,
-                                hw as isize,
-                                0.0,
-                                1.0,
-                                false,
-                                false,
-                                false,
-                                Parallelism::None,
-                            );
-                        }
+                        let cols = &mut cols[..k * t];
+                        im2col_tile(xb, &d, g, p0, t, cols);
+                        // dWᵀ_b[k, co] += cols[k, t] · dY[co, p0..p0+t]ᵀ
+                        matmul_nt(
+                            backend,
+                            (k, co, t),
+                            cols,
+                            t,
+                            &dyb[p0..],
+                            hw,
+                            dwtb,
+                            co,
+                            tile > 0,
+                        )?;
+                        // dcols[k, t] = Wᵀ[k, co] · dY[co, p0..p0+t]
+                        wt_packed.matmul(t, &dyb[p0..], hw, &mut dcols[..k * t], t, Init::Zero)?;
                         col2im_tile(&dcols[..k * t], &d, g, p0, t, dxb);
                     }
+                    Ok(())
                 },
-            );
+            )?;
         let mut out = dx;
         out.reserve(co * k + co);
-        // dW = Σ_b dW_b in sample order (deterministic).
+        // dW[c, j] = Σ_b dWᵀ_b[j, c] in sample order (deterministic).
         let mut dw = vec![0f32; co * k];
-        for part in dw_parts.chunks(co * k) {
-            for (a, v) in dw.iter_mut().zip(part) {
-                *a += v;
+        for part in dwt_parts.chunks(k * co) {
+            for (j, row) in part.chunks(co).enumerate() {
+                for (c, v) in row.iter().enumerate() {
+                    dw[c * k + j] += v;
+                }
             }
         }
         out.extend(dw);

@@ -18,7 +18,7 @@ pub struct GroupNorm {
 
 /// Build from `vb` (keys `weight`, `bias`), like `candle_nn::group_norm`.
 pub fn group_norm(groups: usize, channels: usize, eps: f64, vb: VarBuilder) -> Result<GroupNorm> {
-    if groups == 0 || channels % groups != 0 {
+    if groups == 0 || !channels.is_multiple_of(groups) {
         candle_core::bail!("GroupNorm: {channels} channels are not divisible into {groups} groups");
     }
     Ok(GroupNorm {

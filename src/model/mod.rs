@@ -23,6 +23,7 @@ pub mod normalise;
 pub mod resnet;
 pub mod sampler;
 pub mod schedule;
+pub mod sgemm;
 pub mod train;
 pub mod train_data;
 pub mod unet;

@@ -31,6 +31,8 @@ pub enum BenchCommand {
     Pose(super::bench_pose::PoseBenchArgs),
     /// U-Net forward and training step against `../shared/peers/unet_torch.py`.
     Unet(crate::bench_unet::UnetBenchArgs),
+    /// The tiled convolution's three GEMM patterns, our AVX-512 kernels against the `gemm` crate (GFLOP/s).
+    Gemm(crate::bench_gemm::GemmBenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -57,6 +59,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         BenchCommand::Sim(s) => bench_sim(&s),
         BenchCommand::Pose(p) => super::bench_pose::run(&p),
         BenchCommand::Unet(u) => crate::bench_unet::run(&u),
+        BenchCommand::Gemm(g) => crate::bench_gemm::run(&g),
     }
 }
 

@@ -2,6 +2,7 @@
 
 mod args;
 mod bench;
+mod bench_gemm;
 mod bench_pose;
 mod bench_unet;
 mod dataset_cmd;

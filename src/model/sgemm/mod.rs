@@ -1,0 +1,334 @@
+//! Single-precision GEMM for the tiled convolution (paper IV.B, speed on the CPU).
+//!
+//! [`super::conv_tiled`] needs three row-major products per tile: the forward
+//! `Y[co, t] = bias + W[co, k] · cols[k, t]`, the input gradient `dcols[k, t] = Wᵀ[k, co] · dY[co, t]` (both
+//! [`PackedA::matmul`]: A is the weight, packed once per convolution) and the weight gradient, taken as
+//! `dWᵀ[k, co] (+)= cols[k, t] · dY[co, t]ᵀ` ([`matmul_nt`]) so that the long pixel axis is the summed one. On CPUs
+//! with AVX-512 they run our kernels in [`avx512`] (about twice the `gemm` crate's GFLOP/s: `tnd bench gemm`);
+//! elsewhere (other architectures, older x86, [`GemmBackend::GemmCrate`] asked for explicitly, or a dimension below
+//! [`SMALL_DIM`]) the `gemm` crate, whose x86 kernel on stable Rust is AVX2. The CPU is probed once per process
+//! ([`GemmBackend::detect`]). Both backends sum every output element in an order fixed by the sizes, so re-runs on
+//! the same machine are bit-identical.
+
+#[cfg(target_arch = "x86_64")]
+pub mod avx512;
+
+use std::sync::OnceLock;
+
+use candle_core::Result;
+use gemm::{gemm, Parallelism};
+
+/// Products with a dimension below this ([`PackedA`] rows or inner size, [`matmul_nt`] columns) use the `gemm`
+/// crate on every backend.
+pub const SMALL_DIM: usize = 8;
+
+/// Which GEMM implementation runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GemmBackend {
+    /// Our AVX-512 kernels (x86-64 with `avx512f` only).
+    Avx512,
+    /// The `gemm` crate (portable; AVX2 + FMA on x86-64).
+    GemmCrate,
+}
+
+impl GemmBackend {
+    /// The fastest backend this CPU runs, detected on first use and cached.
+    pub fn detect() -> Self {
+        static DETECTED: OnceLock<GemmBackend> = OnceLock::new();
+        *DETECTED.get_or_init(|| {
+            if Self::Avx512.is_available() {
+                Self::Avx512
+            } else {
+                Self::GemmCrate
+            }
+        })
+    }
+
+    /// Whether this CPU can run the backend.
+    pub fn is_available(self) -> bool {
+        match self {
+            Self::GemmCrate => true,
+            #[cfg(target_arch = "x86_64")]
+            Self::Avx512 => std::arch::is_x86_feature_detected!("avx512f"),
+            #[cfg(not(target_arch = "x86_64"))]
+            Self::Avx512 => false,
+        }
+    }
+
+    /// `self` if this CPU runs it, else the `gemm` crate.
+    fn usable(self) -> Self {
+        if self.is_available() {
+            self
+        } else {
+            Self::GemmCrate
+        }
+    }
+}
+
+/// What C holds before the product is added by [`PackedA::matmul`].
+#[derive(Clone, Copy, Debug)]
+pub enum Init<'a> {
+    /// Nothing: `C = A · B` (C is only written).
+    Zero,
+    /// Its current values: `C += A · B`.
+    Accumulate,
+    /// Row `i` starts from `bias[i]`: `C = bias ⊗ 1 + A · B`, without reading C (a convolution's bias).
+    RowBias(&'a [f32]),
+}
+
+/// Whether a row-major `rows × cols` matrix at row stride `ld` fits in `len` floats.
+fn fits(len: usize, rows: usize, cols: usize, ld: usize) -> bool {
+    rows == 0 || cols == 0 || ((rows - 1) * ld + cols <= len && (rows == 1 || ld >= cols))
+}
+
+/// The left operand `A` (`m × k`) of `C = A · B`, laid out once for the backend (the weight of a convolution is
+/// packed once per call and shared by every tile and thread).
+#[derive(Clone, Debug)]
+pub struct PackedA {
+    backend: GemmBackend,
+    m: usize,
+    k: usize,
+    /// AVX-512: panels of [`avx512::MR`] rows; `gemm` crate: row-major `m × k`.
+    data: Vec<f32>,
+}
+
+impl PackedA {
+    /// Packs `A[i, p] = a[i · rs + p · cs]` for the detected backend (`rs = k, cs = 1` for a row-major A,
+    /// `rs = 1, cs = m` for the transpose of a row-major `k × m` matrix).
+    pub fn new(m: usize, k: usize, a: &[f32], rs: usize, cs: usize) -> Result<Self> {
+        Self::with_backend(GemmBackend::detect(), m, k, a, rs, cs)
+    }
+
+    /// As [`PackedA::new`] for a given backend (the `gemm` crate where the CPU lacks the one asked for, or where
+    /// `m` or `k` is below [`SMALL_DIM`]).
+    pub fn with_backend(
+        backend: GemmBackend,
+        m: usize,
+        k: usize,
+        a: &[f32],
+        rs: usize,
+        cs: usize,
+    ) -> Result<Self> {
+        if m > 0 && k > 0 && (m - 1) * rs + (k - 1) * cs >= a.len() {
+            candle_core::bail!(
+                "sgemm: A of {m}x{k} (strides {rs}, {cs}) does not fit {} floats",
+                a.len()
+            );
+        }
+        // Our register blocks are 8 rows and 16 columns wide: a dimension below 8 (the 1-channel output layer) runs
+        // as fast or faster on the gemm crate (19 against 17 GFLOP/s for Wᵀ·dY with one channel).
+        let backend = if m.min(k) < SMALL_DIM {
+            GemmBackend::GemmCrate
+        } else {
+            backend.usable()
+        };
+        let data = match backend {
+            #[cfg(target_arch = "x86_64")]
+            GemmBackend::Avx512 => avx512::pack_a(m, k, a, rs, cs),
+            _ => {
+                let mut d = Vec::with_capacity(m * k);
+                for i in 0..m {
+                    d.extend((0..k).map(|p| a[i * rs + p * cs]));
+                }
+                d
+            }
+        };
+        Ok(Self {
+            backend,
+            m,
+            k,
+            data,
+        })
+    }
+
+    /// The backend this operand was packed for.
+    pub fn backend(&self) -> GemmBackend {
+        self.backend
+    }
+
+    /// `C[m, n] = init + A · B[k, n]`, B and C row-major at row strides `ldb` and `ldc`; every element is summed
+    /// as `((init + a₀b₀) + a₁b₁) + …` in order of the inner index.
+    pub fn matmul(
+        &self,
+        n: usize,
+        b: &[f32],
+        ldb: usize,
+        c: &mut [f32],
+        ldc: usize,
+        init: Init,
+    ) -> Result<()> {
+        if !fits(c.len(), self.m, n, ldc) {
+            candle_core::bail!("sgemm: C of {}x{n} (stride {ldc}) does not fit", self.m);
+        }
+        // SAFETY: C was checked to lie inside the exclusively borrowed slice.
+        unsafe { self.matmul_raw(n, b, ldb, c.as_mut_ptr(), ldc, init) }
+    }
+
+    /// As [`PackedA::matmul`] with C given by pointer, for outputs that several threads fill in disjoint blocks.
+    ///
+    /// # Safety
+    /// `c` points to `m` rows of `n` floats at stride `ldc`, valid for reads and writes, and no one else reads or
+    /// writes those elements during the call.
+    pub unsafe fn matmul_raw(
+        &self,
+        n: usize,
+        b: &[f32],
+        ldb: usize,
+        c: *mut f32,
+        ldc: usize,
+        init: Init,
+    ) -> Result<()> {
+        let (m, k) = (self.m, self.k);
+        if let Init::RowBias(bias) = init {
+            if bias.len() != m {
+                candle_core::bail!("sgemm: {} row biases for {m} rows", bias.len());
+            }
+        }
+        if !fits(b.len(), k, n, ldb) {
+            candle_core::bail!(
+                "sgemm: B of {k}x{n} (stride {ldb}) does not fit {} floats",
+                b.len()
+            );
+        }
+        if m == 0 || n == 0 {
+            return Ok(());
+        }
+        match self.backend {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: the backend is usable (checked when packing); sizes checked above and by the caller.
+            GemmBackend::Avx512 => {
+                avx512::gemm_packed(m, n, k, &self.data, b.as_ptr(), ldb, c, ldc, init)
+            }
+            _ => {
+                if let Init::RowBias(bias) = init {
+                    for (i, &v) in bias.iter().enumerate() {
+                        // SAFETY: row i of C (n floats at c + i·ldc) is valid for writes (caller's contract).
+                        std::slice::from_raw_parts_mut(c.add(i * ldc), n).fill(v);
+                    }
+                }
+                gemm_crate_nn(self, n, b, ldb, c, ldc, !matches!(init, Init::Zero));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The `gemm` crate's `C = (read_c ? C : 0) + A · B` for a row-major `A`.
+///
+/// # Safety
+/// As [`PackedA::matmul_raw`], with `a` packed for [`GemmBackend::GemmCrate`] and B checked.
+unsafe fn gemm_crate_nn(
+    a: &PackedA,
+    n: usize,
+    b: &[f32],
+    ldb: usize,
+    c: *mut f32,
+    ldc: usize,
+    read_c: bool,
+) {
+    let (m, k) = (a.m, a.k);
+    // SAFETY: A is row-major m × k in `a.data`; B and C as the caller guarantees.
+    unsafe {
+        gemm(
+            m,
+            n,
+            k,
+            c,
+            1,
+            ldc as isize,
+            read_c,
+            a.data.as_ptr(),
+            1,
+            k as isize,
+            b.as_ptr(),
+            1,
+            ldb as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            Parallelism::None,
+        )
+    }
+}
+
+/// `C[m, n] = (accumulate ? C : 0) + A[m, k] · B[n, k]ᵀ`, all row-major (strides `lda`, `ldb`, `ldc`): the weight
+/// gradient `dWᵀ = cols · dYᵀ`, with both operands contiguous along the summed dimension. Fewer than
+/// [`SMALL_DIM`] columns go to the `gemm` crate on every backend (a 1-channel output layer: 28 against 8 GFLOP/s
+/// for our kernel, whose blocks are 16 columns wide).
+#[allow(clippy::too_many_arguments)]
+pub fn matmul_nt(
+    backend: GemmBackend,
+    (m, n, k): (usize, usize, usize),
+    a: &[f32],
+    lda: usize,
+    b: &[f32],
+    ldb: usize,
+    c: &mut [f32],
+    ldc: usize,
+    accumulate: bool,
+) -> Result<()> {
+    if !fits(a.len(), m, k, lda) || !fits(b.len(), n, k, ldb) || !fits(c.len(), m, n, ldc) {
+        candle_core::bail!(
+            "sgemm: A·Bᵀ of {m}x{k} · ({n}x{k})ᵀ does not fit its buffers ({}, {}, {} floats)",
+            a.len(),
+            b.len(),
+            c.len()
+        );
+    }
+    if m == 0 || n == 0 {
+        return Ok(());
+    }
+    let backend = if n < SMALL_DIM {
+        GemmBackend::GemmCrate
+    } else {
+        backend.usable()
+    };
+    match backend {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: avx512f present (usable); every matrix checked to lie inside its slice.
+        GemmBackend::Avx512 => unsafe {
+            avx512::gemm_nt(
+                m,
+                n,
+                k,
+                a.as_ptr(),
+                lda,
+                b.as_ptr(),
+                ldb,
+                c.as_mut_ptr(),
+                ldc,
+                accumulate,
+            )
+        },
+        // SAFETY: every matrix checked to lie inside its slice; B is read as its transpose (column stride ldb).
+        _ => unsafe {
+            gemm(
+                m,
+                n,
+                k,
+                c.as_mut_ptr(),
+                1,
+                ldc as isize,
+                accumulate,
+                a.as_ptr(),
+                1,
+                lda as isize,
+                b.as_ptr(),
+                ldb as isize,
+                1,
+                1.0,
+                1.0,
+                false,
+                false,
+                false,
+                Parallelism::None,
+            )
+        },
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,235 @@
+//! Tests of the three GEMM patterns against a naive f64-accumulated reference, on both backends.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::*;
+
+fn random(rng: &mut ChaCha8Rng, n: usize) -> Vec<f32> {
+    (0..n).map(|_| rng.random_range(-1.0f32..1.0)).collect()
+}
+
+/// Backends to test: the `gemm` crate always, AVX-512 where this CPU has it (said on stderr otherwise).
+fn backends() -> Vec<GemmBackend> {
+    if GemmBackend::Avx512.is_available() {
+        vec![GemmBackend::Avx512, GemmBackend::GemmCrate]
+    } else {
+        eprintln!("sgemm tests: no avx512f on this CPU, testing the gemm crate only");
+        vec![GemmBackend::GemmCrate]
+    }
+}
+
+/// Asserts `got` (m × n at row stride `ldc`) equals `want` (dense m × n) within f32 rounding of sums of `k`
+/// products of values in [-1, 1], and that the elements between rows (columns n..ldc) equal `before`'s.
+fn check(
+    got: &[f32],
+    before: &[f32],
+    want: &[f64],
+    (m, n, k, ldc): (usize, usize, usize, usize),
+    what: &str,
+) {
+    let tol = 2e-6 * (k as f64 + 8.0);
+    for i in 0..m {
+        for j in 0..n {
+            let (g, w) = (got[i * ldc + j], want[i * n + j]);
+            assert!(
+                (f64::from(g) - w).abs() <= tol,
+                "{what}: C[{i}, {j}] = {g}, want {w} (m {m}, n {n}, k {k})"
+            );
+        }
+        if i + 1 < m {
+            let gap = i * ldc + n..(i + 1) * ldc;
+            assert_eq!(
+                got[gap.clone()],
+                before[gap],
+                "{what}: wrote between rows after row {i}"
+            );
+        }
+    }
+}
+
+/// Sizes (m, n, k) with tails: rows not a multiple of the 8-row register block, columns not a multiple of 16 or
+/// 48, k beyond one K block (128), and small sizes (k = 0, 1; m, n < 8) that go to the gemm crate.
+const SIZES: [(usize, usize, usize); 14] = [
+    (1, 1, 1),
+    (16, 113, 1152),
+    (18, 227, 64),
+    (7, 17, 1),
+    (9, 48, 18),
+    (13, 95, 129),
+    (24, 33, 300),
+    (64, 16, 7),
+    (3, 50, 1030),
+    (128, 64, 2049),
+    (5, 6, 16),
+    (10, 100, 0),
+    (33, 8, 8),
+    (8, 31, 9),
+];
+
+/// Runs `PackedA::matmul` for A given as `a[i·rs + p·cs]` and compares with the f64 reference, for
+/// `accumulate` on and off, into a C with row stride `n + 5` pre-filled with random values.
+fn run_nn(
+    rng: &mut ChaCha8Rng,
+    backend: GemmBackend,
+    (m, n, k): (usize, usize, usize),
+    transposed: bool,
+) {
+    let a = random(rng, m * k);
+    let (rs, cs) = if transposed { (1, m) } else { (k, 1) };
+    let (b, ldb) = (random(rng, k * (n + 3)), n + 3);
+    let ldc = n + 5;
+    let c0 = random(rng, m * ldc);
+    let bias = random(rng, m);
+    for init in [Init::Accumulate, Init::Zero, Init::RowBias(&bias)] {
+        let mut want = vec![0f64; m * n];
+        for i in 0..m {
+            for j in 0..n {
+                let start = match init {
+                    Init::Accumulate => f64::from(c0[i * ldc + j]),
+                    Init::Zero => 0.0,
+                    Init::RowBias(bias) => f64::from(bias[i]),
+                };
+                want[i * n + j] = start
+                    + (0..k)
+                        .map(|p| f64::from(a[i * rs + p * cs]) * f64::from(b[p * ldb + j]))
+                        .sum::<f64>();
+            }
+        }
+        let pa = PackedA::with_backend(backend, m, k, &a, rs, cs).unwrap();
+        let expected = if m.min(k) < SMALL_DIM {
+            GemmBackend::GemmCrate
+        } else {
+            backend
+        };
+        assert_eq!(pa.backend(), expected);
+        let mut c = c0.clone();
+        pa.matmul(n, &b, ldb, &mut c, ldc, init).unwrap();
+        let what = format!("{backend:?} nn transposed={transposed} {init:?}");
+        check(&c, &c0, &want, (m, n, k, ldc), &what);
+        // Same inputs, same bits (fixed summation order).
+        let mut again = c0.clone();
+        pa.matmul(n, &b, ldb, &mut again, ldc, init).unwrap();
+        assert!(
+            c.iter()
+                .zip(&again)
+                .all(|(x, y)| x.to_bits() == y.to_bits()),
+            "{what}: not deterministic"
+        );
+    }
+}
+
+/// Pattern 1 (forward): `C += W · cols`, W row-major.
+#[test]
+fn nn_matches_f64_reference() {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    for backend in backends() {
+        for &size in &SIZES {
+            run_nn(&mut rng, backend, size, false);
+        }
+    }
+}
+
+/// Pattern 3 (input gradient): `dcols = Wᵀ · dY`, A read as the transpose of a row-major matrix.
+#[test]
+fn nn_transposed_a_matches_f64_reference() {
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    for backend in backends() {
+        for &size in &SIZES {
+            run_nn(&mut rng, backend, size, true);
+        }
+    }
+}
+
+/// Pattern 2 (weight gradient): `dW (+)= dY · colsᵀ` with dY rows at a stride beyond k.
+#[test]
+fn nt_matches_f64_reference() {
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    for backend in backends() {
+        for &(m, n, k) in &SIZES {
+            let (a, lda) = (random(&mut rng, m * (k + 7)), k + 7);
+            let (b, ldb) = (random(&mut rng, n * k), k);
+            let ldc = n + 2;
+            let c0 = random(&mut rng, m * ldc);
+            for accumulate in [true, false] {
+                let mut want = vec![0f64; m * n];
+                for i in 0..m {
+                    for j in 0..n {
+                        let init = if accumulate {
+                            f64::from(c0[i * ldc + j])
+                        } else {
+                            0.0
+                        };
+                        want[i * n + j] = init
+                            + (0..k)
+                                .map(|p| f64::from(a[i * lda + p]) * f64::from(b[j * ldb + p]))
+                                .sum::<f64>();
+                    }
+                }
+                let mut c = c0.clone();
+                matmul_nt(
+                    backend,
+                    (m, n, k),
+                    &a,
+                    lda,
+                    &b,
+                    ldb,
+                    &mut c,
+                    ldc,
+                    accumulate,
+                )
+                .unwrap();
+                let what = format!("{backend:?} nt accumulate={accumulate}");
+                check(&c, &c0, &want, (m, n, k, ldc), &what);
+                let mut again = c0.clone();
+                matmul_nt(
+                    backend,
+                    (m, n, k),
+                    &a,
+                    lda,
+                    &b,
+                    ldb,
+                    &mut again,
+                    ldc,
+                    accumulate,
+                )
+                .unwrap();
+                assert!(
+                    c.iter()
+                        .zip(&again)
+                        .all(|(x, y)| x.to_bits() == y.to_bits()),
+                    "{what}: not deterministic"
+                );
+            }
+        }
+    }
+}
+
+/// Buffers too small for the sizes are an error, not an out-of-bounds access.
+#[test]
+fn short_buffers_are_errors() {
+    let a = vec![0f32; 12];
+    assert!(PackedA::new(4, 4, &a, 4, 1).is_err());
+    let pa = PackedA::new(3, 4, &a, 4, 1).unwrap();
+    let mut c = vec![0f32; 3 * 5];
+    assert!(pa.matmul(5, &[0f32; 19], 5, &mut c, 5, Init::Zero).is_err());
+    assert!(pa
+        .matmul(5, &[0f32; 20], 5, &mut c[..14], 5, Init::Zero)
+        .is_err());
+    assert!(pa
+        .matmul(5, &[0f32; 20], 5, &mut c, 5, Init::RowBias(&[0.0; 2]))
+        .is_err());
+    assert!(pa.matmul(5, &[0f32; 20], 5, &mut c, 5, Init::Zero).is_ok());
+    assert!(matmul_nt(
+        GemmBackend::detect(),
+        (3, 2, 4),
+        &a,
+        4,
+        &[0f32; 7],
+        4,
+        &mut c,
+        5,
+        true
+    )
+    .is_err());
+}
