@@ -170,3 +170,46 @@ fn model_can_move_to_a_worker_thread() {
     .len();
     assert_eq!(n, 2);
 }
+
+#[test]
+fn sample_uses_the_bundled_model_by_default_and_decodes_no_contact_to_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    // A 10 mm dent in the middle of a 64 x 64 imprint (the bundled model's resolution).
+    let imprint = Image::from_vec(
+        64,
+        64,
+        (0..64 * 64)
+            .map(|i| {
+                let (x, y) = ((i % 64) as f32 - 32.0, (i / 64) as f32 - 32.0);
+                if x * x + y * y < 100.0 {
+                    0.01
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+    )
+    .unwrap();
+    let ip = dir.path().join("imprint.npy");
+    npy::write_image(&ip, &imprint).unwrap();
+    let out = dir.path().join("out");
+    let o = Command::new(env!("CARGO_BIN_EXE_tnd"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["sample", "--imprint", ip.to_str().unwrap(), "--n", "2"])
+        .args(["--sampler", "ddim", "--steps", "3", "--seed", "1"])
+        .args(["--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let model = DiffusionModel::load(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/assets/models/default.safetensors"
+    )))
+    .unwrap();
+    let cut = model.config().tactile_derender.contact_min_depth_m;
+    let samples = npy::read(&out.join("samples.npy")).unwrap();
+    assert_eq!(samples.shape, vec![2, 64, 64]);
+    // Every pixel is either "no contact" (exactly 0) or an in-contact depth at or beyond the cut.
+    assert!(samples.data.iter().all(|&d| d == 0.0 || d >= cut));
+    assert!(samples.data.contains(&0.0));
+}

@@ -22,8 +22,9 @@ use tactile_derender::uncertainty::analysis::{analyse, Signature};
 
 #[derive(Args, Debug)]
 pub struct EvalArgs {
-    /// The generator: a model checkpoint, or `ground-truth` (the true X0: tests everything but the model).
-    #[arg(long)]
+    /// The generator: a model checkpoint (default: the bundled model), or `ground-truth` (the true X0: tests
+    /// everything but the model).
+    #[arg(long, default_value = "assets/models/default.safetensors")]
     pub model: String,
     /// Dataset directory (`tnd dataset gen`).
     #[arg(long)]

@@ -21,8 +21,8 @@ pub enum SamplerArg {
 
 #[derive(Args, Debug)]
 pub struct SampleArgs {
-    /// Model checkpoint (.safetensors with config, or a diffusers directory).
-    #[arg(long)]
+    /// Model checkpoint (.safetensors with config, or a diffusers directory); default: the bundled model.
+    #[arg(long, default_value = "assets/models/default.safetensors")]
     pub model: PathBuf,
     /// Imprint Y as a 2-D .npy array in metres, at the model's resolution.
     #[arg(long)]
