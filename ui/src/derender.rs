@@ -257,19 +257,8 @@ pub fn spawn(
     std::thread::Builder::new()
         .name("tnd-derender".into())
         .spawn(move || {
-            let mut last = Instant::now();
-            let mut progress = |done: usize, total: usize| {
-                // At most ~60 progress messages a second, and always the last step.
-                if done == total || last.elapsed().as_millis() >= 16 {
-                    last = Instant::now();
-                    let _ = tx.send(WorkerMsg::Progress {
-                        job: JobKind::Derender,
-                        done,
-                        total,
-                    });
-                    ctx.request_repaint();
-                }
-            };
+            let mut progress =
+                crate::worker::throttled_progress(JobKind::Derender, tx.clone(), ctx.clone());
             let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                 run(req, &cancel, &mut progress)
             }));

@@ -6,7 +6,6 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Sender;
 use std::sync::Arc;
-use std::time::Instant;
 
 use anyhow::{anyhow, Context, Result};
 use tactile_derender::image::Image;
@@ -144,18 +143,8 @@ pub fn spawn(
         .name("tnd-pose".into())
         .spawn(move || {
             let generation = req.generation;
-            let mut last = Instant::now();
-            let mut progress = |done: usize, total: usize| {
-                if done == total || last.elapsed().as_millis() >= 16 {
-                    last = Instant::now();
-                    let _ = tx.send(WorkerMsg::Progress {
-                        job: JobKind::Pose,
-                        done,
-                        total,
-                    });
-                    ctx.request_repaint();
-                }
-            };
+            let mut progress =
+                crate::worker::throttled_progress(JobKind::Pose, tx.clone(), ctx.clone());
             let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                 run(&req, &cancel, &mut progress)
             }));

@@ -357,3 +357,20 @@ fn sweep(
     )?;
     Ok(points)
 }
+
+/// A progress callback for a background job: sends `Progress { job, done, total }` through `tx` at most ~60 times a
+/// second (always the last step) and wakes the UI.
+pub fn throttled_progress(
+    job: JobKind,
+    tx: Sender<WorkerMsg>,
+    ctx: egui::Context,
+) -> impl FnMut(usize, usize) {
+    let mut last = std::time::Instant::now();
+    move |done, total| {
+        if done == total || last.elapsed().as_millis() >= 16 {
+            last = std::time::Instant::now();
+            let _ = tx.send(WorkerMsg::Progress { job, done, total });
+            ctx.request_repaint();
+        }
+    }
+}
