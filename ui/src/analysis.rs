@@ -3,7 +3,7 @@
 //! messages change them. Nothing here is saved; the settings are in [`crate::state::State`].
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -22,6 +22,7 @@ use crate::measured::PairScene;
 use crate::pose_job::{self, PoseRequest};
 use crate::pose_view::PoseAnalysis;
 use crate::state::{DerenderInput, ObjectSource, Tab};
+use crate::worker::raise_cancel;
 
 /// One shown image of a run.
 pub struct RunImage {
@@ -435,9 +436,7 @@ impl WorkbenchApp {
             samples: r.samples.clone(),
             seed: r.seed,
         };
-        if let Some(c) = view.cancel.take() {
-            c.store(true, Ordering::Relaxed);
-        }
+        raise_cancel(&mut view.cancel);
         let cancel = Arc::new(AtomicBool::new(false));
         pose_job::spawn(req, cancel.clone(), w.sender(), w.context())?;
         view.cancel = Some(cancel);
@@ -466,9 +465,7 @@ impl WorkbenchApp {
 
     /// Cancel the running run, if any.
     pub(crate) fn cancel_derender(&mut self) {
-        if let Some(c) = self.analysis.derender.cancel.take() {
-            c.store(true, Ordering::Relaxed);
-        }
+        raise_cancel(&mut self.analysis.derender.cancel);
     }
 
     /// Apply an analysis command (called from [`WorkbenchApp::apply`]).
@@ -518,9 +515,7 @@ impl WorkbenchApp {
             Command::RunPose => self.run_pose().map_err(|e| e.context("pose")),
             Command::CancelPose => {
                 let view = &mut self.analysis.pose;
-                if let Some(c) = view.cancel.take() {
-                    c.store(true, Ordering::Relaxed);
-                }
+                raise_cancel(&mut view.cancel);
                 // The thread stops at its next registration; its answer (an error "cancelled") is then stale.
                 view.generation += 1;
                 view.running = false;

@@ -270,9 +270,7 @@ impl Worker {
 
     /// Cancel the running sweep, if any.
     pub fn cancel_calibration(&mut self) {
-        if let Some(flag) = self.calibration_cancel.take() {
-            flag.store(true, Ordering::Relaxed);
-        }
+        raise_cancel(&mut self.calibration_cancel);
     }
 
     /// Show a native file dialog on its own thread (rfd returns at once where no dialog is available; the typed path
@@ -372,5 +370,12 @@ pub fn throttled_progress(
             let _ = tx.send(WorkerMsg::Progress { job, done, total });
             ctx.request_repaint();
         }
+    }
+}
+
+/// Stop the job behind `flag`, if any: set its cancel flag and forget it.
+pub fn raise_cancel(flag: &mut Option<Arc<AtomicBool>>) {
+    if let Some(f) = flag.take() {
+        f.store(true, Ordering::Relaxed);
     }
 }
