@@ -56,6 +56,9 @@ pub struct EvalArgs {
     /// Samples per uncertainty analysis.
     #[arg(long, default_value_t = 50)]
     pub samples: usize,
+    /// Also write every pair's scores (both methods, estimated and true pose) as JSON lines to this file.
+    #[arg(long)]
+    pub records: Option<PathBuf>,
 }
 
 /// The generator named by `--model`.
@@ -84,6 +87,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let dataset = Dataset::open(&a.data)?;
     let evaluator = Evaluator::new(EvalConfig::default());
     let mut markdown = String::new();
+    let mut records = String::new();
     for split in splits(&a.split)? {
         let source = DatasetSource::new(&dataset, split, a.limit)?;
         if source.is_empty() {
@@ -116,6 +120,9 @@ pub fn run(a: EvalArgs) -> Result<()> {
             println!("{table}");
         }
         markdown.push_str(&table);
+        for r in &report.records {
+            let _ = writeln!(records, "{}", json!({"split": split.as_str(), "record": r}));
+        }
         if let Some(dir) = &a.report {
             uncertainty_plots(
                 dir,
@@ -127,6 +134,11 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 &mut markdown,
             )?;
         }
+    }
+    if let Some(path) = &a.records {
+        tactile_derender::io::write_atomic(path, records.as_bytes())
+            .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
+        eprintln!("records: {}", path.display());
     }
     if let Some(dir) = &a.report {
         std::fs::create_dir_all(dir)?;
