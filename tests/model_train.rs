@@ -10,7 +10,7 @@ use tactile_derender::model::checkpoint::read_tensors;
 use tactile_derender::model::train::{
     model_path, state_path, train, Loss, TrainBatch, TrainConfig, TrainingData,
 };
-use tactile_derender::model::{ModelError, UNet2DConfig};
+use tactile_derender::model::{DiffusionModel, ModelError, PredictionType, UNet2DConfig};
 
 /// Synthetic pairs: the target is a disc whose radius is encoded by the imprint's level (a learnable relation).
 struct Synthetic {
@@ -206,4 +206,87 @@ fn loss_falls_and_init_fine_tunes() {
         params(&model_path(dir.path()), ""),
         params(&model_path(ft.path()), "")
     );
+}
+
+#[test]
+fn v_prediction_trains_and_is_saved_with_the_model() {
+    // From scratch with v-prediction: the loss falls, and the checkpoint says what the network predicts.
+    let tc = TrainConfig {
+        steps: Some(60),
+        batch: 4,
+        lr: 3e-3,
+        seed: 1,
+        log_every: 10,
+        prediction: Some(PredictionType::VPrediction),
+        ..TrainConfig::default()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut data = Synthetic { pairs: 12, size: 8 };
+    let mut losses = Vec::new();
+    train(dir.path(), &tc, &tiny(), None, &mut data, &mut |p| {
+        losses.push(p.loss);
+        true
+    })
+    .unwrap();
+    let first: f32 = losses[..10].iter().sum::<f32>() / 10.0;
+    let last: f32 = losses[50..].iter().sum::<f32>() / 10.0;
+    assert!(last < 0.7 * first, "loss {first} -> {last}");
+    let m = DiffusionModel::load(&model_path(dir.path())).unwrap();
+    assert_eq!(
+        m.config().tactile_derender.prediction_type,
+        PredictionType::VPrediction
+    );
+
+    // An ε checkpoint fine-tuned with the override becomes a v model; without it, it stays ε.
+    let eps_run = tempfile::tempdir().unwrap();
+    let tc_eps = TrainConfig {
+        steps: Some(1),
+        prediction: None,
+        ..tc.clone()
+    };
+    train(
+        eps_run.path(),
+        &tc_eps,
+        &tiny(),
+        None,
+        &mut data,
+        &mut |_| true,
+    )
+    .unwrap();
+    let eps = DiffusionModel::load(&model_path(eps_run.path())).unwrap();
+    assert_eq!(
+        eps.config().tactile_derender.prediction_type,
+        PredictionType::Epsilon
+    );
+    let ft = tempfile::tempdir().unwrap();
+    let tc_ft = TrainConfig {
+        steps: Some(1),
+        ..tc.clone()
+    };
+    let init = model_path(eps_run.path());
+    train(
+        ft.path(),
+        &tc_ft,
+        &tiny(),
+        Some(&init),
+        &mut data,
+        &mut |_| true,
+    )
+    .unwrap();
+    let ft_model = DiffusionModel::load(&model_path(ft.path())).unwrap();
+    assert_eq!(
+        ft_model.config().tactile_derender.prediction_type,
+        PredictionType::VPrediction
+    );
+
+    // Resuming a v run as an ε run is refused (the target would silently change).
+    let more = TrainConfig {
+        steps: Some(61),
+        prediction: None,
+        ..tc
+    };
+    let e = train(dir.path(), &more, &tiny(), None, &mut data, &mut |_| true)
+        .err()
+        .unwrap();
+    assert!(matches!(e, ModelError::Config { .. }), "{e}");
 }

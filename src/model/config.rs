@@ -139,6 +139,47 @@ pub struct TactileConfig {
     pub num_train_timesteps: usize,
     /// diffusers `beta_schedule`; only `"squaredcos_cap_v2"` (Nichol & Dhariwal's cosine schedule) is supported.
     pub beta_schedule: String,
+    /// What the network predicts (diffusers' scheduler `prediction_type`): the noise ε (the paper, Ho et al.) or the
+    /// velocity v = √ᾱ·ε − √(1−ᾱ)·x0 (Salimans & Ho). Checkpoints without the entry are ε-prediction models.
+    pub prediction_type: PredictionType,
+}
+
+/// The network's regression target (diffusers' `prediction_type`).
+///
+/// With ε-prediction the sampler recovers x0 = (x_t − √(1−ᾱ)·ε̂)/√ᾱ, which divides the network's error by √ᾱ: at the
+/// first steps of the cosine schedule (ᾱ = 0.003 at t = 240 of 250, ~1e-6 at t = 249) x0 is mostly the clipped
+/// amplification of that error, and the sampler commits to contact regions the imprint does not support. With
+/// v-prediction x0 = √ᾱ·x_t − √(1−ᾱ)·v̂ stays as accurate as v̂ at every noise level.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum PredictionType {
+    /// ε, the added noise (Ho et al.; the paper).
+    #[default]
+    #[value(name = "eps", alias = "epsilon")]
+    Epsilon,
+    /// v = √ᾱ·ε − √(1−ᾱ)·x0.
+    #[value(name = "v", alias = "v_prediction")]
+    VPrediction,
+}
+
+impl PredictionType {
+    /// The diffusers name (`"epsilon"` / `"v_prediction"`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Epsilon => "epsilon",
+            Self::VPrediction => "v_prediction",
+        }
+    }
+
+    /// `(x0, ε)` from a network output `out` at a pixel with value `x_t`, where `sa = √ᾱ_t` and `sb = √(1 − ᾱ_t)`;
+    /// x0 unclipped (diffusers' `pred_original_sample`, `pred_epsilon`).
+    #[inline]
+    pub fn x0_eps(self, out: f32, x_t: f32, sa: f32, sb: f32) -> (f32, f32) {
+        match self {
+            Self::Epsilon => ((x_t - sb * out) / sa, out),
+            Self::VPrediction => (sa * x_t - sb * out, sa * out + sb * x_t),
+        }
+    }
 }
 
 impl Default for TactileConfig {
@@ -149,6 +190,7 @@ impl Default for TactileConfig {
             contact_min_depth_m: 0.05,
             num_train_timesteps: 250,
             beta_schedule: "squaredcos_cap_v2".into(),
+            prediction_type: PredictionType::Epsilon,
         }
     }
 }

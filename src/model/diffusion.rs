@@ -110,7 +110,7 @@ impl DiffusionModel {
         let device = Device::Cpu;
         let cond =
             Tensor::from_vec(cond, (1, 1, h, w), &device)?.broadcast_as((n, c_cond, h, w))?;
-        let sampler = sampler::make(kind, self.schedule.clone())?;
+        let sampler = sampler::make(kind, self.schedule.clone(), norm.prediction_type)?;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let len = n * c_out * h * w;
         let normal = |rng: &mut ChaCha8Rng| -> Vec<f32> {
@@ -121,14 +121,14 @@ impl DiffusionModel {
         for (i, &t) in sampler.timesteps().iter().enumerate() {
             let xt = Tensor::from_slice(&x, (n, c_out, h, w), &device)?;
             let input = Tensor::cat(&[&xt, &cond], 1)?;
-            let eps: Vec<f32> = self
+            let out: Vec<f32> = self
                 .vars
                 .unet
                 .forward(&input, &[t as f32])?
                 .flatten_all()?
                 .to_vec1()?;
             let noise = sampler.needs_noise(t).then(|| normal(&mut rng));
-            x = sampler.step(&eps, t, &x, noise.as_deref())?;
+            x = sampler.step(&out, t, &x, noise.as_deref())?;
             if !progress(i + 1, total) {
                 return Err(ModelError::Cancelled);
             }

@@ -45,7 +45,7 @@ pub(crate) fn contiguous_f32<'a>(
     }
 }
 
-pub use config::{TactileConfig, UNet2DConfig};
+pub use config::{PredictionType, TactileConfig, UNet2DConfig};
 pub use diffusion::DiffusionModel;
 pub use normalise::Normalisation;
 pub use sampler::SamplerKind;

@@ -73,6 +73,18 @@ impl NoiseSchedule {
         noise: &Tensor,
         t: &[usize],
     ) -> Result<Tensor, ModelError> {
+        let (sa, sb) = self.coefficients(x0, t)?;
+        Ok((x0.broadcast_mul(&sa)? + noise.broadcast_mul(&sb)?)?)
+    }
+
+    /// The v-prediction target `√ᾱ_t ε − √(1−ᾱ_t) x0` (Salimans & Ho), as diffusers `get_velocity`.
+    pub fn velocity(&self, x0: &Tensor, noise: &Tensor, t: &[usize]) -> Result<Tensor, ModelError> {
+        let (sa, sb) = self.coefficients(x0, t)?;
+        Ok((noise.broadcast_mul(&sa)? - x0.broadcast_mul(&sb)?)?)
+    }
+
+    /// `(√ᾱ_t, √(1−ᾱ_t))` per sample as `[B, 1, 1, 1]` tensors.
+    fn coefficients(&self, x0: &Tensor, t: &[usize]) -> Result<(Tensor, Tensor), ModelError> {
         let b = x0.dim(0)?;
         if t.len() != b {
             return Err(ModelError::Input(format!(
@@ -86,9 +98,10 @@ impl NoiseSchedule {
             .map(|&t| (1.0 - self.alphas_cumprod[t]).sqrt())
             .collect();
         let dev = x0.device();
-        let sa = Tensor::from_vec(sa, (b, 1, 1, 1), dev)?;
-        let sb = Tensor::from_vec(sb, (b, 1, 1, 1), dev)?;
-        Ok((x0.broadcast_mul(&sa)? + noise.broadcast_mul(&sb)?)?)
+        Ok((
+            Tensor::from_vec(sa, (b, 1, 1, 1), dev)?,
+            Tensor::from_vec(sb, (b, 1, 1, 1), dev)?,
+        ))
     }
 }
 

@@ -23,7 +23,7 @@ use super::adam::Adam;
 use super::checkpoint::{
     assign, build, locate, named_vars, read_tensors, save_model, write_tensors, ModelVars,
 };
-use super::config::UNet2DConfig;
+use super::config::{PredictionType, UNet2DConfig};
 use super::init::init_params;
 use super::schedule::NoiseSchedule;
 use super::ModelError;
@@ -92,6 +92,9 @@ pub struct TrainConfig {
     pub checkpoint_every_steps: u64,
     /// Steps between log lines (and validation losses).
     pub log_every: u64,
+    /// Override the network's prediction target for a new run (from scratch or `--init`); `None` keeps the model
+    /// config's (a fine-tune of an ε model with `VPrediction` re-targets its output layer).
+    pub prediction: Option<PredictionType>,
 }
 
 impl Default for TrainConfig {
@@ -107,6 +110,7 @@ impl Default for TrainConfig {
             checkpoint_every_s: 300.0,
             checkpoint_every_steps: 0,
             log_every: 50,
+            prediction: None,
         }
     }
 }
@@ -118,6 +122,7 @@ impl TrainConfig {
             && self.loss == other.loss
             && self.seed == other.seed
             && self.ema == other.ema
+            && self.prediction == other.prediction
     }
 }
 
@@ -257,7 +262,6 @@ pub fn train(
     })
 }
 
-/// The ε-prediction loss on batch `b` with the randomness of `step` (`u64::MAX`: the fixed validation draw).
 /// `ema ← d·ema + (1 − d)·w` for every named weight. The result is detached: `w` is a tracked variable, so
 /// otherwise every step's EMA would keep the previous one (and its intermediates) alive through the op graph — a leak
 /// of 13 MB a step for the default model, which ran a 24 GiB machine out of memory within an hour.
@@ -274,6 +278,8 @@ fn update_ema(
     Ok(())
 }
 
+/// The ε- or v-prediction loss (the model config's `prediction_type`) on batch `b` with the randomness of `step`
+/// (`u64::MAX`: the fixed validation draw).
 fn loss_on(
     run: &Run,
     schedule: &NoiseSchedule,
@@ -305,12 +311,16 @@ fn loss_on(
     let cond = Tensor::from_vec(cond, (n, 1, h, w), &dev)?;
     let eps = Tensor::from_vec(eps, (n, 1, h, w), &dev)?;
     let xt = schedule.add_noise(&x0, &eps, &t)?;
+    let target = match run.cfg.tactile_derender.prediction_type {
+        PredictionType::Epsilon => eps,
+        PredictionType::VPrediction => schedule.velocity(&x0, &eps, &t)?,
+    };
     let tf: Vec<f32> = t.iter().map(|&t| t as f32).collect();
     let pred = run
         .vars
         .unet
         .forward_t(&Tensor::cat(&[&xt, &cond], 1)?, &tf, train)?;
-    let diff = (pred - eps)?;
+    let diff = (pred - target)?;
     Ok(match tc.loss {
         Loss::L2 => diff.sqr()?.mean_all()?,
         Loss::L1 => diff.abs()?.mean_all()?,
@@ -345,9 +355,9 @@ fn open_run(
             return Err(ModelError::Config {
                 source_name: state.display().to_string(),
                 message: format!(
-                    "this run was started with batch {}, lr {}, loss {:?}, seed {}, ema {:?}; resume with the same \
-                     settings or use a new --out",
-                    saved.batch, saved.lr, saved.loss, saved.seed, saved.ema
+                    "this run was started with batch {}, lr {}, loss {:?}, seed {}, ema {:?}, prediction {:?}; resume \
+                     with the same settings or use a new --out",
+                    saved.batch, saved.lr, saved.loss, saved.seed, saved.ema, saved.prediction
                 ),
             });
         }
@@ -386,7 +396,7 @@ fn open_run(
             step,
         });
     }
-    let (vars, cfg) = match init {
+    let (vars, mut cfg) = match init {
         Some(p) => {
             let (file, cfg) = locate(p)?;
             let vars = build(&cfg, &Device::Cpu)?;
@@ -399,6 +409,9 @@ fn open_run(
             (vars, model_cfg.clone())
         }
     };
+    if let Some(p) = tc.prediction {
+        cfg.tactile_derender.prediction_type = p;
+    }
     let adam = Adam::new(named_vars(&vars.varmap).into_iter().collect(), tc.lr)?;
     let ema = tc.ema.map(|_| {
         adam.vars

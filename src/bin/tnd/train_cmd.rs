@@ -10,7 +10,7 @@ use serde_json::json;
 use tactile_derender::dataset::Dataset;
 use tactile_derender::model::train::{train, Loss, TrainConfig};
 use tactile_derender::model::train_data::DatasetTraining;
-use tactile_derender::model::UNet2DConfig;
+use tactile_derender::model::{PredictionType, UNet2DConfig};
 
 #[derive(Args, Debug)]
 pub struct TrainArgs {
@@ -49,6 +49,10 @@ pub struct TrainArgs {
     /// Steps between log lines.
     #[arg(long, default_value_t = 50)]
     pub log_every: u64,
+    /// What the network predicts: eps (the noise, the paper's objective) or v (the velocity √ᾱ·ε − √(1−ᾱ)·x0).
+    /// Default: the model config's (--config, --init), eps for the built-in one.
+    #[arg(long, value_enum)]
+    pub prediction: Option<PredictionType>,
 }
 
 fn model_config(a: &TrainArgs, resolution: (usize, usize)) -> Result<UNet2DConfig> {
@@ -89,6 +93,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
         checkpoint_every_s: a.checkpoint_every,
         checkpoint_every_steps: 0,
         log_every: a.log_every,
+        prediction: a.prediction,
     };
     if let Some(d) = a.ema {
         if !(0.0..1.0).contains(&d) {

@@ -1,10 +1,11 @@
 //! DDIM sampling (Song et al.; paper V.B uses fewer steps for speed): diffusers `DDIMScheduler.step` with
 //! `timestep_spacing="leading"`, `steps_offset=0`, `set_alpha_to_one=True`, `clip_sample=True`,
-//! `prediction_type="epsilon"`, `use_clipped_model_output=False`.
+//! `prediction_type` "epsilon" or "v_prediction", `use_clipped_model_output=False`.
 
 use std::sync::Arc;
 
 use super::{check_lengths, Sampler};
+use crate::model::config::PredictionType;
 use crate::model::schedule::NoiseSchedule;
 use crate::model::ModelError;
 
@@ -15,10 +16,16 @@ pub struct Ddim {
     timesteps: Vec<usize>,
     ratio: usize,
     eta: f32,
+    prediction: PredictionType,
 }
 
 impl Ddim {
-    pub fn new(schedule: Arc<NoiseSchedule>, steps: usize, eta: f64) -> Result<Self, ModelError> {
+    pub fn new(
+        schedule: Arc<NoiseSchedule>,
+        steps: usize,
+        eta: f64,
+        prediction: PredictionType,
+    ) -> Result<Self, ModelError> {
         let t = schedule.len();
         if steps == 0 || steps > t {
             return Err(ModelError::Input(format!(
@@ -36,6 +43,7 @@ impl Ddim {
             timesteps: (0..steps).rev().map(|i| i * ratio).collect(),
             ratio,
             eta: eta as f32,
+            prediction,
         })
     }
 }
@@ -51,12 +59,12 @@ impl Sampler for Ddim {
 
     fn step(
         &self,
-        eps: &[f32],
+        model_output: &[f32],
         t: usize,
         x: &[f32],
         noise: Option<&[f32]>,
     ) -> Result<Vec<f32>, ModelError> {
-        check_lengths(eps, x, noise)?;
+        check_lengths(model_output, x, noise)?;
         let a_t = self.schedule.alpha_bar(t as i64);
         let a_prev = self.schedule.alpha_bar(t as i64 - self.ratio as i64);
         let beta_t = 1.0 - a_t;
@@ -65,12 +73,12 @@ impl Sampler for Ddim {
         let std = self.eta * variance.sqrt();
         let (sb, sa, sa_prev) = (beta_t.sqrt(), a_t.sqrt(), a_prev.sqrt());
         let c_dir = (1.0 - a_prev - std * std).sqrt();
-        let mut out: Vec<f32> = eps
+        let mut out: Vec<f32> = model_output
             .iter()
             .zip(x)
-            .map(|(&e, &xt)| {
-                let x0 = ((xt - sb * e) / sa).clamp(-1.0, 1.0);
-                sa_prev * x0 + c_dir * e
+            .map(|(&o, &xt)| {
+                let (x0, e) = self.prediction.x0_eps(o, xt, sa, sb);
+                sa_prev * x0.clamp(-1.0, 1.0) + c_dir * e
             })
             .collect();
         if self.eta > 0.0 {

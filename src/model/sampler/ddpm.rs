@@ -1,9 +1,10 @@
 //! Ancestral DDPM sampling (Ho et al.; paper IV.B with T = 250): diffusers `DDPMScheduler.step` with
-//! `variance_type="fixed_small"`, `clip_sample=True` (range 1), `prediction_type="epsilon"`.
+//! `variance_type="fixed_small"`, `clip_sample=True` (range 1), `prediction_type` "epsilon" or "v_prediction".
 
 use std::sync::Arc;
 
 use super::{check_lengths, Sampler};
+use crate::model::config::PredictionType;
 use crate::model::schedule::NoiseSchedule;
 use crate::model::ModelError;
 
@@ -12,14 +13,16 @@ use crate::model::ModelError;
 pub struct Ddpm {
     schedule: Arc<NoiseSchedule>,
     timesteps: Vec<usize>,
+    prediction: PredictionType,
 }
 
 impl Ddpm {
-    pub fn new(schedule: Arc<NoiseSchedule>) -> Self {
+    pub fn new(schedule: Arc<NoiseSchedule>, prediction: PredictionType) -> Self {
         let timesteps = (0..schedule.len()).rev().collect();
         Self {
             schedule,
             timesteps,
+            prediction,
         }
     }
 
@@ -43,12 +46,12 @@ impl Sampler for Ddpm {
 
     fn step(
         &self,
-        eps: &[f32],
+        model_output: &[f32],
         t: usize,
         x: &[f32],
         noise: Option<&[f32]>,
     ) -> Result<Vec<f32>, ModelError> {
-        check_lengths(eps, x, noise)?;
+        check_lengths(model_output, x, noise)?;
         let a_t = self.schedule.alpha_bar(t as i64);
         let a_prev = self.schedule.alpha_bar(t as i64 - 1);
         let beta_t = 1.0 - a_t;
@@ -58,11 +61,11 @@ impl Sampler for Ddpm {
         let (sb, sa) = (beta_t.sqrt(), a_t.sqrt());
         let c_x0 = a_prev.sqrt() * cur_beta / beta_t;
         let c_xt = cur_alpha.sqrt() * beta_prev / beta_t;
-        let mut out: Vec<f32> = eps
+        let mut out: Vec<f32> = model_output
             .iter()
             .zip(x)
-            .map(|(&e, &xt)| {
-                let x0 = ((xt - sb * e) / sa).clamp(-1.0, 1.0);
+            .map(|(&o, &xt)| {
+                let x0 = self.prediction.x0_eps(o, xt, sa, sb).0.clamp(-1.0, 1.0);
                 c_x0 * x0 + c_xt * xt
             })
             .collect();
