@@ -15,6 +15,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod conv;
 pub mod conv_tiled;
+pub mod diagnose;
 pub mod diffusion;
 pub mod embeddings;
 pub mod group_norm;

@@ -1,5 +1,6 @@
 //! `tnd model verify`: run a reference input through a checkpoint and compare with the reference output (the peer
 //! script's `*_io.safetensors` layout: `input`, `timesteps`, `output`), to check an imported diffusers checkpoint.
+//! `tnd model diagnose`: the one-step x0 quality of a checkpoint per diffusion timestep on dataset pairs.
 
 use std::path::PathBuf;
 
@@ -7,7 +8,9 @@ use anyhow::{anyhow, bail, Context, Result};
 use candle_core::DType;
 use clap::{Args, Subcommand};
 use serde_json::json;
+use tactile_derender::dataset::{Dataset, SplitName};
 use tactile_derender::model::checkpoint::read_tensors;
+use tactile_derender::model::diagnose::x0_quality;
 use tactile_derender::model::DiffusionModel;
 
 #[derive(Args, Debug)]
@@ -20,6 +23,35 @@ pub struct ModelArgs {
 pub enum ModelCommand {
     /// Print {"max_abs_diff": ..} of the model's output against a reference input/output file.
     Verify(VerifyArgs),
+    /// One JSON line per timestep: how well the model recovers X0 from one noised copy of the truth (ε and x0
+    /// errors, background marked as contact, contact missed) on the first pairs of a dataset split.
+    Diagnose(DiagnoseArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct DiagnoseArgs {
+    /// Checkpoint (default: the bundled model).
+    #[arg(long, default_value = "assets/models/default.safetensors")]
+    pub model: PathBuf,
+    /// Dataset directory.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// train, unseen_poses or unseen_objects.
+    #[arg(long, default_value = "unseen_poses")]
+    pub split: String,
+    /// Pairs (the first of the split).
+    #[arg(long, default_value_t = 32)]
+    pub pairs: usize,
+    /// Timesteps, comma-separated.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "5,25,50,100,150,200,225,240,249"
+    )]
+    pub timesteps: Vec<usize>,
+    /// Seed of the noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
 }
 
 #[derive(Args, Debug)]
@@ -38,7 +70,25 @@ pub struct VerifyArgs {
 pub fn run(a: ModelArgs) -> Result<()> {
     match a.command {
         ModelCommand::Verify(v) => verify(&v),
+        ModelCommand::Diagnose(d) => diagnose(&d),
     }
+}
+
+fn diagnose(a: &DiagnoseArgs) -> Result<()> {
+    let model = DiffusionModel::load(&a.model)?;
+    let dataset = Dataset::open(&a.data)?;
+    let split: SplitName = a.split.parse().map_err(|e| anyhow!("--split: {e}"))?;
+    let n = a.pairs.min(dataset.len(split));
+    if n == 0 {
+        bail!("{}: split {split} has no pairs", a.data.display());
+    }
+    let pairs = (0..n)
+        .map(|i| dataset.pair(split, i).map(|p| (p.imprint, p.target)))
+        .collect::<Result<Vec<_>, _>>()?;
+    for q in x0_quality(&model, &pairs, &a.timesteps, a.seed)? {
+        println!("{}", serde_json::to_string(&q)?);
+    }
+    Ok(())
 }
 
 fn verify(a: &VerifyArgs) -> Result<()> {
