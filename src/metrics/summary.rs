@@ -15,6 +15,10 @@ pub struct MeanStd {
     pub n: usize,
     /// Number of values excluded (undefined or non-finite).
     pub excluded: usize,
+    /// Median of the used values (NaN when none): a few ambiguous pairs (a contact hidden in the sensor noise) can
+    /// dominate a mean.
+    #[serde(default)]
+    pub median: f64,
 }
 
 impl MeanStd {
@@ -34,16 +38,25 @@ impl MeanStd {
                 std: f64::NAN,
                 n: 0,
                 excluded,
+                median: f64::NAN,
             };
         }
         let n = used.len() as f64;
         let mean = used.iter().sum::<f64>() / n;
         let var = used.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n;
+        used.sort_by(f64::total_cmp);
+        let k = used.len() / 2;
+        let median = if used.len() % 2 == 1 {
+            used[k]
+        } else {
+            0.5 * (used[k - 1] + used[k])
+        };
         Self {
             mean,
             std: var.sqrt(),
             n: used.len(),
             excluded,
+            median,
         }
     }
 }
@@ -59,6 +72,16 @@ mod tests {
     fn mean_std_excludes_undefined_values() {
         let m = MeanStd::of([Some(1.0), Some(3.0), None, Some(f64::INFINITY)]);
         assert_eq!((m.mean, m.std, m.n, m.excluded), (2.0, 1.0, 2, 2));
+        assert_eq!(m.median, 2.0);
         assert!(MeanStd::of([None]).mean.is_nan());
+        assert!(MeanStd::of([None]).median.is_nan());
+    }
+
+    #[test]
+    fn median_of_odd_and_even_counts_ignores_an_outlier() {
+        let odd = MeanStd::of([Some(9.0), Some(0.5), Some(100.0), Some(1.0), Some(0.1)]);
+        assert_eq!(odd.median, 1.0);
+        let even = MeanStd::of([Some(4.0), Some(1.0), Some(2.0), Some(1000.0)]);
+        assert_eq!(even.median, 3.0);
     }
 }

@@ -172,6 +172,15 @@ fn cell(m: &MeanStd, scale: f64, digits: usize) -> String {
     }
 }
 
+/// A mean ± std cell followed by the median (position errors: a few ambiguous pairs can dominate the mean).
+fn median_cell(m: &MeanStd) -> String {
+    if m.n == 0 {
+        cell(m, 1.0, 3)
+    } else {
+        format!("{} (median {:.3})", cell(m, 1.0, 3), m.median)
+    }
+}
+
 fn row(name: &str, s: &MethodSummary) -> String {
     format!(
         "| {name} | {} | {} | {} | {} | {} | {} | {} | {} / {} / {} |\n",
@@ -179,7 +188,7 @@ fn row(name: &str, s: &MethodSummary) -> String {
         cell(&s.l1_union_mm, 1.0, 3),
         cell(&s.psnr_db, 1.0, 2),
         cell(&s.ssim, 1.0, 4),
-        cell(&s.position_mm, 1.0, 3),
+        median_cell(&s.position_mm),
         cell(&s.theta_rad, 180.0 / std::f64::consts::PI, 2),
         cell(&s.chamfer_m2, 1e6, 3),
         s.no_contact,
