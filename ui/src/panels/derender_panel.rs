@@ -11,6 +11,7 @@ use crate::panels::image_card::{self, Scale};
 use crate::panels::widgets::path_field;
 use crate::state::{DerenderInput, ModelSettings, SamplerChoice};
 use crate::worker::DialogPurpose;
+use tactile_derender::model::PredictionType;
 
 pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     model_row(app, ui, cmds);
@@ -102,7 +103,11 @@ fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>)
                 .filter(|(q, _)| *q == p)
                 .map(|(_, m)| {
                     let (w, h) = m.resolution();
-                    format!(" · loaded, {w}x{h} px")
+                    let predicts = match m.config().tactile_derender.prediction_type {
+                        PredictionType::Epsilon => "ε",
+                        PredictionType::VPrediction => "v",
+                    };
+                    format!(" · loaded, {w}x{h} px, predicts {predicts}")
                 })
                 .unwrap_or_default();
             ui.weak(format!("using {}{loaded}", p.display()));
