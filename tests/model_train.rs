@@ -97,6 +97,19 @@ fn params(path: &Path, prefix: &str) -> Vec<(String, Vec<f32>)> {
     v
 }
 
+/// Train 60 steps of `tc` on the tiny model and require the last 10 losses to average < 0.7 × the first 10.
+fn assert_loss_falls(dir: &Path, tc: &TrainConfig, data: &mut Synthetic) {
+    let mut losses = Vec::new();
+    train(dir, tc, &tiny(), None, data, &mut |p| {
+        losses.push(p.loss);
+        true
+    })
+    .unwrap();
+    let first: f32 = losses[..10].iter().sum::<f32>() / 10.0;
+    let last: f32 = losses[50..].iter().sum::<f32>() / 10.0;
+    assert!(last < 0.7 * first, "loss {first} -> {last}");
+}
+
 #[test]
 fn killed_run_resumes_exactly() {
     let tc = TrainConfig {
@@ -177,15 +190,7 @@ fn loss_falls_and_init_fine_tunes() {
     };
     let dir = tempfile::tempdir().unwrap();
     let mut data = Synthetic { pairs: 12, size: 8 };
-    let mut losses = Vec::new();
-    train(dir.path(), &tc, &tiny(), None, &mut data, &mut |p| {
-        losses.push(p.loss);
-        true
-    })
-    .unwrap();
-    let first: f32 = losses[..10].iter().sum::<f32>() / 10.0;
-    let last: f32 = losses[50..].iter().sum::<f32>() / 10.0;
-    assert!(last < 0.7 * first, "loss {first} -> {last}");
+    assert_loss_falls(dir.path(), &tc, &mut data);
     // Fine-tune from the trained model into a new run: starts from its weights (not from a fresh init).
     let ft = tempfile::tempdir().unwrap();
     let tc2 = TrainConfig {
@@ -222,15 +227,7 @@ fn v_prediction_trains_and_is_saved_with_the_model() {
     };
     let dir = tempfile::tempdir().unwrap();
     let mut data = Synthetic { pairs: 12, size: 8 };
-    let mut losses = Vec::new();
-    train(dir.path(), &tc, &tiny(), None, &mut data, &mut |p| {
-        losses.push(p.loss);
-        true
-    })
-    .unwrap();
-    let first: f32 = losses[..10].iter().sum::<f32>() / 10.0;
-    let last: f32 = losses[50..].iter().sum::<f32>() / 10.0;
-    assert!(last < 0.7 * first, "loss {first} -> {last}");
+    assert_loss_falls(dir.path(), &tc, &mut data);
     let m = DiffusionModel::load(&model_path(dir.path())).unwrap();
     assert_eq!(
         m.config().tactile_derender.prediction_type,
