@@ -163,14 +163,6 @@ pub enum PredictionType {
 }
 
 impl PredictionType {
-    /// The diffusers name (`"epsilon"` / `"v_prediction"`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Epsilon => "epsilon",
-            Self::VPrediction => "v_prediction",
-        }
-    }
-
     /// `(x0, ε)` from a network output `out` at a pixel with value `x_t`, where `sa = √ᾱ_t` and `sb = √(1 − ᾱ_t)`;
     /// x0 unclipped (diffusers' `pred_original_sample`, `pred_epsilon`).
     #[inline]

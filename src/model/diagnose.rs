@@ -9,6 +9,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::Serialize;
 
+use super::diffusion::decode_depth;
 use super::{DiffusionModel, ModelError};
 use crate::image::Image;
 
@@ -56,8 +57,6 @@ pub fn x0_quality(
             }
         }
     }
-    // The decision threshold of `decode_depth` in model units.
-    let cut = norm.target.forward(norm.contact_min_depth_m);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let dev = Device::Cpu;
     let mut out = Vec::with_capacity(timesteps.len());
@@ -76,6 +75,11 @@ pub fn x0_quality(
         let (mut n_all, mut n_bg, mut n_fg) = (0usize, 0usize, 0usize);
         for chunk in pairs.chunks(16) {
             let n = chunk.len();
+            // Truth: in contact where the target depth is set (metres).
+            let in_contact: Vec<bool> = chunk
+                .iter()
+                .flat_map(|(_, x)| x.data.iter().map(|&v| v > 0.0))
+                .collect();
             let x0: Vec<f32> = chunk
                 .iter()
                 .flat_map(|(_, x)| x.data.iter().map(|&v| norm.target.forward(v)))
@@ -105,14 +109,16 @@ pub fn x0_quality(
                 let x0_hat = x0_hat.clamp(-1.0, 1.0);
                 q.eps_mse += f64::from(eps_hat - eps[i]).powi(2);
                 let d = f64::from(x0_hat - x0[i]).powi(2);
-                if x0[i] < cut {
-                    q.x0_mse_background += d;
-                    q.false_contact += f64::from(u8::from(x0_hat >= cut));
-                    n_bg += 1;
-                } else {
+                // The sampler's own contact decision.
+                let says_contact = decode_depth(norm, x0_hat) > 0.0;
+                if in_contact[i] {
                     q.x0_mse_contact += d;
-                    q.missed_contact += f64::from(u8::from(x0_hat < cut));
+                    q.missed_contact += f64::from(u8::from(!says_contact));
                     n_fg += 1;
+                } else {
+                    q.x0_mse_background += d;
+                    q.false_contact += f64::from(u8::from(says_contact));
+                    n_bg += 1;
                 }
             }
             n_all += x0.len();

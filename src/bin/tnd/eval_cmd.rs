@@ -136,10 +136,6 @@ pub fn run(a: EvalArgs) -> Result<()> {
         }
     }
     if let Some(path) = &a.records {
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir)
-                .map_err(|e| anyhow!("{}: cannot create: {e}", dir.display()))?;
-        }
         tactile_derender::io::write_atomic(path, records.as_bytes())
             .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
         eprintln!("records: {}", path.display());
