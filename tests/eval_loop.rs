@@ -179,7 +179,11 @@ fn the_diffusion_model_is_a_generator() {
     use tactile_derender::model::{DiffusionModel, SamplerKind};
     // The model team's tiny 8x8 reference checkpoint (untrained weights): this checks the wiring, not the quality.
     let path = std::path::Path::new("tests/fixtures/unet_small/unet_ref.safetensors");
-    let sampler = SamplerKind::Ddim { steps: 3, eta: 0.0 };
+    let sampler = SamplerKind::Ddim {
+        steps: 3,
+        eta: 0.0,
+        spacing: Default::default(),
+    };
     let generator = ModelGenerator {
         model: DiffusionModel::load(path).unwrap(),
         sampler,

@@ -118,7 +118,11 @@ fn sampling_api_batches_seeds_and_cancels() {
     let model = DiffusionModel::load(Path::new(MODEL)).unwrap();
     assert_eq!(model.resolution(), (8, 8));
     let imprint = Image::filled(8, 8, 0.001);
-    let kind = SamplerKind::Ddim { steps: 4, eta: 0.0 };
+    let kind = SamplerKind::Ddim {
+        steps: 4,
+        eta: 0.0,
+        spacing: Default::default(),
+    };
     let mut calls = Vec::new();
     let a = model.sample(&imprint, 3, kind, 7, &mut |i, n| {
         calls.push((i, n));
@@ -159,7 +163,11 @@ fn model_can_move_to_a_worker_thread() {
         model.sample(
             &Image::filled(8, 8, 0.0),
             2,
-            SamplerKind::Ddim { steps: 2, eta: 0.0 },
+            SamplerKind::Ddim {
+                steps: 2,
+                eta: 0.0,
+                spacing: Default::default(),
+            },
             0,
             &mut |_, _| true,
         )

@@ -8,13 +8,13 @@ use std::sync::Arc;
 
 use tactile_derender::model::checkpoint::read_tensors;
 use tactile_derender::model::sampler::{self, SamplerKind};
-use tactile_derender::model::{NoiseSchedule, PredictionType};
+use tactile_derender::model::{NoiseSchedule, PredictionType, TimestepSpacing};
 
 fn fixture() -> std::collections::HashMap<String, Vec<f32>> {
     let f = read_tensors(Path::new("tests/fixtures/sched_ref.safetensors")).unwrap();
     f.tensors
         .iter()
-        .filter(|(k, _)| k.as_str() != "ddim_timesteps" && k.as_str() != "v.velocity.t")
+        .filter(|(k, _)| !k.starts_with("ddim_timesteps") && k.as_str() != "v.velocity.t")
         .map(|(k, v)| {
             (
                 k.clone(),
@@ -68,7 +68,11 @@ fn ddim_step_and_timesteps_match_diffusers() {
     let f = fixture();
     for eta in [0.0, 0.5, 1.0] {
         let s = sampler::make(
-            SamplerKind::Ddim { steps: 25, eta },
+            SamplerKind::Ddim {
+                steps: 25,
+                eta,
+                spacing: TimestepSpacing::Leading,
+            },
             Arc::new(NoiseSchedule::cosine(250)),
             PredictionType::Epsilon,
         )
@@ -108,7 +112,12 @@ fn v_prediction_steps_match_diffusers() {
         assert!(max_diff(&eps, g("prev")) > 1e-3, "t = {t}");
     }
     for eta in [0.0, 0.5, 1.0] {
-        let s = sampler::make(SamplerKind::Ddim { steps: 25, eta }, schedule.clone(), v).unwrap();
+        let kind = SamplerKind::Ddim {
+            steps: 25,
+            eta,
+            spacing: TimestepSpacing::Leading,
+        };
+        let s = sampler::make(kind, schedule.clone(), v).unwrap();
         for t in [240usize, 130, 10, 0] {
             let g = |k: &str| &f[&format!("v.ddim.{eta:.1}.{t}.{k}")];
             let noise = s.needs_noise(t).then(|| g("noise").as_slice());
@@ -117,6 +126,70 @@ fn v_prediction_steps_match_diffusers() {
             assert!(d <= 1e-5, "v DDIM eta {eta} t = {t}: max |Δ| = {d}");
         }
     }
+}
+
+#[test]
+fn ddim_timestep_spacings_match_diffusers() {
+    let file = read_tensors(Path::new("tests/fixtures/sched_ref.safetensors")).unwrap();
+    for spacing in [TimestepSpacing::Leading, TimestepSpacing::Trailing] {
+        // K = 4 puts trailing steps on .5 ties (187.5, 62.5): numpy rounds them to even.
+        for k in [1usize, 3, 4, 7, 25, 250] {
+            let want: Vec<i64> = file.tensors[&format!("ddim_timesteps.{spacing}.{k}")]
+                .to_vec1()
+                .unwrap();
+            let ours: Vec<i64> = spacing
+                .timesteps(250, k)
+                .into_iter()
+                .map(|t| t as i64)
+                .collect();
+            assert_eq!(ours, want, "{spacing} K = {k}");
+        }
+    }
+    // The session default is trailing; parsing round-trips the names.
+    assert_eq!(TimestepSpacing::default(), TimestepSpacing::Trailing);
+    assert_eq!("leading".parse(), Ok(TimestepSpacing::Leading));
+    assert!("middle".parse::<TimestepSpacing>().is_err());
+}
+
+#[test]
+fn trailing_ddim_first_and_last_steps_match_diffusers() {
+    let f = fixture();
+    for eta in [0.0, 1.0] {
+        let kind = SamplerKind::Ddim {
+            steps: 25,
+            eta,
+            spacing: TimestepSpacing::Trailing,
+        };
+        let s = sampler::make(
+            kind,
+            Arc::new(NoiseSchedule::cosine(250)),
+            PredictionType::VPrediction,
+        )
+        .unwrap();
+        assert_eq!(s.timesteps().first(), Some(&249));
+        assert_eq!(s.timesteps().last(), Some(&9));
+        for t in [249usize, 9] {
+            let g = |k: &str| &f[&format!("vt.ddim.{eta:.1}.{t}.{k}")];
+            let noise = s.needs_noise(t).then(|| g("noise").as_slice());
+            let prev = s.step(g("out"), t, g("sample"), noise).unwrap();
+            let d = max_diff(&prev, g("prev"));
+            assert!(d <= 1e-5, "trailing DDIM eta {eta} t = {t}: max |Δ| = {d}");
+        }
+    }
+}
+
+/// Sessions and eval configs saved before the spacing option existed keep the leading spacing they ran with.
+#[test]
+fn ddim_kind_without_spacing_deserialises_as_leading() {
+    let kind: SamplerKind = serde_json::from_str(r#"{"Ddim":{"steps":25,"eta":0.0}}"#).unwrap();
+    assert_eq!(
+        kind,
+        SamplerKind::Ddim {
+            steps: 25,
+            eta: 0.0,
+            spacing: TimestepSpacing::Leading
+        }
+    );
 }
 
 #[test]

@@ -14,7 +14,11 @@ impl Generator for ModelGenerator {
     fn name(&self) -> String {
         let sampler = match self.sampler {
             SamplerKind::Ddpm => "ddpm".to_string(),
-            SamplerKind::Ddim { steps, eta } => format!("ddim {steps} steps, eta {eta}"),
+            SamplerKind::Ddim {
+                steps,
+                eta,
+                spacing,
+            } => format!("ddim {steps} steps, eta {eta}, {spacing} spacing"),
         };
         format!("model {} ({sampler})", self.model.source().display())
     }

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 use tactile_derender::dataset::SplitName;
-use tactile_derender::model::SamplerKind;
+use tactile_derender::model::{SamplerKind, TimestepSpacing};
 
 /// The dataset inspector's settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -72,6 +72,8 @@ pub struct DerenderSettings {
     pub ddim_steps: usize,
     /// DDIM η: 0 is deterministic, 1 DDPM-like noise (dimensionless).
     pub eta: f64,
+    /// Where DDIM's K steps sit among the 250 (trailing starts from pure noise at t = 249, like DDPM).
+    pub spacing: TimestepSpacing,
     /// Number of samples drawn for the imprint (the paper's uncertainty analysis uses 50).
     pub samples: usize,
     /// Seed of the sampler's noise.
@@ -86,6 +88,7 @@ impl Default for DerenderSettings {
             sampler: SamplerChoice::Ddim,
             ddim_steps: 50,
             eta: 0.0,
+            spacing: TimestepSpacing::Trailing,
             samples: 8,
             seed: 0,
             input: DerenderInput::Scene,
@@ -101,6 +104,7 @@ impl DerenderSettings {
             SamplerChoice::Ddim => SamplerKind::Ddim {
                 steps: self.ddim_steps,
                 eta: self.eta,
+                spacing: self.spacing,
             },
         }
     }

@@ -250,7 +250,11 @@ fn de_rendering_a_dataset_pair_with_a_tiny_model_matches_the_core_sampler() {
         .sample(
             &pair.imprint,
             3,
-            SamplerKind::Ddim { steps: 4, eta: 0.0 },
+            SamplerKind::Ddim {
+                steps: 4,
+                eta: 0.0,
+                spacing: Default::default(),
+            },
             7,
             &mut |_, _| true,
         )
@@ -547,7 +551,11 @@ fn an_imported_measurement_is_de_rendered_without_scores() {
         .sample(
             &imprint,
             2,
-            SamplerKind::Ddim { steps: 2, eta: 0.0 },
+            SamplerKind::Ddim {
+                steps: 2,
+                eta: 0.0,
+                spacing: Default::default(),
+            },
             0,
             &mut |_, _| true,
         )

@@ -16,7 +16,7 @@ use tactile_derender::metrics::evaluate::{
 use tactile_derender::metrics::model_generator::ModelGenerator;
 use tactile_derender::metrics::sources::DatasetSource;
 use tactile_derender::metrics::MeanStd;
-use tactile_derender::model::{DiffusionModel, SamplerKind};
+use tactile_derender::model::{DiffusionModel, SamplerKind, TimestepSpacing};
 use tactile_derender::pose::threshold_contact;
 use tactile_derender::uncertainty::analysis::{analyse, Signature};
 
@@ -41,6 +41,9 @@ pub struct EvalArgs {
     /// DDIM steps.
     #[arg(long, default_value_t = 25)]
     pub steps: usize,
+    /// DDIM timestep spacing: trailing (starts at t = T−1, like DDPM) or leading (diffusers' default).
+    #[arg(long, default_value = "trailing")]
+    pub spacing: TimestepSpacing,
     /// Seed of the sampler and the registration starts.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -62,13 +65,22 @@ pub struct EvalArgs {
 }
 
 /// The generator named by `--model`.
-pub fn generator(model: &str, sampler: &str, steps: usize) -> Result<Box<dyn Generator>> {
+pub fn generator(
+    model: &str,
+    sampler: &str,
+    steps: usize,
+    spacing: TimestepSpacing,
+) -> Result<Box<dyn Generator>> {
     if model == "ground-truth" {
         return Ok(Box::new(GroundTruthGenerator));
     }
     let sampler = match sampler {
         "ddpm" => SamplerKind::Ddpm,
-        "ddim" if steps > 0 => SamplerKind::Ddim { steps, eta: 0.0 },
+        "ddim" if steps > 0 => SamplerKind::Ddim {
+            steps,
+            eta: 0.0,
+            spacing,
+        },
         _ => bail!("--sampler must be ddpm or ddim (with --steps > 0), got '{sampler}'"),
     };
     let model = DiffusionModel::load(Path::new(model))?;
@@ -83,7 +95,7 @@ fn splits(s: &str) -> Result<Vec<SplitName>> {
 }
 
 pub fn run(a: EvalArgs) -> Result<()> {
-    let gen = generator(&a.model, &a.sampler, a.steps)?;
+    let gen = generator(&a.model, &a.sampler, a.steps, a.spacing)?;
     let dataset = Dataset::open(&a.data)?;
     let evaluator = Evaluator::new(EvalConfig::default());
     let mut markdown = String::new();

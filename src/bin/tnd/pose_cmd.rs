@@ -49,6 +49,9 @@ pub struct PoseArgs {
     /// DDIM steps.
     #[arg(long, default_value_t = 25)]
     pub steps: usize,
+    /// DDIM timestep spacing: trailing (starts at t = T−1, like DDPM) or leading (diffusers' default).
+    #[arg(long, default_value = "trailing")]
+    pub spacing: tactile_derender::model::TimestepSpacing,
     /// Seed of the sampler and the registration starts.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -96,7 +99,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     if a.model == "ground-truth" && a.target.is_none() {
         bail!("--model ground-truth needs --target FILE.npy (the in-contact depth to use as every sample)");
     }
-    let gen = super::eval_cmd::generator(&a.model, &a.sampler, a.steps)?;
+    let gen = super::eval_cmd::generator(&a.model, &a.sampler, a.steps, a.spacing)?;
     let signature = a.signature.as_ref().map(|p| read(p, res)).transpose()?;
     let pair = EvalPair {
         name: a.imprint.display().to_string(),

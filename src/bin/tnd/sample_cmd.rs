@@ -11,7 +11,7 @@ use serde_json::json;
 use tactile_derender::image::Image;
 use tactile_derender::io::preview::{render_panel, save_png, side_by_side, PanelStyle};
 use tactile_derender::io::{npy, write_atomic};
-use tactile_derender::model::{DiffusionModel, SamplerKind};
+use tactile_derender::model::{DiffusionModel, SamplerKind, TimestepSpacing};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum SamplerArg {
@@ -38,6 +38,9 @@ pub struct SampleArgs {
     /// DDIM η (0 = deterministic).
     #[arg(long, default_value_t = 0.0)]
     pub eta: f64,
+    /// DDIM timestep spacing: trailing (starts at t = T−1, like DDPM) or leading (diffusers' default).
+    #[arg(long, default_value = "trailing")]
+    pub spacing: TimestepSpacing,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Output directory.
@@ -53,6 +56,7 @@ pub fn run(a: SampleArgs) -> Result<()> {
         SamplerArg::Ddim => SamplerKind::Ddim {
             steps: a.steps,
             eta: a.eta,
+            spacing: a.spacing,
         },
     };
     let mut bar = kdam::tqdm!(desc = "sampling", unit = " steps");

@@ -1,15 +1,16 @@
 //! DDIM sampling (Song et al.; paper V.B uses fewer steps for speed): diffusers `DDIMScheduler.step` with
-//! `timestep_spacing="leading"`, `steps_offset=0`, `set_alpha_to_one=True`, `clip_sample=True`,
+//! `timestep_spacing` "leading" or "trailing", `steps_offset=0`, `set_alpha_to_one=True`, `clip_sample=True`,
 //! `prediction_type` "epsilon" or "v_prediction", `use_clipped_model_output=False`.
 
 use std::sync::Arc;
 
-use super::{check_lengths, Sampler};
+use super::{check_lengths, Sampler, TimestepSpacing};
 use crate::model::config::PredictionType;
 use crate::model::schedule::NoiseSchedule;
 use crate::model::ModelError;
 
-/// DDIM over `steps` timesteps `(steps−1)·r, …, r, 0` with `r = T / steps` (integer division).
+/// DDIM over `steps` timesteps placed by a [`TimestepSpacing`]; each step goes from `t` to `t − r`,
+/// `r = T / steps` (integer division; ᾱ = 1 below 0), as diffusers' `step` does for either spacing.
 #[derive(Clone, Debug)]
 pub struct Ddim {
     schedule: Arc<NoiseSchedule>,
@@ -24,6 +25,7 @@ impl Ddim {
         schedule: Arc<NoiseSchedule>,
         steps: usize,
         eta: f64,
+        spacing: TimestepSpacing,
         prediction: PredictionType,
     ) -> Result<Self, ModelError> {
         let t = schedule.len();
@@ -40,7 +42,7 @@ impl Ddim {
         let ratio = t / steps;
         Ok(Self {
             schedule,
-            timesteps: (0..steps).rev().map(|i| i * ratio).collect(),
+            timesteps: spacing.timesteps(t, steps),
             ratio,
             eta: eta as f32,
             prediction,

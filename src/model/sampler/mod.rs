@@ -19,8 +19,73 @@ use super::ModelError;
 pub enum SamplerKind {
     /// Ancestral DDPM over all T steps (`fixed_small` variance).
     Ddpm,
-    /// DDIM over `steps` evenly spaced steps ("leading" spacing); `eta` = 0 is deterministic, 1 is DDPM-like.
-    Ddim { steps: usize, eta: f64 },
+    /// DDIM over `steps` evenly spaced steps placed by `spacing`; `eta` = 0 is deterministic, 1 is DDPM-like.
+    Ddim {
+        steps: usize,
+        eta: f64,
+        /// Older sessions have no spacing saved: they keep diffusers' default, "leading".
+        #[serde(default = "TimestepSpacing::leading")]
+        spacing: TimestepSpacing,
+    },
+}
+
+/// Where DDIM's `K` timesteps sit among the `T` training steps (diffusers' `timestep_spacing`), with `r = T / K`
+/// (integer division) and `T = 250, K = 25` as example.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TimestepSpacing {
+    /// `(K−1)·r, …, r, 0` (240, 230, …, 0): diffusers' default. The first step treats pure noise as x_240,
+    /// which still holds √ᾱ = 6 % of the signal under the cosine schedule.
+    Leading,
+    /// `T−1, T−1−r, …` (249, 239, …, 9; Lin et al. 2024, "Common diffusion noise schedules and sample steps are
+    /// flawed"): the first step starts from pure noise at the last training step, as DDPM-250 does. Our default.
+    #[default]
+    Trailing,
+}
+
+impl TimestepSpacing {
+    fn leading() -> Self {
+        Self::Leading
+    }
+
+    /// The `steps` timesteps, descending, among `t` training steps (`1 ≤ steps ≤ t`).
+    pub fn timesteps(self, t: usize, steps: usize) -> Vec<usize> {
+        match self {
+            Self::Leading => {
+                let r = t / steps;
+                (0..steps).rev().map(|i| i * r).collect()
+            }
+            // diffusers: round(arange(T, 0, −T/K)) − 1, in f64 like numpy.
+            Self::Trailing => {
+                let r = t as f64 / steps as f64;
+                (0..steps)
+                    .map(|i| (t as f64 - i as f64 * r).round_ties_even() as usize - 1)
+                    .collect()
+            }
+        }
+    }
+}
+
+impl std::str::FromStr for TimestepSpacing {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "leading" => Ok(Self::Leading),
+            "trailing" => Ok(Self::Trailing),
+            _ => Err(format!(
+                "timestep spacing must be leading or trailing, got '{s}'"
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for TimestepSpacing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Leading => "leading",
+            Self::Trailing => "trailing",
+        })
+    }
 }
 
 /// One reverse process over a fixed timestep sequence.
@@ -48,9 +113,11 @@ pub fn make(
 ) -> Result<Box<dyn Sampler>, ModelError> {
     Ok(match kind {
         SamplerKind::Ddpm => Box::new(ddpm::Ddpm::new(schedule, prediction)),
-        SamplerKind::Ddim { steps, eta } => {
-            Box::new(ddim::Ddim::new(schedule, steps, eta, prediction)?)
-        }
+        SamplerKind::Ddim {
+            steps,
+            eta,
+            spacing,
+        } => Box::new(ddim::Ddim::new(schedule, steps, eta, spacing, prediction)?),
     })
 }
 

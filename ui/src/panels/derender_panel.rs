@@ -11,7 +11,7 @@ use crate::panels::image_card::{self, Scale};
 use crate::panels::widgets::path_field;
 use crate::state::{DerenderInput, ModelSettings, SamplerChoice};
 use crate::worker::DialogPurpose;
-use tactile_derender::model::PredictionType;
+use tactile_derender::model::{PredictionType, TimestepSpacing};
 
 pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     model_row(app, ui, cmds);
@@ -23,6 +23,18 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         ui.add_enabled_ui(d.sampler == SamplerChoice::Ddim, |ui| {
             ui.add(egui::Slider::new(&mut d.ddim_steps, 1..=250).text("steps K"));
             ui.add(egui::Slider::new(&mut d.eta, 0.0..=1.0).text("η"));
+            egui::ComboBox::from_id_salt("ddim_spacing")
+                .selected_text(format!("{} spacing", d.spacing))
+                .show_ui(ui, |ui| {
+                    for s in [TimestepSpacing::Trailing, TimestepSpacing::Leading] {
+                        ui.selectable_value(&mut d.spacing, s, s.to_string());
+                    }
+                })
+                .response
+                .on_hover_text(
+                    "trailing: the first step is t = 249, pure noise, as in DDPM (recommended). \
+                     leading: diffusers' default, starts at t = 240.",
+                );
         });
         ui.separator();
         ui.add(egui::Slider::new(&mut d.samples, 1..=64).text("samples"));
@@ -156,9 +168,11 @@ fn results(app: &mut WorkbenchApp, ui: &mut egui::Ui) {
     };
     let sampler = match r.sampler {
         tactile_derender::model::SamplerKind::Ddpm => "DDPM-250".to_string(),
-        tactile_derender::model::SamplerKind::Ddim { steps, eta } => {
-            format!("DDIM-{steps} η={eta}")
-        }
+        tactile_derender::model::SamplerKind::Ddim {
+            steps,
+            eta,
+            spacing,
+        } => format!("DDIM-{steps} η={eta} {spacing}"),
     };
     ui.label(format!(
         "{} · {} samples · {sampler} · seed {} · {:.2} s ({})",
