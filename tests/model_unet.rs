@@ -134,6 +134,34 @@ fn im2col_conv_matches_candle_forward_and_backward() {
                 pad_end: 0,
             },
         ),
+        // The direct path's edge cases: one output channel (the GEMM's portable loop), two input channels,
+        // one sample, non-square; and a 5 × 5 kernel (padding 2).
+        (
+            1,
+            2,
+            1,
+            7,
+            5,
+            ConvGeom {
+                kernel: 3,
+                stride: 1,
+                pad_begin: 1,
+                pad_end: 1,
+            },
+        ),
+        (
+            2,
+            9,
+            10,
+            6,
+            11,
+            ConvGeom {
+                kernel: 5,
+                stride: 1,
+                pad_begin: 2,
+                pad_end: 2,
+            },
+        ),
         // Large enough for the tiled path's GEMM register blocks: K = 576 (5 K blocks of the AVX-512 kernel),
         // 400 output pixels in 2 tiles of 227 (dW accumulated across tiles), Cout = 24 (a partial 8-row block
         // and a masked 24-wide column strip).
@@ -161,6 +189,7 @@ fn im2col_conv_matches_candle_forward_and_backward() {
             ConvBackend::Candle,
             ConvBackend::Im2colGemm,
             ConvBackend::Tiled,
+            ConvBackend::Direct,
         ] {
             let y = conv2d(
                 x.as_tensor(),
@@ -197,6 +226,52 @@ fn im2col_conv_matches_candle_forward_and_backward() {
                     "{what} case {i} backend {n}: {err} (scale {scale})"
                 );
             }
+        }
+    }
+}
+
+/// The direct convolution on the portable GEMM loop (CPUs without AVX-512, and 1-row products) against candle's
+/// `conv2d`, values and gradients; the default test above covers the AVX-512 kernels where the CPU has them.
+#[test]
+fn direct_conv_portable_gemm_matches_candle() {
+    use tactile_derender::model::conv_direct::DirectConv;
+    use tactile_derender::model::sgemm::GemmBackend;
+    for (i, &(b, ci, co, h, w, k)) in [(2, 3, 9, 6, 5, 3), (1, 8, 16, 12, 9, 1), (2, 4, 3, 5, 5, 5)]
+        .iter()
+        .enumerate()
+    {
+        let x = Var::from_tensor(&rand_t(&[b, ci, h, w], 40 + i as u64)).unwrap();
+        let kw = Var::from_tensor(&rand_t(&[co, ci, k, k], 50 + i as u64)).unwrap();
+        let bias = Var::from_tensor(&rand_t(&[co], 60 + i as u64)).unwrap();
+        let r = rand_t(&[b, co, h, w], 70 + i as u64);
+        let grads = |y: &Tensor| {
+            let g = (y * &r).unwrap().sum_all().unwrap().backward().unwrap();
+            [&x, &kw, &bias].map(|v| g.get(v).unwrap().clone())
+        };
+        let op = DirectConv {
+            kernel: k,
+            backend: GemmBackend::GemmCrate,
+        };
+        let ours = x
+            .as_tensor()
+            .apply_op3(kw.as_tensor(), bias.as_tensor(), op)
+            .unwrap();
+        let reference = x
+            .as_tensor()
+            .conv2d(kw.as_tensor(), k / 2, 1, 1, 1)
+            .unwrap()
+            .broadcast_add(&bias.as_tensor().reshape((1, co, 1, 1)).unwrap())
+            .unwrap();
+        let (go, gr) = (grads(&ours), grads(&reference));
+        for (what, a, b) in [
+            ("forward", &reference, &ours),
+            ("grad x", &gr[0], &go[0]),
+            ("grad w", &gr[1], &go[1]),
+            ("grad b", &gr[2], &go[2]),
+        ] {
+            let scale = max_abs(a, &a.zeros_like().unwrap()).max(1.0);
+            let err = max_abs(a, b);
+            assert!(err < 1e-5 * scale, "{what} case {i}: {err} (scale {scale})");
         }
     }
 }

@@ -1,5 +1,7 @@
 //! 2-D convolution of the U-Net (paper IV.B) and the choice of implementation: candle's `conv2d`, a full im2col +
-//! one large GEMM (this file), or the cache-tiled custom op of [`super::conv_tiled`] (the default).
+//! one large GEMM (this file), the cache-tiled im2col custom op of [`super::conv_tiled`], or the direct
+//! (implicit-GEMM) op of [`super::conv_direct`] for stride-1 "same" convolutions (the default where the CPU has
+//! AVX-512; the tiled op runs every other geometry and CPU).
 //!
 //! candle 0.11's CPU `conv2d` reaches ~20 GFLOP/s forward and its backward goes through `conv_transpose2d`
 //! (~10 GFLOP/s), while its GEMM reaches ~80 GFLOP/s on the same 2 cores. Here a convolution is
@@ -11,6 +13,8 @@ use std::sync::atomic::{AtomicU8, Ordering};
 
 use candle_core::{CpuStorage, CustomOp1, Layout, Module, Result, Shape, Tensor};
 use candle_nn::VarBuilder;
+
+use super::sgemm::GemmBackend;
 use rayon::prelude::*;
 
 /// Which convolution implementation the model uses.
@@ -20,11 +24,14 @@ pub enum ConvBackend {
     Candle,
     /// Our im2col + GEMM path through candle's matmul (full im2col buffer).
     Im2colGemm,
-    /// Our cache-tiled im2col + GEMM custom op ([`super::conv_tiled`], default).
+    /// Our cache-tiled im2col + GEMM custom op ([`super::conv_tiled`]).
     Tiled,
+    /// Our direct convolution ([`super::conv_direct`]) where the geometry allows it and the CPU has AVX-512,
+    /// else [`ConvBackend::Tiled`] (default).
+    Direct,
 }
 
-static BACKEND: AtomicU8 = AtomicU8::new(2);
+static BACKEND: AtomicU8 = AtomicU8::new(3);
 
 /// Select the convolution implementation for all convolutions run afterwards (process-wide; for benchmarks).
 pub fn set_conv_backend(b: ConvBackend) {
@@ -36,7 +43,8 @@ pub fn conv_backend() -> ConvBackend {
     match BACKEND.load(Ordering::Relaxed) {
         0 => ConvBackend::Candle,
         1 => ConvBackend::Im2colGemm,
-        _ => ConvBackend::Tiled,
+        2 => ConvBackend::Tiled,
+        _ => ConvBackend::Direct,
     }
 }
 
@@ -116,7 +124,7 @@ pub fn conv2d(
     let (b, _c_in, h, wd) = x.dims4()?;
     let c_out = w.dim(0)?;
     let y = match backend {
-        ConvBackend::Tiled => {
+        ConvBackend::Tiled | ConvBackend::Direct => {
             let zeros;
             let bias = match bias {
                 Some(b) => b,
@@ -125,7 +133,14 @@ pub fn conv2d(
                     &zeros
                 }
             };
-            super::conv_tiled::conv2d_tiled(x, w, bias, geom)?
+            let direct = backend == ConvBackend::Direct
+                && super::conv_direct::supports(geom)
+                && GemmBackend::detect() == GemmBackend::Avx512;
+            if direct {
+                super::conv_direct::conv2d_direct(x, w, bias, geom)?
+            } else {
+                super::conv_tiled::conv2d_tiled(x, w, bias, geom)?
+            }
         }
         ConvBackend::Candle => {
             let x = if geom.pad_begin == geom.pad_end {

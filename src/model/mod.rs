@@ -14,6 +14,7 @@ pub mod attention;
 pub mod checkpoint;
 pub mod config;
 pub mod conv;
+pub mod conv_direct;
 pub mod conv_tiled;
 pub mod diagnose;
 pub mod diffusion;

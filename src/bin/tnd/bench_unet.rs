@@ -43,8 +43,9 @@ pub struct UnetBenchArgs {
     /// Training batch size.
     #[arg(long, default_value_t = 16)]
     pub train_batch: usize,
-    /// Convolution implementation: tiled (ours, default), im2col (ours, full buffer) or candle.
-    #[arg(long, default_value = "tiled")]
+    /// Convolution implementation: direct (ours, default; tiled where the geometry or CPU needs it), tiled (ours,
+    /// im2col tiles), im2col (ours, full buffer) or candle.
+    #[arg(long, default_value = "direct")]
     pub conv: String,
     /// Parts to skip: forward, train.
     #[arg(long, value_delimiter = ',')]
@@ -93,9 +94,10 @@ pub fn run(a: &UnetBenchArgs) -> Result<()> {
         "candle" => ConvBackend::Candle,
         "im2col" => ConvBackend::Im2colGemm,
         "tiled" => ConvBackend::Tiled,
+        "direct" => ConvBackend::Direct,
         other => {
             return Err(anyhow!(
-                "--conv must be tiled, im2col or candle, not '{other}'"
+                "--conv must be direct, tiled, im2col or candle, not '{other}'"
             ))
         }
     });

@@ -46,6 +46,63 @@ pub fn pack_a(m: usize, k: usize, a: &[f32], rs: usize, cs: usize) -> Vec<f32> {
     out
 }
 
+/// Where a kernel finds row `p` of a row-major operand: at a fixed stride ([`Strided`]), or at per-row offsets
+/// ([`Offsets`]: the shifted rows of a padded image, the implicit im2col of [`crate::model::conv_direct`]).
+pub trait Rows: Copy {
+    /// Start of row `p`.
+    ///
+    /// # Safety
+    /// `p` is a row of the operand.
+    unsafe fn row(self, p: usize) -> *const f32;
+    /// The operand from row `p0` and column `j0` on.
+    ///
+    /// # Safety
+    /// Row `p0` and column `j0` are inside the operand.
+    unsafe fn shifted(self, p0: usize, j0: usize) -> Self;
+}
+
+/// Row `p` at `base + p · ld`.
+#[derive(Clone, Copy)]
+pub struct Strided {
+    pub base: *const f32,
+    pub ld: usize,
+}
+
+impl Rows for Strided {
+    #[inline(always)]
+    unsafe fn row(self, p: usize) -> *const f32 {
+        self.base.add(p * self.ld)
+    }
+    #[inline(always)]
+    unsafe fn shifted(self, p0: usize, j0: usize) -> Self {
+        Self {
+            base: self.base.add(p0 * self.ld + j0),
+            ld: self.ld,
+        }
+    }
+}
+
+/// Row `p` at `base + offs[p]`.
+#[derive(Clone, Copy)]
+pub struct Offsets {
+    pub base: *const f32,
+    pub offs: *const usize,
+}
+
+impl Rows for Offsets {
+    #[inline(always)]
+    unsafe fn row(self, p: usize) -> *const f32 {
+        self.base.add(*self.offs.add(p))
+    }
+    #[inline(always)]
+    unsafe fn shifted(self, p0: usize, j0: usize) -> Self {
+        Self {
+            base: self.base.add(j0),
+            offs: self.offs.add(p0),
+        }
+    }
+}
+
 /// Lane mask of the first `w` lanes (`1 ≤ w ≤ 16`).
 fn lane_mask(w: usize) -> __mmask16 {
     if w >= 16 {
@@ -86,17 +143,16 @@ impl Start {
 /// first `mr` rows of C are read and written.
 ///
 /// # Safety
-/// avx512f; `a[r] + p · a_step` is readable for `p < kc`; for every `p < kc`, `b + p · ldb` holds
+/// avx512f; `a[r] + p · a_step` is readable for `p < kc`; for every `p < kc`, `b.row(p)` holds
 /// `16 · (NV - 1)` floats plus the lanes in `mask`; `c + r · ldc` likewise for `r < mr`, valid for reads (for
 /// `Start::LoadC`) and writes; `Start::Row(init)` has `mr` readable values.
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
-unsafe fn kernel<const R: usize, const NV: usize>(
+unsafe fn kernel<const R: usize, const NV: usize, B: Rows>(
     kc: usize,
     a: &[*const f32; R],
     a_step: usize,
-    b: *const f32,
-    ldb: usize,
+    b: B,
     c: *mut f32,
     ldc: usize,
     mr: usize,
@@ -125,7 +181,7 @@ unsafe fn kernel<const R: usize, const NV: usize>(
         }
     }
     for p in 0..kc {
-        let bp = b.add(p * ldb);
+        let bp = b.row(p);
         let mut bv = [_mm512_setzero_ps(); NV];
         for v in 0..NV {
             bv[v] = if v + 1 == NV {
@@ -156,11 +212,11 @@ unsafe fn kernel<const R: usize, const NV: usize>(
     }
 }
 
-/// `C[m, n] = init + A · B` with A packed by [`pack_a`] (`m × k`) and B row-major (`k × n`, row stride `ldb`).
+/// `C[m, n] = init + A · B` with A packed by [`pack_a`] (`m × k`) and B's rows `0..k` of `n` floats found by `b`.
 ///
 /// # Safety
 /// avx512f must be available; `pa` comes from [`pack_a`] with these `m`, `k`; an `Init::RowBias` holds `m`
-/// values; `b` holds rows `0..k` of `n` floats at stride `ldb`; `c` points to `m` rows of `n` floats at stride
+/// values; every `b.row(p)`, `p < k`, holds `n` readable floats; `c` points to `m` rows of `n` floats at stride
 /// `ldc`, valid for reads and writes and not accessed by anyone else during the call.
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments)]
@@ -169,8 +225,7 @@ pub unsafe fn gemm_packed(
     n: usize,
     k: usize,
     pa: &[f32],
-    b: *const f32,
-    ldb: usize,
+    b: impl Rows,
     c: *mut f32,
     ldc: usize,
     init: Init,
@@ -193,7 +248,7 @@ pub unsafe fn gemm_packed(
         let mask = lane_mask(w - 16 * (nv - 1));
         for k0 in (0..k).step_by(KC) {
             let kc = KC.min(k - k0);
-            let bp = b.add(k0 * ldb + j0);
+            let bp = b.shifted(k0, j0);
             for ib in 0..blocks {
                 let mr = MR.min(m - ib * MR);
                 let panel = pa.as_ptr().add((ib * k + k0) * MR);
@@ -201,9 +256,9 @@ pub unsafe fn gemm_packed(
                 let cp = c.add(ib * MR * ldc + j0);
                 let start = Start::first(init, ib * MR, k0);
                 match nv {
-                    1 => kernel::<MR, 1>(kc, &ap, MR, bp, ldb, cp, ldc, mr, mask, start),
-                    2 => kernel::<MR, 2>(kc, &ap, MR, bp, ldb, cp, ldc, mr, mask, start),
-                    _ => kernel::<MR, 3>(kc, &ap, MR, bp, ldb, cp, ldc, mr, mask, start),
+                    1 => kernel::<MR, 1, _>(kc, &ap, MR, bp, cp, ldc, mr, mask, start),
+                    2 => kernel::<MR, 2, _>(kc, &ap, MR, bp, cp, ldc, mr, mask, start),
+                    _ => kernel::<MR, 3, _>(kc, &ap, MR, bp, cp, ldc, mr, mask, start),
                 }
             }
         }
@@ -231,7 +286,7 @@ fn strip_width(rem: usize) -> usize {
 /// 8 × 48, 12 × 32 or 24 × 16 of C broadcast A straight from its rows.
 ///
 /// # Safety
-/// avx512f must be available; `a` holds rows `0..m` of `k` floats at stride `lda`, `b` rows `0..n` of `k` floats
+/// avx512f must be available; every `a.row(i)`, `i < m`, holds `k` readable floats, `b` rows `0..n` of `k` floats
 /// at stride `ldb`; `c` points to `m` rows of `n` floats at stride `ldc`, valid for reads and writes and not
 /// accessed by anyone else during the call.
 #[target_feature(enable = "avx512f")]
@@ -240,8 +295,7 @@ pub unsafe fn gemm_nt(
     m: usize,
     n: usize,
     k: usize,
-    a: *const f32,
-    lda: usize,
+    a: impl Rows,
     b: *const f32,
     ldb: usize,
     c: *mut f32,
@@ -278,24 +332,24 @@ pub unsafe fn gemm_nt(
                 match nv {
                     1 => nt_rows::<24, 1>(
                         (m, kc),
-                        (a.add(k0), lda),
-                        (bp, n),
+                        a.shifted(0, k0),
+                        Strided { base: bp, ld: n },
                         (c.add(j0), ldc),
                         mask,
                         start,
                     ),
                     2 => nt_rows::<12, 2>(
                         (m, kc),
-                        (a.add(k0), lda),
-                        (bp, n),
+                        a.shifted(0, k0),
+                        Strided { base: bp, ld: n },
                         (c.add(j0), ldc),
                         mask,
                         start,
                     ),
                     _ => nt_rows::<8, 3>(
                         (m, kc),
-                        (a.add(k0), lda),
-                        (bp, n),
+                        a.shifted(0, k0),
+                        Strided { base: bp, ld: n },
                         (c.add(j0), ldc),
                         mask,
                         start,
@@ -324,16 +378,16 @@ pub unsafe fn gemm_nt(
 #[target_feature(enable = "avx512f")]
 unsafe fn nt_rows<const R: usize, const NV: usize>(
     (m, kc): (usize, usize),
-    (a, lda): (*const f32, usize),
-    (b, ldb): (*const f32, usize),
+    a: impl Rows,
+    b: Strided,
     (c, ldc): (*mut f32, usize),
     mask: __mmask16,
     start: Start,
 ) {
     for i0 in (0..m).step_by(R) {
         let mr = R.min(m - i0);
-        let ap: [*const f32; R] = core::array::from_fn(|r| a.add((i0 + r.min(mr - 1)) * lda));
-        kernel::<R, NV>(kc, &ap, 1, b, ldb, c.add(i0 * ldc), ldc, mr, mask, start);
+        let ap: [*const f32; R] = core::array::from_fn(|r| a.row(i0 + r.min(mr - 1)));
+        kernel::<R, NV, _>(kc, &ap, 1, b, c.add(i0 * ldc), ldc, mr, mask, start);
     }
 }
 

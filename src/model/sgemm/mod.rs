@@ -197,7 +197,11 @@ impl PackedA {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: the backend is usable (checked when packing); sizes checked above and by the caller.
             GemmBackend::Avx512 => {
-                avx512::gemm_packed(m, n, k, &self.data, b.as_ptr(), ldb, c, ldc, init)
+                let b = avx512::Strided {
+                    base: b.as_ptr(),
+                    ld: ldb,
+                };
+                avx512::gemm_packed(m, n, k, &self.data, b, c, ldc, init)
             }
             _ => {
                 if let Init::RowBias(bias) = init {
@@ -211,6 +215,155 @@ impl PackedA {
         }
         Ok(())
     }
+}
+
+impl PackedA {
+    /// `C[m, n] = init + A · B` where row `p` of B is `b[offs[p]..offs[p] + n]` (`offs` has `k` entries): the
+    /// shifted rows of a padded image, so a convolution needs no im2col copy. Summation order as
+    /// [`PackedA::matmul`]. The `gemm` crate cannot read such rows: that backend runs a portable loop.
+    ///
+    /// # Safety
+    /// As [`PackedA::matmul_raw`] for C.
+    pub unsafe fn matmul_offsets_raw(
+        &self,
+        n: usize,
+        b: &[f32],
+        offs: &[usize],
+        c: *mut f32,
+        ldc: usize,
+        init: Init,
+    ) -> Result<()> {
+        let (m, k) = (self.m, self.k);
+        if let Init::RowBias(bias) = init {
+            if bias.len() != m {
+                candle_core::bail!("sgemm: {} row biases for {m} rows", bias.len());
+            }
+        }
+        check_offsets(offs, k, n, b.len(), "B")?;
+        if m == 0 || n == 0 {
+            return Ok(());
+        }
+        match self.backend {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: the backend is usable (checked when packing); every row of B checked above, C by the caller.
+            GemmBackend::Avx512 => {
+                let rows = avx512::Offsets {
+                    base: b.as_ptr(),
+                    offs: offs.as_ptr(),
+                };
+                avx512::gemm_packed(m, n, k, &self.data, rows, c, ldc, init);
+            }
+            _ => {
+                for i in 0..m {
+                    // SAFETY: row i of C is valid and exclusive (caller's contract).
+                    let row = std::slice::from_raw_parts_mut(c.add(i * ldc), n);
+                    match init {
+                        Init::Zero => row.fill(0.0),
+                        Init::Accumulate => {}
+                        Init::RowBias(bias) => row.fill(bias[i]),
+                    }
+                    for (&a, &o) in self.data[i * k..(i + 1) * k].iter().zip(offs) {
+                        for (y, &v) in row.iter_mut().zip(&b[o..o + n]) {
+                            *y += a * v;
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Every row `offs[p] .. offs[p] + n` of a `k`-row operand lies inside `len` floats.
+fn check_offsets(offs: &[usize], k: usize, n: usize, len: usize, what: &str) -> Result<()> {
+    if offs.len() != k {
+        candle_core::bail!("sgemm: {} row offsets for {k} rows of {what}", offs.len());
+    }
+    if let Some(&o) = offs.iter().find(|&&o| o + n > len) {
+        candle_core::bail!("sgemm: a row of {what} at {o} + {n} floats does not fit {len}");
+    }
+    Ok(())
+}
+
+/// `C[m, n] = (accumulate ? C : 0) + A · B[n, k]ᵀ` where row `i` of A is `a[a_offs[i]..a_offs[i] + k]` (the
+/// weight gradient of the direct convolution: A's rows are shifted rows of the padded input) and B is row-major
+/// at stride `ldb`. Fewer than [`SMALL_DIM`] columns, or no AVX-512: 16-lane dot products in a fixed order.
+#[allow(clippy::too_many_arguments)]
+pub fn matmul_nt_offsets(
+    backend: GemmBackend,
+    (m, n, k): (usize, usize, usize),
+    a: &[f32],
+    a_offs: &[usize],
+    b: &[f32],
+    ldb: usize,
+    c: &mut [f32],
+    ldc: usize,
+    accumulate: bool,
+) -> Result<()> {
+    check_offsets(a_offs, m, k, a.len(), "A")?;
+    if !fits(b.len(), n, k, ldb) || !fits(c.len(), m, n, ldc) {
+        candle_core::bail!(
+            "sgemm: A·Bᵀ of {m}x{k} · ({n}x{k})ᵀ does not fit its buffers ({}, {} floats)",
+            b.len(),
+            c.len()
+        );
+    }
+    if m == 0 || n == 0 {
+        return Ok(());
+    }
+    let backend = if n < SMALL_DIM {
+        GemmBackend::GemmCrate
+    } else {
+        backend.usable()
+    };
+    match backend {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: avx512f present (usable); every row of A and the whole of B and C checked above.
+        GemmBackend::Avx512 => unsafe {
+            let rows = avx512::Offsets {
+                base: a.as_ptr(),
+                offs: a_offs.as_ptr(),
+            };
+            avx512::gemm_nt(
+                m,
+                n,
+                k,
+                rows,
+                b.as_ptr(),
+                ldb,
+                c.as_mut_ptr(),
+                ldc,
+                accumulate,
+            );
+        },
+        _ => {
+            for (i, &o) in a_offs.iter().enumerate() {
+                let ar = &a[o..o + k];
+                for j in 0..n {
+                    let dot = dot16(ar, &b[j * ldb..j * ldb + k]);
+                    let cij = &mut c[i * ldc + j];
+                    *cij = if accumulate { *cij + dot } else { dot };
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `Σ x·y` over 16 interleaved partial sums (vectorisable without reassociation; fixed order).
+fn dot16(x: &[f32], y: &[f32]) -> f32 {
+    let mut acc = [0f32; 16];
+    let (xc, yc) = (x.chunks_exact(16), y.chunks_exact(16));
+    let (xr, yr) = (xc.remainder(), yc.remainder());
+    for (a, b) in xc.zip(yc) {
+        for l in 0..16 {
+            acc[l] += a[l] * b[l];
+        }
+    }
+    for (l, (a, b)) in xr.iter().zip(yr).enumerate() {
+        acc[l] += a * b;
+    }
+    acc.iter().sum()
 }
 
 /// The `gemm` crate's `C = (read_c ? C : 0) + A · B` for a row-major `A`.
@@ -293,8 +446,10 @@ pub fn matmul_nt(
                 m,
                 n,
                 k,
-                a.as_ptr(),
-                lda,
+                avx512::Strided {
+                    base: a.as_ptr(),
+                    ld: lda,
+                },
                 b.as_ptr(),
                 ldb,
                 c.as_mut_ptr(),

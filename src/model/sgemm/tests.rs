@@ -233,3 +233,58 @@ fn short_buffers_are_errors() {
     )
     .is_err());
 }
+
+/// Row-offset operands: a row reaching past the buffer, or a wrong number of offsets, is an error; a valid call
+/// equals the same product with the rows gathered into a strided matrix, on both backends.
+#[test]
+fn offset_rows_match_gathered_rows_and_check_bounds() {
+    let (m, k, n) = (9, 12, 37);
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let a = random(&mut rng, m * k);
+    let img = random(&mut rng, 200);
+    // Overlapping, unordered rows as a convolution's taps are.
+    let offs: Vec<usize> = (0..k).map(|p| (p * 13) % 150).collect();
+    let gathered: Vec<f32> = offs.iter().flat_map(|&o| img[o..o + n].to_vec()).collect();
+    for backend in backends() {
+        let pa = PackedA::with_backend(backend, m, k, &a, k, 1).unwrap();
+        let mut want = vec![0f32; m * n];
+        pa.matmul(n, &gathered, n, &mut want, n, Init::Zero)
+            .unwrap();
+        let mut got = vec![0f32; m * n];
+        // SAFETY: got holds m rows of n floats.
+        unsafe { pa.matmul_offsets_raw(n, &img, &offs, got.as_mut_ptr(), n, Init::Zero) }.unwrap();
+        let err = want
+            .iter()
+            .zip(&got)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0f32, f32::max);
+        assert!(err < 1e-5, "{backend:?}: {err}");
+        // Aᵀ-side offsets: C[k, m] = rows(img)[k, n] · A'[m, n]ᵀ against the gathered rows.
+        let b = random(&mut rng, m * n);
+        let mut want = vec![0f32; k * m];
+        matmul_nt(backend, (k, m, n), &gathered, n, &b, n, &mut want, m, false).unwrap();
+        let mut got = vec![0f32; k * m];
+        matmul_nt_offsets(backend, (k, m, n), &img, &offs, &b, n, &mut got, m, false).unwrap();
+        let err = want
+            .iter()
+            .zip(&got)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0f32, f32::max);
+        assert!(err < 1e-5, "nt {backend:?}: {err}");
+        // Out of bounds and miscounted offsets.
+        let mut c = vec![0f32; m * n];
+        let short = &img[..offs.iter().max().unwrap() + n - 1];
+        // SAFETY: c holds m rows of n floats.
+        assert!(
+            unsafe { pa.matmul_offsets_raw(n, short, &offs, c.as_mut_ptr(), n, Init::Zero) }
+                .is_err()
+        );
+        assert!(unsafe {
+            pa.matmul_offsets_raw(n, &img, &offs[1..], c.as_mut_ptr(), n, Init::Zero)
+        }
+        .is_err());
+        assert!(
+            matmul_nt_offsets(backend, (k, m, n), short, &offs, &b, n, &mut got, m, false).is_err()
+        );
+    }
+}

@@ -1,0 +1,367 @@
+//! Direct ("implicit GEMM") convolution for the U-Net's stride-1 "same" convolutions (paper IV.B, speed on the
+//! CPU): every 3 × 3 convolution of the ResNet blocks and up-samplers, and the 1 × 1 shortcuts.
+//!
+//! Measured first (`perf`, default model, training step): the tiled path's im2col and col2im copies
+//! ([`super::conv_tiled`]) took about a quarter of the step. Here nothing is unfolded. A sample's channels are
+//! copied once into a zero-padded image of row width `Wp = W + 2p`; on that grid, the im2col row of tap
+//! `(ci, ky, kx)` *is* the padded image read from offset `ci·plane + ky·Wp + kx`, so the GEMM kernels read B's rows
+//! (or A's, for the weight gradient) straight from the image at those offsets ([`PackedA::matmul_offsets_raw`],
+//! [`matmul_nt_offsets`]). The products are computed at all `H × Wp` grid positions; the `2p` columns past each
+//! row are discarded when the result is copied out. The backward is the same trick twice: the input gradient is a
+//! direct convolution of the padded output gradient with the flipped, transposed kernel, and the weight gradient
+//! reads the padded input and the padded output gradient, whose off-image columns are zero. Work is split by
+//! (sample, row tile) forward and by sample backward, with a fixed summation order (deterministic results).
+//! Tests compare it with candle's `conv2d` (values and gradients) in `tests/model_unet.rs`.
+
+use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
+use rayon::prelude::*;
+
+use super::conv::ConvGeom;
+use super::sgemm::{matmul_nt_offsets, GemmBackend, Init, PackedA};
+
+/// Whether [`conv2d_direct`] computes a convolution of this geometry: stride 1, odd kernel, padding
+/// `(kernel − 1) / 2` on every side (the output has the input's size).
+pub fn supports(g: ConvGeom) -> bool {
+    g.stride == 1 && g.kernel % 2 == 1 && g.pad_begin == g.kernel / 2 && g.pad_end == g.kernel / 2
+}
+
+/// Convolution of `x` `[B, Cin, H, W]` with `w` `[Cout, Cin, k, k]` plus `bias` by the direct path
+/// (differentiable). The geometry must satisfy [`supports`].
+pub fn conv2d_direct(x: &Tensor, w: &Tensor, bias: &Tensor, geom: ConvGeom) -> Result<Tensor> {
+    if !supports(geom) {
+        candle_core::bail!("direct convolution: unsupported geometry {geom:?}");
+    }
+    let op = DirectConv {
+        kernel: geom.kernel,
+        backend: GemmBackend::detect(),
+    };
+    x.contiguous()?
+        .apply_op3(&w.contiguous()?, &bias.contiguous()?, op)
+}
+
+/// Forward op on `(x, w, bias)`; `backend` is the GEMM to use (tests force the portable one).
+#[derive(Clone, Copy, Debug)]
+pub struct DirectConv {
+    pub kernel: usize,
+    pub backend: GemmBackend,
+}
+
+/// Backward op on `(x, w, dy)` returning `[dx…, dw…, db…]` flat.
+#[derive(Clone, Copy, Debug)]
+struct DirectConvBackward {
+    kernel: usize,
+    backend: GemmBackend,
+}
+
+/// Sizes of one convolution on the padded grid.
+#[derive(Clone, Copy, Debug)]
+struct Grid {
+    b: usize,
+    h: usize,
+    w: usize,
+    /// Kernel size `k` and padding `p = (k − 1) / 2`.
+    k: usize,
+    p: usize,
+    /// Padded row width `W + 2p`.
+    wp: usize,
+}
+
+impl Grid {
+    fn new(x: &[usize], k: usize) -> Result<(Self, usize)> {
+        let [b, c, h, w] = x else {
+            candle_core::bail!("conv: input must be 4-D, found {x:?}")
+        };
+        let p = k / 2;
+        Ok((
+            Self {
+                b: *b,
+                h: *h,
+                w: *w,
+                k,
+                p,
+                wp: w + 2 * p,
+            },
+            *c,
+        ))
+    }
+
+    /// Floats of one padded channel holding `rows` image rows (plus `p` zero rows above and below).
+    fn plane(&self, rows: usize) -> usize {
+        (rows + 2 * self.p) * self.wp
+    }
+
+    /// Length of a padded image of `c` channels of `rows` rows: the last tap's reads of the off-image columns run
+    /// `2p` floats past the last plane.
+    fn padded_len(&self, c: usize, rows: usize) -> usize {
+        c * self.plane(rows) + 2 * self.p
+    }
+
+    /// Offsets of the taps `(c, ky, kx)` (the weight's inner index order) in a padded image of `rows` rows.
+    fn tap_offsets(&self, c: usize, rows: usize) -> Vec<usize> {
+        let plane = self.plane(rows);
+        let mut offs = Vec::with_capacity(c * self.k * self.k);
+        for ci in 0..c {
+            for ky in 0..self.k {
+                for kx in 0..self.k {
+                    offs.push(ci * plane + ky * self.wp + kx);
+                }
+            }
+        }
+        offs
+    }
+
+    /// Image rows per forward work item: about 384 grid positions, so a tile's output stays in L2.
+    fn tile_rows(&self) -> usize {
+        384usize.div_ceil(self.wp).clamp(1, self.h.max(1))
+    }
+}
+
+/// Writes rows `y0 .. y0 + rows` of one sample `src` `[C, H, W]` into `dst` as a zero-padded image with `p` rows
+/// of the sample's neighbourhood (or zeros outside it) above and below and `p` zero columns on each side.
+fn pad_rows(src: &[f32], c: usize, g: &Grid, y0: usize, rows: usize, dst: &mut [f32]) {
+    let plane = g.plane(rows);
+    dst[..g.padded_len(c, rows)].fill(0.0);
+    for ci in 0..c {
+        let s = &src[ci * g.h * g.w..(ci + 1) * g.h * g.w];
+        let d = &mut dst[ci * plane..(ci + 1) * plane];
+        for r in 0..rows + 2 * g.p {
+            let y = (y0 + r) as isize - g.p as isize;
+            if y >= 0 && (y as usize) < g.h {
+                let y = y as usize;
+                d[r * g.wp + g.p..r * g.wp + g.p + g.w].copy_from_slice(&s[y * g.w..(y + 1) * g.w]);
+            }
+        }
+    }
+}
+
+/// Copies the first `W` of every `Wp` grid columns of `wide` (`c` rows of `rows · Wp`) into rows `y0..` of `dst`
+/// (`[c, H, W]`).
+fn unpad_into(wide: &[f32], c: usize, g: &Grid, y0: usize, rows: usize, dst: &mut [f32]) {
+    for ci in 0..c {
+        for r in 0..rows {
+            let from = &wide[(ci * rows + r) * g.wp..(ci * rows + r) * g.wp + g.w];
+            let to = (ci * g.h + y0 + r) * g.w;
+            dst[to..to + g.w].copy_from_slice(from);
+        }
+    }
+}
+
+/// A raw pointer that may cross threads; every use writes a region no other work item touches.
+#[derive(Clone, Copy)]
+struct SendPtr(*mut f32);
+unsafe impl Send for SendPtr {}
+unsafe impl Sync for SendPtr {}
+
+impl SendPtr {
+    /// The pointer (a method, so closures capture the whole `Sync` wrapper rather than the raw field).
+    fn ptr(self) -> *mut f32 {
+        self.0
+    }
+}
+
+impl CustomOp3 for DirectConv {
+    fn name(&self) -> &'static str {
+        "conv2d-direct"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let x = super::contiguous_f32(s1, l1, "conv: input")?;
+        let w = super::contiguous_f32(s2, l2, "conv: weight")?;
+        let bias = super::contiguous_f32(s3, l3, "conv: bias")?;
+        let (g, c) = Grid::new(l1.shape().dims(), self.kernel)?;
+        let co = l2.shape().dims()[0];
+        let kk = c * g.k * g.k;
+        if w.len() != co * kk || bias.len() != co {
+            candle_core::bail!(
+                "conv: weight {:?} / bias {} do not fit input {:?}",
+                l2.shape(),
+                bias.len(),
+                l1.shape()
+            );
+        }
+        let hw = g.h * g.w;
+        let mut y = vec![0f32; g.b * co * hw];
+        let yp = SendPtr(y.as_mut_ptr());
+        let w_packed = PackedA::with_backend(self.backend, co, kk, w, kk, 1)?;
+        let tr = g.tile_rows();
+        let tiles = g.h.div_ceil(tr);
+        let items: Vec<(usize, usize)> = (0..g.b)
+            .flat_map(|b| (0..tiles).map(move |t| (b, t)))
+            .collect();
+        items.par_iter().try_for_each_init(
+            || (vec![0f32; g.padded_len(c, tr)], vec![0f32; co * tr * g.wp]),
+            |(xp, wide), &(b, tile)| -> Result<()> {
+                let y0 = tile * tr;
+                let rows = tr.min(g.h - y0);
+                pad_rows(&x[b * c * hw..(b + 1) * c * hw], c, &g, y0, rows, xp);
+                let offs = g.tap_offsets(c, rows);
+                let n = rows * g.wp;
+                // SAFETY: `wide` holds co rows of n floats and is this work item's own buffer.
+                unsafe {
+                    w_packed.matmul_offsets_raw(
+                        n,
+                        &xp[..g.padded_len(c, rows)],
+                        &offs,
+                        wide.as_mut_ptr(),
+                        n,
+                        Init::RowBias(bias),
+                    )?;
+                }
+                // SAFETY: rows y0..y0+rows of sample b, every channel: inside `y`, disjoint across items.
+                let yb =
+                    unsafe { std::slice::from_raw_parts_mut(yp.ptr().add(b * co * hw), co * hw) };
+                unpad_into(&wide[..co * n], co, &g, y0, rows, yb);
+                Ok(())
+            },
+        )?;
+        Ok((CpuStorage::F32(y), Shape::from((g.b, co, g.h, g.w))))
+    }
+
+    fn bwd(
+        &self,
+        x: &Tensor,
+        w: &Tensor,
+        _bias: &Tensor,
+        _res: &Tensor,
+        grad: &Tensor,
+    ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
+        let (nx, nw, co) = (x.elem_count(), w.elem_count(), w.dim(0)?);
+        let op = DirectConvBackward {
+            kernel: self.kernel,
+            backend: self.backend,
+        };
+        let packed =
+            x.contiguous()?
+                .apply_op3_no_bwd(&w.contiguous()?, &grad.contiguous()?, &op)?;
+        let dx = packed.narrow(0, 0, nx)?.reshape(x.shape())?;
+        let dw = packed.narrow(0, nx, nw)?.reshape(w.shape())?;
+        let db = packed.narrow(0, nx + nw, co)?;
+        Ok((Some(dx), Some(dw), Some(db)))
+    }
+}
+
+impl CustomOp3 for DirectConvBackward {
+    fn name(&self) -> &'static str {
+        "conv2d-direct-backward"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let x = super::contiguous_f32(s1, l1, "conv: input")?;
+        let w = super::contiguous_f32(s2, l2, "conv: weight")?;
+        let dy = super::contiguous_f32(s3, l3, "conv: output gradient")?;
+        let (g, c) = Grid::new(l1.shape().dims(), self.kernel)?;
+        let co = l2.shape().dims()[0];
+        let (hw, kk, taps) = (g.h * g.w, c * g.k * g.k, g.k * g.k);
+        if w.len() != co * kk || dy.len() != g.b * co * hw {
+            candle_core::bail!(
+                "conv backward: weight {:?} / gradient {:?} do not fit input {:?}",
+                l2.shape(),
+                l3.shape(),
+                l1.shape()
+            );
+        }
+        // dX = conv(dY padded by p, W flipped in space with in/out channels swapped): A'[ci, (co, ky, kx)].
+        let mut wt = vec![0f32; c * co * taps];
+        for o in 0..co {
+            for ci in 0..c {
+                for t in 0..taps {
+                    wt[(ci * co + o) * taps + t] = w[(o * c + ci) * taps + (taps - 1 - t)];
+                }
+            }
+        }
+        let wt_packed = PackedA::with_backend(self.backend, c, co * taps, &wt, co * taps, 1)?;
+        let (x_offs, dy_offs) = (g.tap_offsets(c, g.h), g.tap_offsets(co, g.h));
+        let (plane, n) = (g.plane(g.h), g.h * g.wp);
+        let tr = g.tile_rows();
+        let mut dx = vec![0f32; g.b * c * hw];
+        let mut dwt_parts = vec![0f32; g.b * kk * co];
+        dx.par_chunks_mut(c * hw)
+            .zip(dwt_parts.par_chunks_mut(kk * co))
+            .enumerate()
+            .try_for_each_init(
+                || {
+                    (
+                        vec![0f32; g.padded_len(c, g.h)],
+                        vec![0f32; g.padded_len(co, g.h)],
+                        vec![0f32; c * tr * g.wp],
+                    )
+                },
+                |(xp, dyp, wide), (b, (dxb, dwtb))| -> Result<()> {
+                    pad_rows(&x[b * c * hw..(b + 1) * c * hw], c, &g, 0, g.h, xp);
+                    pad_rows(&dy[b * co * hw..(b + 1) * co * hw], co, &g, 0, g.h, dyp);
+                    // dWᵀ_b[(ci, ky, kx), o] = Σ_q Xp[ci, q + ky·Wp + kx] · dYp[o, q + p·Wp + p] over all grid
+                    // positions q: dYp's off-image columns are zero, so the extra positions add nothing.
+                    let dyw = &dyp[g.p * g.wp + g.p..];
+                    matmul_nt_offsets(
+                        self.backend,
+                        (kk, co, n),
+                        xp,
+                        &x_offs,
+                        dyw,
+                        plane,
+                        dwtb,
+                        co,
+                        false,
+                    )?;
+                    // dX_b row tile by row tile: rows y0.. of the grid start at dYp row y0.
+                    for y0 in (0..g.h).step_by(tr) {
+                        let rows = tr.min(g.h - y0);
+                        let m = rows * g.wp;
+                        // SAFETY: `wide` holds c rows of m floats and is this work item's own buffer.
+                        unsafe {
+                            wt_packed.matmul_offsets_raw(
+                                m,
+                                &dyp[y0 * g.wp..],
+                                &dy_offs,
+                                wide.as_mut_ptr(),
+                                m,
+                                Init::Zero,
+                            )?;
+                        }
+                        unpad_into(&wide[..c * m], c, &g, y0, rows, dxb);
+                    }
+                    Ok(())
+                },
+            )?;
+        let mut out = dx;
+        out.reserve(co * kk + co);
+        // dW[o, j] = Σ_b dWᵀ_b[j, o] in sample order (deterministic).
+        let mut dw = vec![0f32; co * kk];
+        for part in dwt_parts.chunks(kk * co) {
+            for (j, row) in part.chunks(co).enumerate() {
+                for (o, v) in row.iter().enumerate() {
+                    dw[o * kk + j] += v;
+                }
+            }
+        }
+        out.extend(dw);
+        for o in 0..co {
+            let mut s = 0f64;
+            for b in 0..g.b {
+                s += dy[(b * co + o) * hw..(b * co + o + 1) * hw]
+                    .iter()
+                    .map(|&v| f64::from(v))
+                    .sum::<f64>();
+            }
+            out.push(s as f32);
+        }
+        let n = out.len();
+        Ok((CpuStorage::F32(out), Shape::from(n)))
+    }
+}
