@@ -188,7 +188,8 @@ impl CustomOp3 for DirectConv {
             );
         }
         let hw = g.h * g.w;
-        let mut y = vec![0f32; g.b * co * hw];
+        // SAFETY: the work items below write every (sample, channel, row) of y.
+        let mut y = unsafe { super::alloc::output_vec(g.b * co * hw) };
         let yp = SendPtr(y.as_mut_ptr());
         let w_packed = PackedA::with_backend(self.backend, co, kk, w, kk, 1)?;
         let tr = g.tile_rows();
@@ -289,10 +290,19 @@ impl CustomOp3 for DirectConvBackward {
         let (x_offs, dy_offs) = (g.tap_offsets(c, g.h), g.tap_offsets(co, g.h));
         let (plane, n) = (g.plane(g.h), g.h * g.wp);
         let tr = g.tile_rows();
-        let mut dx = vec![0f32; g.b * c * hw];
-        let mut dwt_parts = vec![0f32; g.b * kk * co];
+        // out = [dx, dw, db]: dx written by the per-sample items (every channel and row), dw and db below.
+        let (nx, nw) = (g.b * c * hw, co * kk);
+        // SAFETY: every element is written before `out` is returned.
+        let mut out = unsafe { super::alloc::output_vec(nx + nw + co) };
+        let (dx, rest) = out.split_at_mut(nx);
+        let (dw, db) = rest.split_at_mut(nw);
+        // Per sample: dWᵀ_b (overwritten by the GEMM) and Σ dY per channel in f64.
+        // SAFETY: matmul_nt_offsets below overwrites every element (accumulate = false).
+        let mut dwt_parts = unsafe { super::alloc::output_vec(g.b * kk * co) };
+        let mut db_parts = vec![0f64; g.b * co];
         dx.par_chunks_mut(c * hw)
             .zip(dwt_parts.par_chunks_mut(kk * co))
+            .zip(db_parts.par_chunks_mut(co))
             .enumerate()
             .try_for_each_init(
                 || {
@@ -302,9 +312,13 @@ impl CustomOp3 for DirectConvBackward {
                         vec![0f32; c * tr * g.wp],
                     )
                 },
-                |(xp, dyp, wide), (b, (dxb, dwtb))| -> Result<()> {
+                |(xp, dyp, wide), (b, ((dxb, dwtb), dbb))| -> Result<()> {
+                    let dy_b = &dy[b * co * hw..(b + 1) * co * hw];
                     pad_rows(&x[b * c * hw..(b + 1) * c * hw], c, &g, 0, g.h, xp);
-                    pad_rows(&dy[b * co * hw..(b + 1) * co * hw], co, &g, 0, g.h, dyp);
+                    pad_rows(dy_b, co, &g, 0, g.h, dyp);
+                    for (s, row) in dbb.iter_mut().zip(dy_b.chunks(hw)) {
+                        *s = sum_f64(row);
+                    }
                     // dWᵀ_b[(ci, ky, kx), o] = Σ_q Xp[ci, q + ky·Wp + kx] · dYp[o, q + p·Wp + p] over all grid
                     // positions q: dYp's off-image columns are zero, so the extra positions add nothing.
                     let dyw = &dyp[g.p * g.wp + g.p..];
@@ -339,29 +353,52 @@ impl CustomOp3 for DirectConvBackward {
                     Ok(())
                 },
             )?;
-        let mut out = dx;
-        out.reserve(co * kk + co);
-        // dW[o, j] = Σ_b dWᵀ_b[j, o] in sample order (deterministic).
-        let mut dw = vec![0f32; co * kk];
-        for part in dwt_parts.chunks(kk * co) {
-            for (j, row) in part.chunks(co).enumerate() {
-                for (o, v) in row.iter().enumerate() {
-                    dw[o * kk + j] += v;
-                }
-            }
-        }
-        out.extend(dw);
-        for o in 0..co {
-            let mut s = 0f64;
-            for b in 0..g.b {
-                s += dy[(b * co + o) * hw..(b * co + o + 1) * hw]
-                    .iter()
-                    .map(|&v| f64::from(v))
-                    .sum::<f64>();
-            }
-            out.push(s as f32);
-        }
+        sum_parts(&dwt_parts, &db_parts, dw, db);
         let n = out.len();
         Ok((CpuStorage::F32(out), Shape::from(n)))
     }
+}
+
+/// The weight and bias gradients from per-sample parts: `dw[o, j] = Σ_b dwt_parts[b][j, o]` and
+/// `db[o] = Σ_b db_parts[b][o]` (f64 parts), summed in sample order (deterministic). The parts are summed in their
+/// own `[j, o]` layout (contiguous, vectorised, rows of j in parallel), then transposed once. Shared with
+/// [`super::conv_tiled`].
+pub(super) fn sum_parts(dwt_parts: &[f32], db_parts: &[f64], dw: &mut [f32], db: &mut [f32]) {
+    let (co, kk) = (db.len(), dw.len() / db.len().max(1));
+    let n = kk * co;
+    let mut dwt = dwt_parts[..n].to_vec();
+    dwt.par_chunks_mut(co * 16)
+        .enumerate()
+        .for_each(|(i, acc)| {
+            let (start, len) = (i * co * 16, acc.len());
+            for part in dwt_parts.chunks(n).skip(1) {
+                for (a, &v) in acc.iter_mut().zip(&part[start..start + len]) {
+                    *a += v;
+                }
+            }
+        });
+    for (j, row) in dwt.chunks(co).enumerate() {
+        for (o, &v) in row.iter().enumerate() {
+            dw[o * kk + j] = v;
+        }
+    }
+    for (o, v) in db.iter_mut().enumerate() {
+        *v = db_parts.iter().skip(o).step_by(co).sum::<f64>() as f32;
+    }
+}
+
+/// `Σ v` of f32 values in f64, over 8 interleaved partial sums (vectorised, fixed order).
+pub(super) fn sum_f64(v: &[f32]) -> f64 {
+    let mut acc = [0f64; 8];
+    let chunks = v.chunks_exact(8);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for l in 0..8 {
+            acc[l] += f64::from(c[l]);
+        }
+    }
+    for (l, &x) in rest.iter().enumerate() {
+        acc[l] += f64::from(x);
+    }
+    acc.iter().sum()
 }

@@ -205,8 +205,9 @@ impl CustomOp3 for TiledConv {
             );
         }
         let hw = d.ho * d.wo;
-        // The GEMM starts every output row from its bias (no pre-filled output to read back).
-        let mut y = vec![0f32; d.b * co * hw];
+        // The GEMM starts every output row from its bias (no pre-filled output to read back); the tiles cover y.
+        // SAFETY: every (sample, tile) item writes all co rows of its columns.
+        let mut y = unsafe { super::alloc::output_vec(d.b * co * hw) };
         let yp = SendPtr(y.as_mut_ptr());
         let w_packed = PackedA::new(co, d.k, w, d.k, 1)?;
         let items: Vec<(usize, usize)> = (0..d.b)
@@ -282,21 +283,29 @@ impl CustomOp3 for TiledConvBackward {
         if dy.len() != d.b * co * hw {
             candle_core::bail!("conv backward: gradient {:?} does not fit", l3.shape());
         }
-        let mut dx = vec![0f32; d.b * in_len];
+        // out = [dx (col2im accumulates: zeroed), dw, db].
+        let mut out = vec![0f32; d.b * in_len + co * k + co];
+        let (dx, rest) = out.split_at_mut(d.b * in_len);
+        let (dw, db) = rest.split_at_mut(co * k);
         // Per sample dWᵀ [K, Cout]: cols · dYᵀ keeps the long pixel axis as the summed one and the small channel
         // axis as C's rows, the shape the GEMM kernels run fastest (see `sgemm::avx512::gemm_nt`).
         let mut dwt_parts = vec![0f32; d.b * k * co];
+        let mut db_parts = vec![0f64; d.b * co];
         // A = Wᵀ [K, Cout] read in place from W [Cout, K].
         let wt_packed = PackedA::new(k, co, w, 1, k)?;
         let backend = wt_packed.backend();
         dx.par_chunks_mut(in_len)
             .zip(dwt_parts.par_chunks_mut(k * co))
+            .zip(db_parts.par_chunks_mut(co))
             .enumerate()
             .try_for_each_init(
                 || (vec![0f32; k * d.tile], vec![0f32; k * d.tile]),
-                |(cols, dcols), (b, (dxb, dwtb))| -> Result<()> {
+                |(cols, dcols), (b, ((dxb, dwtb), dbb))| -> Result<()> {
                     let xb = &x[b * in_len..(b + 1) * in_len];
                     let dyb = &dy[b * co * hw..(b + 1) * co * hw];
+                    for (s, row) in dbb.iter_mut().zip(dyb.chunks(hw)) {
+                        *s = super::conv_direct::sum_f64(row);
+                    }
                     for tile in 0..d.tiles() {
                         let p0 = tile * d.tile;
                         let t = d.tile.min(hw - p0);
@@ -321,28 +330,7 @@ impl CustomOp3 for TiledConvBackward {
                     Ok(())
                 },
             )?;
-        let mut out = dx;
-        out.reserve(co * k + co);
-        // dW[c, j] = Σ_b dWᵀ_b[j, c] in sample order (deterministic).
-        let mut dw = vec![0f32; co * k];
-        for part in dwt_parts.chunks(k * co) {
-            for (j, row) in part.chunks(co).enumerate() {
-                for (c, v) in row.iter().enumerate() {
-                    dw[c * k + j] += v;
-                }
-            }
-        }
-        out.extend(dw);
-        for c in 0..co {
-            let mut s = 0f64;
-            for b in 0..d.b {
-                s += dy[(b * co + c) * hw..(b * co + c + 1) * hw]
-                    .iter()
-                    .map(|&v| f64::from(v))
-                    .sum::<f64>();
-            }
-            out.push(s as f32);
-        }
+        super::conv_direct::sum_parts(&dwt_parts, &db_parts, dw, db);
         let n = out.len();
         Ok((CpuStorage::F32(out), Shape::from(n)))
     }

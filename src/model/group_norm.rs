@@ -307,6 +307,56 @@ mod avx2 {
     }
 }
 
+/// The same two functions compiled for AVX-512 (16-lane loops where LLVM widens them), chosen before AVX2.
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use super::GnOp;
+
+    #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) unsafe fn fwd_group(
+        op: GnOp,
+        w: &[f32],
+        b: &[f32],
+        tg: &[f32],
+        c0: usize,
+        hw: usize,
+        xg: &[f32],
+        yg: &mut [f32],
+    ) {
+        super::fwd_group(op, w, b, tg, c0, hw, xg, yg)
+    }
+
+    #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) unsafe fn bwd_group(
+        op: GnOp,
+        w: &[f32],
+        b: &[f32],
+        tg: &[f32],
+        c0: usize,
+        hw: usize,
+        xg: &[f32],
+        dyg: &[f32],
+        dxg: &mut [f32],
+        pg: &mut [[f64; 3]],
+    ) {
+        super::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg)
+    }
+}
+
+/// The fastest build of the group kernels this CPU runs: 2 = AVX-512, 1 = AVX2 + FMA, 0 = portable.
+fn simd_level() -> u8 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("avx512vl") && has_avx2()
+        {
+            return 2;
+        }
+    }
+    u8::from(has_avx2())
+}
+
 fn has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
@@ -343,8 +393,9 @@ impl CustomOp3 for GnOp {
             candle_core::bail!("group_norm: parameters do not fit input {dims:?}");
         }
         let (w, b) = wb.split_at(c);
-        let mut y = vec![0f32; x.len()];
-        let (op, fast) = (*self, has_avx2());
+        // SAFETY: fwd_group writes every value of every (sample, group) chunk.
+        let mut y = unsafe { super::alloc::output_vec(x.len()) };
+        let (op, fast) = (*self, simd_level());
         y.par_chunks_mut(cpg * hw)
             .zip(x.par_chunks(cpg * hw))
             .zip(t.par_chunks(cpg))
@@ -352,10 +403,12 @@ impl CustomOp3 for GnOp {
             .for_each(|(bg, ((yg, xg), tg))| {
                 let c0 = (bg % op.groups) * cpg;
                 #[cfg(target_arch = "x86_64")]
-                if fast {
+                match fast {
+                    // SAFETY: the CPU supports AVX-512 (F, VL), AVX2 and FMA (checked above).
+                    2 => return unsafe { avx512::fwd_group(op, w, b, tg, c0, hw, xg, yg) },
                     // SAFETY: the CPU supports AVX2 and FMA (checked above).
-                    unsafe { avx2::fwd_group(op, w, b, tg, c0, hw, xg, yg) };
-                    return;
+                    1 => return unsafe { avx2::fwd_group(op, w, b, tg, c0, hw, xg, yg) },
+                    _ => {}
                 }
                 let _ = fast;
                 fwd_group(op, w, b, tg, c0, hw, xg, yg);
@@ -415,11 +468,12 @@ impl CustomOp3 for GnBackward {
         let hw: usize = dims[2..].iter().product();
         let cpg = c / op.groups;
         let n = x.len();
-        let mut out = vec![0f32; n + 2 * c + bsz * c];
+        // SAFETY: dx by bwd_group (every value), the parameter gradients by the loops below (every entry).
+        let mut out = unsafe { super::alloc::output_vec(n + 2 * c + bsz * c) };
         let (dx, _) = out.split_at_mut(n);
         // Per (sample, channel) sums of dL/dw, dL/db and dL/dshift.
         let mut partial = vec![[0f64; 3]; bsz * c];
-        let fast = has_avx2();
+        let fast = simd_level();
         dx.par_chunks_mut(cpg * hw)
             .zip(partial.par_chunks_mut(cpg))
             .zip(t.par_chunks(cpg))
@@ -429,10 +483,14 @@ impl CustomOp3 for GnBackward {
                 let (xg, dyg) = (&x[off..off + cpg * hw], &dy[off..off + cpg * hw]);
                 let c0 = (bg % op.groups) * cpg;
                 #[cfg(target_arch = "x86_64")]
-                if fast {
+                match fast {
+                    // SAFETY: the CPU supports AVX-512 (F, VL), AVX2 and FMA (checked above).
+                    2 => {
+                        return unsafe { avx512::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg) }
+                    }
                     // SAFETY: the CPU supports AVX2 and FMA (checked above).
-                    unsafe { avx2::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg) };
-                    return;
+                    1 => return unsafe { avx2::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg) },
+                    _ => {}
                 }
                 let _ = fast;
                 bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg);
