@@ -500,3 +500,52 @@ fn loads_a_diffusers_save_pretrained_directory() {
         .to_string()
         .contains("diffusion_pytorch_model.safetensors"));
 }
+
+/// The two half-batches run side by side give the whole batch's output, loss and gradients (invariant: every op
+/// treats samples independently), and a timestep count that fits neither is an error.
+#[test]
+fn half_batches_match_the_whole_batch() {
+    use tactile_derender::model::parallel_batch::{halves, loss_and_grads};
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        assert_eq!(halves(5), vec![0..2, 2..5]);
+        let model =
+            DiffusionModel::load(Path::new("tests/fixtures/unet_small/unet_ref.safetensors"))
+                .unwrap();
+        let unet = model.unet();
+        let x = rand_t(&[5, 2, 8, 8], 11);
+        let target = rand_t(&[5, 1, 8, 8], 12);
+        let t = [3.0, 50.0, 100.0, 200.0, 249.0];
+        let whole = unet.forward_t(&x, &t, false).unwrap();
+        let split = unet.forward(&x, &t).unwrap();
+        assert!(max_abs(&whole, &split) < 1e-6);
+        assert!(unet.forward(&x, &t[..3]).is_err());
+
+        let loss = (unet.forward_t(&x, &t, true).unwrap() - &target)
+            .unwrap()
+            .sqr()
+            .unwrap()
+            .mean_all()
+            .unwrap();
+        let want = loss.backward().unwrap();
+        let (value, got) = loss_and_grads(5, |r| {
+            let pred = unet.forward_t(&x.narrow(0, r.start, r.len())?, &t[r.clone()], true)?;
+            (pred - target.narrow(0, r.start, r.len())?)?
+                .sqr()?
+                .mean_all()
+        })
+        .unwrap();
+        let whole_value = loss.to_scalar::<f32>().unwrap();
+        assert!((value - whole_value).abs() < 1e-6 * whole_value.abs().max(1.0));
+        let vars = model.vars().varmap.all_vars();
+        assert!(!vars.is_empty());
+        for v in &vars {
+            let (a, b) = (want.get(v).unwrap(), got.get(v).unwrap());
+            let scale = max_abs(a, &a.zeros_like().unwrap()).max(1e-3);
+            assert!(max_abs(a, b) < 1e-5 * scale.max(1.0), "{:?}", v.dims());
+        }
+    });
+}

@@ -22,6 +22,7 @@ pub mod embeddings;
 pub mod group_norm;
 pub mod init;
 pub mod normalise;
+pub mod parallel_batch;
 pub mod resnet;
 pub mod sampler;
 pub mod schedule;

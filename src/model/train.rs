@@ -208,15 +208,16 @@ pub fn train(
             tc.batch,
             tc.seed,
         )?;
-        let loss = loss_on(&run, &schedule, &b, tc, s, true)?;
-        let value = loss.to_scalar::<f32>()?;
+        let (input, tf, target) = prepare(&run, &schedule, &b, tc, s)?;
+        let (value, grads) = super::parallel_batch::loss_and_grads(b.n, |r| {
+            mean_loss(&run, tc, (&input, &tf, &target), r, true)
+        })?;
         if !value.is_finite() {
             return Err(ModelError::NonFinite {
                 what: "training loss".into(),
                 at_step: Some(s),
             });
         }
-        let grads = loss.backward()?;
         run.adam.step(&grads)?;
         if let (Some(d), Some(ema)) = (tc.ema, run.ema.as_mut()) {
             update_ema(ema, &run.adam.vars, d)?;
@@ -228,8 +229,9 @@ pub fn train(
         let mut val_loss = None;
         if run.step % tc.log_every.max(1) == 0 || run.step == total {
             if let Some(vb) = &val {
-                val_loss =
-                    Some(loss_on(&run, &schedule, vb, tc, u64::MAX, false)?.to_scalar::<f32>()?);
+                let (input, tf, target) = prepare(&run, &schedule, vb, tc, u64::MAX)?;
+                let loss = mean_loss(&run, tc, (&input, &tf, &target), 0..vb.n, false)?;
+                val_loss = Some(loss.to_scalar::<f32>()?);
             }
             append_log(run_dir, run.step, value, val_loss, samples_per_s)?;
             window = (Instant::now(), 0);
@@ -278,16 +280,15 @@ fn update_ema(
     Ok(())
 }
 
-/// The ε- or v-prediction loss (the model config's `prediction_type`) on batch `b` with the randomness of `step`
-/// (`u64::MAX`: the fixed validation draw).
-fn loss_on(
+/// The network input `cat([x_t, imprint])`, the timesteps and the regression target (the model config's
+/// `prediction_type`: ε or v) of batch `b` with the randomness of `step` (`u64::MAX`: the fixed validation draw).
+fn prepare(
     run: &Run,
     schedule: &NoiseSchedule,
     b: &TrainBatch,
     tc: &TrainConfig,
     step: u64,
-    train: bool,
-) -> Result<Tensor, ModelError> {
+) -> Result<(Tensor, Vec<f32>, Tensor), ModelError> {
     let norm = &run.cfg.tactile_derender;
     let (n, h, w) = (b.n, b.height, b.width);
     let s = run.cfg.sample_size;
@@ -316,15 +317,27 @@ fn loss_on(
         PredictionType::VPrediction => schedule.velocity(&x0, &eps, &t)?,
     };
     let tf: Vec<f32> = t.iter().map(|&t| t as f32).collect();
+    Ok((Tensor::cat(&[&xt, &cond], 1)?, tf, target))
+}
+
+/// The mean loss (`tc.loss`) of the samples `r` of a prepared batch.
+fn mean_loss(
+    run: &Run,
+    tc: &TrainConfig,
+    (input, tf, target): (&Tensor, &[f32], &Tensor),
+    r: std::ops::Range<usize>,
+    train: bool,
+) -> candle_core::Result<Tensor> {
+    let (start, len) = (r.start, r.len());
     let pred = run
         .vars
         .unet
-        .forward_t(&Tensor::cat(&[&xt, &cond], 1)?, &tf, train)?;
-    let diff = (pred - target)?;
-    Ok(match tc.loss {
-        Loss::L2 => diff.sqr()?.mean_all()?,
-        Loss::L1 => diff.abs()?.mean_all()?,
-    })
+        .forward_t(&input.narrow(0, start, len)?, &tf[r], train)?;
+    let diff = (pred - target.narrow(0, start, len)?)?;
+    match tc.loss {
+        Loss::L2 => diff.sqr()?.mean_all(),
+        Loss::L1 => diff.abs()?.mean_all(),
+    }
 }
 
 fn open_run(

@@ -114,8 +114,20 @@ impl UNet2DModel {
     }
 
     /// ε prediction for `x` `[B, in_channels, H, W]` at diffusion `timesteps` (one per sample, or one for all).
+    /// Batches of two or more run as two half-batches side by side ([`super::parallel_batch`]).
     pub fn forward(&self, x: &Tensor, timesteps: &[f32]) -> Result<Tensor> {
-        self.forward_t(x, timesteps, false)
+        let b = x.dim(0)?;
+        if timesteps.len() != 1 && timesteps.len() != b {
+            candle_core::bail!("{} timesteps for a batch of {b}", timesteps.len());
+        }
+        super::parallel_batch::forward_halves(x, |xh, r| {
+            let t = if timesteps.len() == 1 {
+                timesteps
+            } else {
+                &timesteps[r]
+            };
+            self.forward_t(xh, t, false)
+        })
     }
 
     /// Like [`Self::forward`]; `train` enables dropout.

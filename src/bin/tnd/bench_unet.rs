@@ -16,6 +16,7 @@ use tactile_derender::model::adam::Adam;
 use tactile_derender::model::checkpoint::{build, named_vars};
 use tactile_derender::model::conv::{set_conv_backend, ConvBackend};
 use tactile_derender::model::init::init_params;
+use tactile_derender::model::parallel_batch;
 use tactile_derender::model::{NoiseSchedule, UNet2DConfig};
 
 use crate::bench::median_time;
@@ -150,13 +151,20 @@ pub fn run(a: &UnetBenchArgs) -> Result<()> {
             let t: Vec<usize> = (0..b).map(|_| rng.random_range(0..t_max)).collect();
             let xt = schedule.add_noise(&x0, &noise, &t)?;
             let tf: Vec<f32> = t.iter().map(|&t| t as f32).collect();
-            let pred = vars
-                .unet
-                .forward_t(&Tensor::cat(&[&xt, &cond], 1)?, &tf, true)?;
-            let loss = (pred - noise)?.sqr()?.mean_all()?;
-            let grads = loss.backward()?;
+            let input = Tensor::cat(&[&xt, &cond], 1)?;
+            // As `tnd train` does: the two half-batches side by side, gradients summed.
+            let (loss, grads) = parallel_batch::loss_and_grads(b, |r| {
+                let pred = vars.unet.forward_t(
+                    &input.narrow(0, r.start, r.len())?,
+                    &tf[r.clone()],
+                    true,
+                )?;
+                (pred - noise.narrow(0, r.start, r.len())?)?
+                    .sqr()?
+                    .mean_all()
+            })?;
             adam.step(&grads)?;
-            Ok(loss.to_scalar::<f32>()?)
+            Ok(loss)
         };
         let mut err = None;
         let median_s = median_time(a.warmup.min(2), a.train_runs, || {
