@@ -22,7 +22,7 @@ pub const MIN_SPLIT: usize = 2;
 /// The sample ranges of the halves of a batch of `n` (`n` itself when it is not split).
 pub fn halves(n: usize) -> Vec<Range<usize>> {
     if n < MIN_SPLIT || rayon::current_num_threads() < 2 {
-        vec![0..n]
+        std::iter::once(0..n).collect()
     } else {
         vec![0..n / 2, n / 2..n]
     }
