@@ -447,15 +447,21 @@ fn upsample_op_matches_broadcast_reshape() {
 #[test]
 fn scaled_softmax_matches_candle_softmax() {
     use tactile_derender::model::attention::scaled_softmax;
-    let x = Var::from_tensor(&(rand_t(&[2, 3, 5, 37], 31) * 4.0).unwrap()).unwrap();
-    let y1 = scaled_softmax(x.as_tensor(), 0.35).unwrap();
-    let y2 =
-        candle_nn::ops::softmax(&(x.as_tensor() * 0.35).unwrap(), candle_core::D::Minus1).unwrap();
-    assert!(max_abs(&y1, &y2) < 1e-6);
-    let r = rand_t(y1.dims(), 32);
-    let g1 = (&y1 * &r).unwrap().sum_all().unwrap().backward().unwrap();
-    let g2 = (&y2 * &r).unwrap().sum_all().unwrap().backward().unwrap();
-    assert!(max_abs(g1.get(&x).unwrap(), g2.get(&x).unwrap()) < 1e-6);
+    // Rows of 37 (two 16-lane blocks and a tail); rows of 300 in tasks of several rows each.
+    for shape in [[2, 3, 5, 37], [2, 4, 40, 300]] {
+        let x = Var::from_tensor(&(rand_t(&shape, 31) * 4.0).unwrap()).unwrap();
+        let y1 = scaled_softmax(x.as_tensor(), 0.35).unwrap();
+        let y2 = candle_nn::ops::softmax(&(x.as_tensor() * 0.35).unwrap(), candle_core::D::Minus1)
+            .unwrap();
+        assert!(max_abs(&y1, &y2) < 1e-6, "{shape:?}");
+        let r = rand_t(y1.dims(), 32);
+        let g1 = (&y1 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+        let g2 = (&y2 * &r).unwrap().sum_all().unwrap().backward().unwrap();
+        assert!(
+            max_abs(g1.get(&x).unwrap(), g2.get(&x).unwrap()) < 1e-6,
+            "{shape:?}"
+        );
+    }
 }
 
 #[test]

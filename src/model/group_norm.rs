@@ -349,7 +349,7 @@ mod avx512 {
 }
 
 /// The fastest build of the group kernels this CPU runs: 2 = AVX-512, 1 = AVX2 + FMA, 0 = portable.
-fn simd_level() -> u8 {
+pub(crate) fn simd_level() -> u8 {
     #[cfg(target_arch = "x86_64")]
     {
         if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("avx512vl") && has_avx2()
