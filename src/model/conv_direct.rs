@@ -17,6 +17,7 @@ use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
 
 use super::conv::ConvGeom;
+use super::conv_tiled::SendPtr;
 use super::sgemm::{matmul_nt_offsets, GemmBackend, Init, PackedA};
 
 /// Whether [`conv2d_direct`] computes a convolution of this geometry: stride 1, odd kernel, padding
@@ -148,19 +149,6 @@ fn unpad_into(wide: &[f32], c: usize, g: &Grid, y0: usize, rows: usize, dst: &mu
             let to = (ci * g.h + y0 + r) * g.w;
             dst[to..to + g.w].copy_from_slice(from);
         }
-    }
-}
-
-/// A raw pointer that may cross threads; every use writes a region no other work item touches.
-#[derive(Clone, Copy)]
-struct SendPtr(*mut f32);
-unsafe impl Send for SendPtr {}
-unsafe impl Sync for SendPtr {}
-
-impl SendPtr {
-    /// The pointer (a method, so closures capture the whole `Sync` wrapper rather than the raw field).
-    fn ptr(self) -> *mut f32 {
-        self.0
     }
 }
 

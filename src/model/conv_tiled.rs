@@ -165,13 +165,13 @@ fn col2im_tile(cols: &[f32], d: &Dims, g: ConvGeom, p0: usize, t: usize, dx: &mu
 
 /// A raw pointer that may cross threads; every use writes a region no other work item touches.
 #[derive(Clone, Copy)]
-struct SendPtr(*mut f32);
+pub(super) struct SendPtr(pub(super) *mut f32);
 unsafe impl Send for SendPtr {}
 unsafe impl Sync for SendPtr {}
 
 impl SendPtr {
     /// The pointer (a method, so closures capture the whole `Sync` wrapper rather than the raw field).
-    fn ptr(self) -> *mut f32 {
+    pub(super) fn ptr(self) -> *mut f32 {
         self.0
     }
 }
