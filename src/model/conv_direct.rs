@@ -227,18 +227,11 @@ impl CustomOp3 for DirectConv {
         _res: &Tensor,
         grad: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
-        let (nx, nw, co) = (x.elem_count(), w.elem_count(), w.dim(0)?);
         let op = DirectConvBackward {
             kernel: self.kernel,
             backend: self.backend,
         };
-        let packed =
-            x.contiguous()?
-                .apply_op3_no_bwd(&w.contiguous()?, &grad.contiguous()?, &op)?;
-        let dx = packed.narrow(0, 0, nx)?.reshape(x.shape())?;
-        let dw = packed.narrow(0, nx, nw)?.reshape(w.shape())?;
-        let db = packed.narrow(0, nx + nw, co)?;
-        Ok((Some(dx), Some(dw), Some(db)))
+        conv_grads(x, w, grad, &op)
     }
 }
 
@@ -350,6 +343,24 @@ impl CustomOp3 for DirectConvBackward {
         let n = out.len();
         Ok((CpuStorage::F32(out), Shape::from(n)))
     }
+}
+
+/// `(dx, dw, db)` of a convolution from a backward op on `(x, w, dy)` that returns them packed flat, in that order
+/// (shared with [`super::conv_tiled`]).
+pub(super) fn conv_grads(
+    x: &Tensor,
+    w: &Tensor,
+    grad: &Tensor,
+    op: &impl CustomOp3,
+) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
+    let (nx, nw, co) = (x.elem_count(), w.elem_count(), w.dim(0)?);
+    let packed = x
+        .contiguous()?
+        .apply_op3_no_bwd(&w.contiguous()?, &grad.contiguous()?, op)?;
+    let dx = packed.narrow(0, 0, nx)?.reshape(x.shape())?;
+    let dw = packed.narrow(0, nx, nw)?.reshape(w.shape())?;
+    let db = packed.narrow(0, nx + nw, co)?;
+    Ok((Some(dx), Some(dw), Some(db)))
 }
 
 /// The weight and bias gradients from per-sample parts: `dw[o, j] = Σ_b dwt_parts[b][j, o]` and

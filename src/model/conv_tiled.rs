@@ -245,16 +245,7 @@ impl CustomOp3 for TiledConv {
         _res: &Tensor,
         grad: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
-        let (nx, nw, co) = (x.elem_count(), w.elem_count(), w.dim(0)?);
-        let packed = x.contiguous()?.apply_op3_no_bwd(
-            &w.contiguous()?,
-            &grad.contiguous()?,
-            &TiledConvBackward { geom: self.geom },
-        )?;
-        let dx = packed.narrow(0, 0, nx)?.reshape(x.shape())?;
-        let dw = packed.narrow(0, nx, nw)?.reshape(w.shape())?;
-        let db = packed.narrow(0, nx + nw, co)?;
-        Ok((Some(dx), Some(dw), Some(db)))
+        super::conv_direct::conv_grads(x, w, grad, &TiledConvBackward { geom: self.geom })
     }
 }
 

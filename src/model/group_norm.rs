@@ -271,82 +271,53 @@ fn bwd_group(
     }
 }
 
-/// [`fwd_group`] and [`bwd_group`] compiled for AVX2 + FMA (8 f32 lanes), chosen at run time; the portable
-/// versions run elsewhere. Same operations in the same order either way (Rust never contracts to FMA by itself).
-#[cfg(target_arch = "x86_64")]
-mod avx2 {
-    use super::GnOp;
+/// Defines module `$name` with [`fwd_group`] and [`bwd_group`] compiled for the target features `$features`
+/// (same operations in the same order as the portable versions; Rust never contracts to FMA by itself).
+macro_rules! simd_group_kernels {
+    ($name:ident, $features:literal) => {
+        #[cfg(target_arch = "x86_64")]
+        mod $name {
+            use super::GnOp;
 
-    #[target_feature(enable = "avx2,fma")]
-    #[allow(clippy::too_many_arguments)]
-    pub(super) unsafe fn fwd_group(
-        op: GnOp,
-        w: &[f32],
-        b: &[f32],
-        tg: &[f32],
-        c0: usize,
-        hw: usize,
-        xg: &[f32],
-        yg: &mut [f32],
-    ) {
-        super::fwd_group(op, w, b, tg, c0, hw, xg, yg)
-    }
+            #[target_feature(enable = $features)]
+            #[allow(clippy::too_many_arguments)]
+            pub(super) unsafe fn fwd_group(
+                op: GnOp,
+                w: &[f32],
+                b: &[f32],
+                tg: &[f32],
+                c0: usize,
+                hw: usize,
+                xg: &[f32],
+                yg: &mut [f32],
+            ) {
+                super::fwd_group(op, w, b, tg, c0, hw, xg, yg)
+            }
 
-    #[target_feature(enable = "avx2,fma")]
-    #[allow(clippy::too_many_arguments)]
-    pub(super) unsafe fn bwd_group(
-        op: GnOp,
-        w: &[f32],
-        b: &[f32],
-        tg: &[f32],
-        c0: usize,
-        hw: usize,
-        xg: &[f32],
-        dyg: &[f32],
-        dxg: &mut [f32],
-        pg: &mut [[f64; 3]],
-    ) {
-        super::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg)
-    }
+            #[target_feature(enable = $features)]
+            #[allow(clippy::too_many_arguments)]
+            pub(super) unsafe fn bwd_group(
+                op: GnOp,
+                w: &[f32],
+                b: &[f32],
+                tg: &[f32],
+                c0: usize,
+                hw: usize,
+                xg: &[f32],
+                dyg: &[f32],
+                dxg: &mut [f32],
+                pg: &mut [[f64; 3]],
+            ) {
+                super::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg)
+            }
+        }
+    };
 }
 
-/// The same two functions compiled for AVX-512 (16-lane loops where LLVM widens them), chosen before AVX2.
-#[cfg(target_arch = "x86_64")]
-mod avx512 {
-    use super::GnOp;
-
-    #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-    #[allow(clippy::too_many_arguments)]
-    pub(super) unsafe fn fwd_group(
-        op: GnOp,
-        w: &[f32],
-        b: &[f32],
-        tg: &[f32],
-        c0: usize,
-        hw: usize,
-        xg: &[f32],
-        yg: &mut [f32],
-    ) {
-        super::fwd_group(op, w, b, tg, c0, hw, xg, yg)
-    }
-
-    #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-    #[allow(clippy::too_many_arguments)]
-    pub(super) unsafe fn bwd_group(
-        op: GnOp,
-        w: &[f32],
-        b: &[f32],
-        tg: &[f32],
-        c0: usize,
-        hw: usize,
-        xg: &[f32],
-        dyg: &[f32],
-        dxg: &mut [f32],
-        pg: &mut [[f64; 3]],
-    ) {
-        super::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg)
-    }
-}
+// AVX2 + FMA (8 f32 lanes) and AVX-512 (16-lane loops where LLVM widens them), chosen at run time (`simd_level`);
+// the portable versions run elsewhere.
+simd_group_kernels!(avx2, "avx2,fma");
+simd_group_kernels!(avx512, "avx512f,avx512vl,avx2,fma");
 
 /// The fastest build of the group kernels this CPU runs: 2 = AVX-512, 1 = AVX2 + FMA, 0 = portable.
 pub(crate) fn simd_level() -> u8 {
