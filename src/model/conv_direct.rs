@@ -187,6 +187,9 @@ impl CustomOp3 for DirectConv {
         let w_packed = PackedA::with_backend(self.backend, co, kk, w, kk, 1)?;
         let tr = g.tile_rows();
         let tiles = g.h.div_ceil(tr);
+        // Tap offsets of a full tile and of the last, possibly shorter one (they depend on the tile's plane size).
+        let last_rows = g.h - tiles.saturating_sub(1) * tr;
+        let (offs_full, offs_last) = (g.tap_offsets(c, tr), g.tap_offsets(c, last_rows));
         let items: Vec<(usize, usize)> = (0..g.b)
             .flat_map(|b| (0..tiles).map(move |t| (b, t)))
             .collect();
@@ -196,14 +199,14 @@ impl CustomOp3 for DirectConv {
                 let y0 = tile * tr;
                 let rows = tr.min(g.h - y0);
                 pad_rows(&x[b * c * hw..(b + 1) * c * hw], c, &g, y0, rows, xp);
-                let offs = g.tap_offsets(c, rows);
+                let offs = if rows == tr { &offs_full } else { &offs_last };
                 let n = rows * g.wp;
                 // SAFETY: `wide` holds co rows of n floats and is this work item's own buffer.
                 unsafe {
                     w_packed.matmul_offsets_raw(
                         n,
                         &xp[..g.padded_len(c, rows)],
-                        &offs,
+                        offs,
                         wide.as_mut_ptr(),
                         n,
                         Init::RowBias(bias),

@@ -179,11 +179,7 @@ impl PackedA {
         init: Init,
     ) -> Result<()> {
         let (m, k) = (self.m, self.k);
-        if let Init::RowBias(bias) = init {
-            if bias.len() != m {
-                candle_core::bail!("sgemm: {} row biases for {m} rows", bias.len());
-            }
-        }
+        check_bias(init, m)?;
         if !fits(b.len(), k, n, ldb) {
             candle_core::bail!(
                 "sgemm: B of {k}x{n} (stride {ldb}) does not fit {} floats",
@@ -234,11 +230,7 @@ impl PackedA {
         init: Init,
     ) -> Result<()> {
         let (m, k) = (self.m, self.k);
-        if let Init::RowBias(bias) = init {
-            if bias.len() != m {
-                candle_core::bail!("sgemm: {} row biases for {m} rows", bias.len());
-            }
-        }
+        check_bias(init, m)?;
         check_offsets(offs, k, n, b.len(), "B")?;
         if m == 0 || n == 0 {
             return Ok(());
@@ -271,6 +263,26 @@ impl PackedA {
             }
         }
         Ok(())
+    }
+}
+
+/// An `Init::RowBias` holds one value per row of C.
+fn check_bias(init: Init, m: usize) -> Result<()> {
+    match init {
+        Init::RowBias(bias) if bias.len() != m => {
+            candle_core::bail!("sgemm: {} row biases for {m} rows", bias.len())
+        }
+        _ => Ok(()),
+    }
+}
+
+/// The backend an `A·Bᵀ` product with `n` columns runs on: the `gemm` crate below [`SMALL_DIM`] columns (our
+/// blocks are 16 columns wide), else `backend` where the CPU has it.
+fn nt_backend(backend: GemmBackend, n: usize) -> GemmBackend {
+    if n < SMALL_DIM {
+        GemmBackend::GemmCrate
+    } else {
+        backend.usable()
     }
 }
 
@@ -311,11 +323,7 @@ pub fn matmul_nt_offsets(
     if m == 0 || n == 0 {
         return Ok(());
     }
-    let backend = if n < SMALL_DIM {
-        GemmBackend::GemmCrate
-    } else {
-        backend.usable()
-    };
+    let backend = nt_backend(backend, n);
     match backend {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: avx512f present (usable); every row of A and the whole of B and C checked above.
@@ -433,11 +441,7 @@ pub fn matmul_nt(
     if m == 0 || n == 0 {
         return Ok(());
     }
-    let backend = if n < SMALL_DIM {
-        GemmBackend::GemmCrate
-    } else {
-        backend.usable()
-    };
+    let backend = nt_backend(backend, n);
     match backend {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: avx512f present (usable); every matrix checked to lie inside its slice.
