@@ -9,6 +9,7 @@
 //! Units are SI metres everywhere in storage and APIs; millimetres appear only in display code.
 
 pub mod dataset;
+pub mod error;
 pub mod image;
 pub mod io;
 pub mod mesh;

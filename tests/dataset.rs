@@ -506,7 +506,7 @@ fn write_numpy_round_trip_fixture() {
 #[test]
 fn the_stored_seed_reproduces_the_pair_with_noise() {
     use tactile_derender::dataset::sample::Sampler;
-    use tactile_derender::dataset::split::{pair_stream, PlannedPair};
+    use tactile_derender::dataset::split::{pair_stream, ObjectDraw, PlannedPair};
     let tmp = tempfile::tempdir().unwrap();
     let set = small_set(&tmp.path().join("set"));
     let cfg = gen_config(20);
@@ -519,10 +519,11 @@ fn the_stored_seed_reproduces_the_pair_with_noise() {
         .iter()
         .map(|n| PreparedObject::new(set.mesh(n).unwrap()).unwrap())
         .collect();
-    let sampler = Sampler::new(&sim, &objects, &names, &cfg);
+    let draw = ObjectDraw::uniform(names.len());
+    let sampler = Sampler::new(&sim, &objects, &names, &draw, &cfg);
     for (split, i) in [(SplitName::Train, 0), (SplitName::UnseenObjects, 1)] {
         let p = ds.pair(split, i).unwrap();
-        let (_, object) = pair_stream(p.meta.seed, names.len());
+        let (_, object) = pair_stream(p.meta.seed, &draw);
         assert_eq!(names[object], p.meta.object);
         let plan = PlannedPair {
             index: p.meta.index,

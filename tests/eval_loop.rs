@@ -104,15 +104,18 @@ fn uncertainty_analysis_reports_each_registration_and_can_cancel() {
         truth: Some(pair.object_pose),
         init: None,
     };
-    // K-start search + 2 samples + baseline.
+    // K-start search + 2 samples + baseline + the multi-sample estimate.
     let mut seen = Vec::new();
     let report = analyse_with_progress(&eval, &object, ctx, &sig, 3, &mut |d, t| {
         seen.push((d, t));
         true
     })
     .unwrap();
-    assert_eq!(seen, vec![(1, 4), (2, 4), (3, 4), (4, 4)]);
+    assert_eq!(seen, vec![(1, 5), (2, 5), (3, 5), (4, 5), (5, 5)]);
     assert_eq!(report.samples.len(), 2);
+    // Two identical true samples: their consensus is the truth, registered from K starts.
+    let multi = report.multi_sample.as_ref().expect("multi-sample estimate");
+    assert!(multi.position_mm < 0.5, "{multi:?}");
     assert!(
         report.samples.iter().all(|s| s.position_mm < 0.5),
         "{:?}",

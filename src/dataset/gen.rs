@@ -71,10 +71,13 @@ pub fn generate(
     }
     let sim = Simulator::new(sim_config.clone())?;
     let object_splits: Vec<_> = set.entries().iter().map(|e| e.split).collect();
+    let weights: Vec<f64> = set.entries().iter().map(|e| e.weight).collect();
+    let draw = split::ObjectDraw::new(&weights);
     let plan = split::plan(
         config.seed,
         config.pairs,
         &object_splits,
+        &draw,
         config.holdout_every,
     );
     let dataset = planned_manifest(sim_config, set, config, &plan)?;
@@ -107,7 +110,7 @@ pub fn generate(
         .par_iter()
         .map(|n| Ok(PreparedObject::new(set.mesh(n)?)?))
         .collect::<Result<_, DatasetError>>()?;
-    let sampler = Sampler::new(&sim, &objects, &names, config);
+    let sampler = Sampler::new(&sim, &objects, &names, &draw, config);
     let state = simulate_and_write(out, &plan, &todo, &sampler, state, &mut report, progress)?;
 
     let manifest_path = out.join(MANIFEST_FILE);

@@ -15,7 +15,7 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 use super::shard::Record;
-use super::split::{pair_stream, PlannedPair};
+use super::split::{pair_stream, ObjectDraw, PlannedPair};
 use super::{DatasetError, GenConfig};
 use crate::sensor::{Scene, Se2};
 use crate::sim::{signature, PreparedObject, Simulator};
@@ -74,6 +74,8 @@ pub struct Sampler<'a> {
     pub sim: &'a Simulator,
     pub objects: &'a [PreparedObject],
     pub names: &'a [String],
+    /// How pairs draw their object (the same draw the plan used).
+    pub draw: &'a ObjectDraw,
     pub config: &'a GenConfig,
     pub offsets: OffsetBox,
     pub min_pixels: usize,
@@ -84,6 +86,7 @@ impl<'a> Sampler<'a> {
         sim: &'a Simulator,
         objects: &'a [PreparedObject],
         names: &'a [String],
+        draw: &'a ObjectDraw,
         config: &'a GenConfig,
     ) -> Self {
         let (w, h) = sim.config().camera.resolution;
@@ -91,6 +94,7 @@ impl<'a> Sampler<'a> {
             sim,
             objects,
             names,
+            draw,
             config,
             offsets: OffsetBox::new(sim, config.offset_fraction),
             min_pixels: config.min_contact_pixels(w, h),
@@ -100,7 +104,7 @@ impl<'a> Sampler<'a> {
     /// Simulate the planned pair, redrawing pose and press until the contact is large enough: the record and the
     /// number of draws it took (1 = the first draw was accepted).
     pub fn sample(&self, plan: &PlannedPair) -> Result<(Record, usize), DatasetError> {
-        let (mut rng, object_index) = pair_stream(plan.seed, self.objects.len());
+        let (mut rng, object_index) = pair_stream(plan.seed, self.draw);
         let object = self
             .objects
             .get(object_index)

@@ -5,11 +5,15 @@
 //! [`Units`] and [`LoadOptions`]; [`load`] dispatches on the file extension.
 
 pub mod bvh;
+pub mod gltf;
 pub mod obj;
+pub mod ply;
 pub mod query;
 pub mod stl;
+pub mod winding;
 
 pub use query::{RayCaster, SignMethod, SignedDistance};
+pub use winding::FastWinding;
 
 use std::path::{Path, PathBuf};
 
@@ -37,7 +41,7 @@ pub enum MeshError {
         format: &'static str,
         message: String,
     },
-    #[error("{path}: unsupported mesh format '{extension}' (use .obj or .stl)")]
+    #[error("{path}: unsupported mesh format '{extension}' (use .obj, .stl, .ply, .gltf or .glb)")]
     UnsupportedFormat { path: PathBuf, extension: String },
     #[error("{context}: mesh has no triangles (or no vertices)")]
     Empty { context: String },
@@ -139,7 +143,18 @@ impl Default for LoadOptions {
     }
 }
 
-/// Load a mesh from an `.obj` or `.stl` file, convert it to metres and validate it.
+/// File extensions [`load`] reads (lower case).
+pub const MESH_EXTENSIONS: [&str; 5] = ["obj", "stl", "ply", "gltf", "glb"];
+
+/// Whether `path` has one of the [`MESH_EXTENSIONS`] (any case).
+pub fn is_mesh_file(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| MESH_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+}
+
+/// Load a mesh from an OBJ (every object and group merged), STL, PLY, glTF or GLB file, convert it to metres and
+/// validate it.
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Mesh, MeshError> {
     let extension = path
         .extension()
@@ -149,6 +164,8 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Mesh, MeshError> {
     let raw = match extension.as_str() {
         "obj" => obj::read(path)?,
         "stl" => stl::read(path)?,
+        "ply" => ply::read(path)?,
+        "gltf" | "glb" => gltf::read(path)?,
         _ => {
             return Err(MeshError::UnsupportedFormat {
                 path: path.to_path_buf(),
@@ -377,6 +394,35 @@ impl Mesh {
             vertices,
             triangles,
         }
+    }
+
+    /// Connected pieces of the surface (triangles sharing a vertex index; weld first to join coincident corners).
+    pub fn shell_count(&self) -> usize {
+        let n = self.vertices.len();
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn find(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        let mut used = vec![false; n];
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| i as usize);
+            used[a] = true;
+            used[b] = true;
+            used[c] = true;
+            for (x, y) in [(a, b), (b, c)] {
+                let (rx, ry) = (find(&mut parent, x), find(&mut parent, y));
+                if rx != ry {
+                    parent[rx] = ry;
+                }
+            }
+        }
+        (0..n)
+            .filter(|&i| used[i] && find(&mut parent, i) == i)
+            .count()
     }
 
     /// The same surface with reversed triangle winding (normals flipped).

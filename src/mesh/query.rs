@@ -44,7 +44,8 @@ impl RayCaster {
 pub enum SignMethod {
     /// Angle-weighted pseudo-normals at the closest feature (closed meshes).
     PseudoNormal,
-    /// Generalised winding number >= 0.5 (open meshes; O(triangles) per query).
+    /// Generalised winding number |w| >= 0.5 (open, multi-shell or non-manifold meshes; Barill et al.'s fast
+    /// hierarchical approximation, [`super::FastWinding`]).
     WindingNumber,
 }
 
@@ -52,6 +53,8 @@ pub enum SignMethod {
 pub struct SignedDistance {
     trimesh: TriMesh,
     method: SignMethod,
+    /// The winding-number tree ([`SignMethod::WindingNumber`] only).
+    winding: Option<super::FastWinding>,
 }
 
 impl SignedDistance {
@@ -60,7 +63,7 @@ impl SignedDistance {
     pub fn new(mesh: &Mesh) -> Result<Self, MeshError> {
         let welded = mesh.welded(1e-6);
         let report = welded.report();
-        let method = if report.closed {
+        let method = if report.closed && welded.shell_count() == 1 {
             SignMethod::PseudoNormal
         } else {
             SignMethod::WindingNumber
@@ -84,7 +87,13 @@ impl SignedDistance {
             context: "signed distance".into(),
             message: e.to_string(),
         })?;
-        Ok(Self { trimesh, method })
+        let winding =
+            (method == SignMethod::WindingNumber).then(|| super::FastWinding::new(&welded));
+        Ok(Self {
+            trimesh,
+            method,
+            winding,
+        })
     }
 
     /// The sign method chosen for this mesh.
@@ -98,7 +107,7 @@ impl SignedDistance {
         let d = (p - proj.point).length();
         let inside = match self.method {
             SignMethod::PseudoNormal => proj.is_inside,
-            SignMethod::WindingNumber => self.winding_number(p) >= 0.5,
+            SignMethod::WindingNumber => self.winding_number(p).abs() >= 0.5,
         };
         if inside {
             -d
@@ -107,21 +116,23 @@ impl SignedDistance {
         }
     }
 
-    /// Generalised winding number of the surface around `p` (1 inside a closed outward mesh, 0 outside).
+    /// Generalised winding number of the surface around `p` (1 inside a closed outward mesh, 0 outside; exact sum
+    /// for closed meshes, the fast hierarchical approximation for the others).
     pub fn winding_number(&self, p: Vec3) -> f32 {
-        let v = self.trimesh.vertices();
-        let mut total = 0.0f64;
-        for t in self.trimesh.indices() {
-            let a = (v[t[0] as usize] - p).as_dvec3();
-            let b = (v[t[1] as usize] - p).as_dvec3();
-            let c = (v[t[2] as usize] - p).as_dvec3();
-            let (la, lb, lc) = (a.length(), b.length(), c.length());
-            // Van Oosterom & Strackee (1983): solid angle of a triangle seen from the origin.
-            let num = a.dot(b.cross(c));
-            let den = la * lb * lc + a.dot(b) * lc + b.dot(c) * la + c.dot(a) * lb;
-            total += 2.0 * num.atan2(den);
+        let p = p.as_dvec3();
+        match &self.winding {
+            Some(w) => w.winding_number(p) as f32,
+            None => {
+                let v = self.trimesh.vertices();
+                let tris: Vec<[glam::DVec3; 3]> = self
+                    .trimesh
+                    .indices()
+                    .iter()
+                    .map(|t| t.map(|i| v[i as usize].as_dvec3()))
+                    .collect();
+                super::winding::winding_number_of(&tris, p) as f32
+            }
         }
-        (total / (4.0 * std::f64::consts::PI)) as f32
     }
 
     /// Closest point on the surface to `p`.

@@ -16,11 +16,12 @@ use super::MetricsError;
 use crate::image::Image;
 use crate::mesh::Mesh;
 use crate::objects::{ObjectError, ObjectSet, Symmetry};
+use crate::pose::from_depth::{consensus_depth, SensorView};
 use crate::pose::{
-    register, sample_surface, threshold_contact, BaselineConfig, Hypothesis, InitStrategy,
-    PoseError, RegistrationProblem, SdfRegistration, SdfRegistrationConfig,
+    sample_surface, threshold_contact, BaselineConfig, Hypothesis, InitStrategy, PoseError,
+    SdfRegistration, SdfRegistrationConfig,
 };
-use crate::recon::{back_project, free_space_points, FreeSpaceConfig};
+use crate::recon::FreeSpaceConfig;
 use crate::sensor::{Intrinsics, Se2};
 
 /// Errors of the evaluation; each names its source.
@@ -121,6 +122,12 @@ pub struct EvalConfig {
     pub init_radius_m: f64,
     /// Points sampled on each object for the Chamfer distance (default 1000).
     pub chamfer_points: usize,
+    /// Model samples per pair. With more than 1, the model is also scored on the multi-sample estimate (the
+    /// consensus of the samples, [`crate::pose::from_depth::consensus_depth`]) beside the first sample alone
+    /// (default 1: single sample only).
+    pub pose_samples: usize,
+    /// Fraction of the samples that must mark a pixel as contact for the consensus (default 0.5).
+    pub consensus_probability: f64,
 }
 
 impl Default for EvalConfig {
@@ -133,6 +140,8 @@ impl Default for EvalConfig {
             inits: 10,
             init_radius_m: 0.01,
             chamfer_points: 1000,
+            pose_samples: 1,
+            consensus_probability: 0.5,
         }
     }
 }
@@ -161,8 +170,26 @@ pub struct PairRecord {
     pub name: String,
     pub object: String,
     pub truth: Se2,
+    /// Pixels in contact in the true X0 (the contact-size bins of the breakdown).
+    #[serde(default)]
+    pub contact_pixels: usize,
+    /// The model's first sample.
     pub model: MethodResult,
+    /// The model's multi-sample estimate (with [`EvalConfig::pose_samples`] > 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_multi: Option<MethodResult>,
     pub baseline: MethodResult,
+}
+
+/// A pair that could not be scored, and why; the evaluation goes on without it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FailedPair {
+    /// Pair name (or its index in the source when even reading it failed).
+    pub name: String,
+    /// Object name, when known.
+    pub object: String,
+    /// The error, said once.
+    pub reason: String,
 }
 
 /// Table I and Table II rows of one method (mean ± population std), with exclusion counts.
@@ -206,10 +233,40 @@ impl MethodSummary {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvalReport {
     pub generator: String,
+    /// Pairs scored (failed pairs are not counted here).
     pub pairs: usize,
     pub model: MethodSummary,
+    /// The multi-sample estimate's rows (with [`EvalConfig::pose_samples`] > 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_multi: Option<MethodSummary>,
     pub baseline: MethodSummary,
+    /// Per contact-size bin and per object.
+    #[serde(default)]
+    pub breakdown: super::breakdown::Breakdown,
     pub records: Vec<PairRecord>,
+    /// Pairs that could not be scored.
+    #[serde(default)]
+    pub failed: Vec<FailedPair>,
+}
+
+impl EvalReport {
+    /// Summarise scored records and failures.
+    pub fn new(generator: String, records: Vec<PairRecord>, failed: Vec<FailedPair>) -> Self {
+        let multi: Vec<&MethodResult> = records
+            .iter()
+            .filter_map(|r| r.model_multi.as_ref())
+            .collect();
+        Self {
+            generator,
+            pairs: records.len(),
+            model: MethodSummary::of(records.iter().map(|r| &r.model)),
+            model_multi: (!multi.is_empty()).then(|| MethodSummary::of(multi.iter().copied())),
+            baseline: MethodSummary::of(records.iter().map(|r| &r.baseline)),
+            breakdown: super::breakdown::Breakdown::of(&records),
+            records,
+            failed,
+        }
+    }
 }
 
 /// Runs the evaluation; caches one [`ObjectModel`] per object.
@@ -261,7 +318,8 @@ impl Evaluator {
         Ok(model)
     }
 
-    /// Register `object` to an in-contact depth image: every hypothesis, best first; `None` without contact.
+    /// Register `object` to an in-contact depth image: every hypothesis, best first; `None` without contact
+    /// ([`crate::pose::from_depth::register_depth`] with this evaluator's free-space settings).
     pub fn register_depth(
         &self,
         object: &ObjectModel,
@@ -271,23 +329,19 @@ impl Evaluator {
         strategy: &InitStrategy,
         seed: u64,
     ) -> Result<Option<Vec<Hypothesis>>, PoseError> {
-        let surface = back_project(x0, &ctx.intrinsics, t_world_camera).p_world;
-        if surface.is_empty() {
-            return Ok(None);
-        }
-        let free = free_space_points(
-            x0,
-            &ctx.membrane,
-            &ctx.intrinsics,
+        let view = SensorView {
+            intrinsics: &ctx.intrinsics,
+            membrane: &ctx.membrane,
             t_world_camera,
-            &self.config.free_space,
-            seed,
-        );
-        let problem = RegistrationProblem {
-            surface: &surface,
-            free: &free,
         };
-        register(&object.registration, &problem, strategy).map(Some)
+        crate::pose::from_depth::register_depth(
+            &object.registration,
+            x0,
+            &view,
+            &self.config.free_space,
+            strategy,
+            seed,
+        )
     }
 
     /// Score one in-contact depth estimate of `pair`.
@@ -329,8 +383,63 @@ impl Evaluator {
         })
     }
 
-    /// Evaluate every pair of `source` with `generator` and the baseline. `progress(done, total)` returns false to
-    /// cancel.
+    /// Score both methods on pair `i` of `source`.
+    fn evaluate_pair(
+        &self,
+        source: &dyn PairSource,
+        generator: &dyn Generator,
+        i: usize,
+        pair_seed: u64,
+    ) -> Result<PairRecord, FailedPair> {
+        let pair = source.pair(i).map_err(|e| FailedPair {
+            name: format!("#{i}"),
+            object: String::new(),
+            reason: crate::error::render(&e),
+        })?;
+        let object = pair.object.clone();
+        let fail = |e: EvalError| FailedPair {
+            name: pair.name.clone(),
+            object: pair.object.clone(),
+            reason: crate::error::render(&e),
+        };
+        let ctx = source.context();
+        let n = self.config.pose_samples.max(1);
+        let samples = generator.generate(&pair, n, pair_seed).map_err(fail)?;
+        let first = samples
+            .first()
+            .ok_or_else(|| fail(EvalError::Generator("returned no sample".into())))?;
+        let model = self.score(&pair, first, ctx, pair_seed).map_err(fail)?;
+        let model_multi = if samples.len() > 1 {
+            let consensus =
+                consensus_depth(&samples, self.config.consensus_probability).map_err(|source| {
+                    fail(EvalError::Pose {
+                        object: object.clone(),
+                        source,
+                    })
+                })?;
+            Some(
+                self.score(&pair, &consensus, ctx, pair_seed)
+                    .map_err(fail)?,
+            )
+        } else {
+            None
+        };
+        let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.baseline);
+        let baseline = self.score(&pair, &base_x0, ctx, pair_seed).map_err(fail)?;
+        Ok(PairRecord {
+            name: pair.name.clone(),
+            object: pair.object.clone(),
+            truth: pair.object_pose,
+            contact_pixels: pair.target.count_nonzero(),
+            model,
+            model_multi,
+            baseline,
+        })
+    }
+
+    /// Evaluate every pair of `source` with `generator` and the baseline. A pair that cannot be read or scored (an
+    /// object whose mesh cannot be prepared, a generator error) is recorded in [`EvalReport::failed`] with its reason
+    /// and the evaluation goes on. `progress(done, total)` returns false to cancel.
     pub fn evaluate(
         &self,
         source: &dyn PairSource,
@@ -338,38 +447,20 @@ impl Evaluator {
         seed: u64,
         progress: &mut dyn FnMut(usize, usize) -> bool,
     ) -> Result<EvalReport, EvalError> {
-        let ctx = source.context();
         let mut records = Vec::with_capacity(source.len());
+        let mut failed = Vec::new();
         for i in 0..source.len() {
-            let pair = source.pair(i)?;
             let pair_seed = seed
                 .wrapping_mul(0x9E37_79B9_7F4A_7C15)
                 .wrapping_add(i as u64);
-            let generated = generator
-                .generate(&pair, 1, pair_seed)?
-                .into_iter()
-                .next()
-                .ok_or_else(|| EvalError::Generator("returned no sample".into()))?;
-            let model = self.score(&pair, &generated, ctx, pair_seed)?;
-            let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.baseline);
-            let baseline = self.score(&pair, &base_x0, ctx, pair_seed)?;
-            records.push(PairRecord {
-                name: pair.name.clone(),
-                object: pair.object.clone(),
-                truth: pair.object_pose,
-                model,
-                baseline,
-            });
+            match self.evaluate_pair(source, generator, i, pair_seed) {
+                Ok(r) => records.push(r),
+                Err(f) => failed.push(f),
+            }
             if !progress(i + 1, source.len()) {
                 return Err(EvalError::Cancelled);
             }
         }
-        Ok(EvalReport {
-            generator: generator.name(),
-            pairs: records.len(),
-            model: MethodSummary::of(records.iter().map(|r| &r.model)),
-            baseline: MethodSummary::of(records.iter().map(|r| &r.baseline)),
-            records,
-        })
+        Ok(EvalReport::new(generator.name(), records, failed))
     }
 }

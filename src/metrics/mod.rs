@@ -3,6 +3,7 @@
 //! ([`pose`]); [`summary`] aggregates them into mean/std rows; [`evaluate`] runs the whole loop over a
 //! [`evaluate::PairSource`] ([`sources`]: dataset splits, simulated pairs) with a [`evaluate::Generator`].
 
+pub mod breakdown;
 pub mod depth;
 pub mod evaluate;
 pub mod model_generator;

@@ -7,10 +7,12 @@ use crate::objects::ObjectSet;
 use crate::sensor::{Scene, Se2};
 use crate::sim::{PreparedObject, SimConfig, Simulator};
 
-/// The pairs of one dataset split (optionally the first `limit`).
+/// The pairs of one dataset split (optionally `limit` pairs after skipping the first `skip`).
 pub struct DatasetSource<'a> {
     dataset: &'a Dataset,
     split: SplitName,
+    /// Index in the split of this source's pair 0.
+    skip: usize,
     len: usize,
     ctx: EvalContext,
     t_sensor_camera: glam::DAffine3,
@@ -36,6 +38,7 @@ impl<'a> DatasetSource<'a> {
         Ok(Self {
             dataset,
             split,
+            skip: 0,
             len: limit.map_or(n, |l| l.min(n)),
             ctx: EvalContext {
                 intrinsics: *sim.intrinsics(),
@@ -47,12 +50,24 @@ impl<'a> DatasetSource<'a> {
     }
 }
 
+impl DatasetSource<'_> {
+    /// Start at pair `skip` of the split (pairs already looked at, e.g. while tuning, stay out of a test figure);
+    /// the limit then counts from there.
+    pub fn skip(mut self, skip: usize, limit: Option<usize>) -> Self {
+        let n = self.dataset.len(self.split).saturating_sub(skip);
+        self.skip = skip;
+        self.len = limit.map_or(n, |l| l.min(n));
+        self
+    }
+}
+
 impl PairSource for DatasetSource<'_> {
     fn len(&self) -> usize {
         self.len
     }
 
     fn pair(&self, index: usize) -> Result<EvalPair, EvalError> {
+        let index = index + self.skip;
         let p = self
             .dataset
             .pair(self.split, index)

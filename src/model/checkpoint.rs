@@ -31,14 +31,41 @@ pub fn read_tensors(path: &Path) -> Result<TensorFile, ModelError> {
         path: path.to_path_buf(),
         error: source,
     })?;
+    parse_tensors(&bytes, path)
+}
+
+/// The bundled default model, compiled into the binary so that `tnd` and the workbench find it from any working
+/// directory (`assets/models/default.safetensors` at build time; 4.3 MB).
+pub const BUNDLED_MODEL: &[u8] = include_bytes!("../../assets/models/default.safetensors");
+
+/// The name that selects [`BUNDLED_MODEL`] wherever a checkpoint path is asked for (`--model default`).
+pub const BUNDLED_MODEL_NAME: &str = "default";
+
+/// [`BUNDLED_MODEL`] as tensors and its config (from its metadata).
+pub fn bundled() -> Result<(TensorFile, UNet2DConfig), ModelError> {
+    let label = Path::new("<bundled default model>");
+    let file = parse_tensors(BUNDLED_MODEL, label)?;
+    let text = file
+        .metadata
+        .get("config")
+        .ok_or_else(|| ModelError::Config {
+            source_name: label.display().to_string(),
+            message: "no \"config\" metadata entry".into(),
+        })?;
+    let cfg = UNet2DConfig::from_json(text, &label.display().to_string())?;
+    Ok((file, cfg))
+}
+
+/// Parse safetensors bytes read from `path` (named in errors).
+fn parse_tensors(bytes: &[u8], path: &Path) -> Result<TensorFile, ModelError> {
     let bad = |message: String| ModelError::BadFile {
         path: path.to_path_buf(),
         message,
     };
     let (_, meta) =
-        safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| bad(e.to_string()))?;
+        safetensors::SafeTensors::read_metadata(bytes).map_err(|e| bad(e.to_string()))?;
     let metadata = meta.metadata().clone().unwrap_or_default();
-    let raw = candle_core::safetensors::load_buffer(&bytes, &Device::Cpu)
+    let raw = candle_core::safetensors::load_buffer(bytes, &Device::Cpu)
         .map_err(|e| bad(e.to_string()))?;
     let mut tensors = HashMap::with_capacity(raw.len());
     for (k, t) in raw {
@@ -87,8 +114,12 @@ pub fn write_tensors(
     })
 }
 
-/// Locate weights and config for `path` (file or diffusers directory) and parse the config.
+/// Locate weights and config for `path` (file or diffusers directory) and parse the config. The name `default`
+/// (when no such file exists) is the bundled model ([`BUNDLED_MODEL`]).
 pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
+    if path.as_os_str() == BUNDLED_MODEL_NAME && !path.exists() {
+        return bundled();
+    }
     let weights = if path.is_dir() {
         path.join("diffusion_pytorch_model.safetensors")
     } else {

@@ -1,6 +1,8 @@
 //! Training pairs from the dataset stage (paper V.A → IV.B): an adapter from [`crate::dataset::Dataset`]'s
-//! shuffled batches to the trainer's [`TrainingData`]. The train split is used for training; a fixed batch of the
-//! `unseen_poses` split (or of `train` when that is empty) gives the logged validation loss, which only monitors.
+//! shuffled batches to the trainer's [`TrainingData`]. The train split is used for training. The logged validation
+//! loss comes from a fixed batch of a separate validation dataset when one is given ([`DatasetTraining::with_validation`]:
+//! pairs that no test split holds, so that stopping and tuning decisions never look at test pairs); otherwise from
+//! the `unseen_poses` split (or `train` when that is empty), which only monitors.
 
 use crate::dataset::{Batches, Dataset, SplitName};
 
@@ -10,6 +12,8 @@ use super::ModelError;
 /// Batches of the train split, read in the dataset's `(seed, epoch)` order.
 pub struct DatasetTraining<'a> {
     dataset: &'a Dataset,
+    /// A separate validation dataset, if any.
+    validation: Option<&'a Dataset>,
     /// The open epoch: (epoch, index of the next batch, iterator).
     cursor: Option<(u64, usize, Batches<'a>)>,
 }
@@ -18,9 +22,20 @@ impl<'a> DatasetTraining<'a> {
     pub fn new(dataset: &'a Dataset) -> Self {
         Self {
             dataset,
+            validation: None,
             cursor: None,
         }
     }
+
+    /// Take the validation loss from `validation` instead: a fixed draw of [`Self::VALIDATION_PAIRS`] pairs (or
+    /// fewer) from its first non-empty split.
+    pub fn with_validation(mut self, validation: &'a Dataset) -> Self {
+        self.validation = Some(validation);
+        self
+    }
+
+    /// Pairs in the validation batch of a separate validation dataset.
+    pub const VALIDATION_PAIRS: usize = 128;
 }
 
 fn convert(b: crate::dataset::Batch) -> TrainBatch {
@@ -71,6 +86,17 @@ impl TrainingData for DatasetTraining<'_> {
     }
 
     fn validation(&mut self, batch: usize) -> Result<Option<TrainBatch>, ModelError> {
+        if let Some(val) = self.validation {
+            let Some(split) = SplitName::ALL.into_iter().find(|&s| val.len(s) > 0) else {
+                return Ok(None);
+            };
+            return val
+                .batches(split, batch.max(Self::VALIDATION_PAIRS), 0, 0)
+                .next()
+                .transpose()
+                .map(|b| b.map(convert))
+                .map_err(data_err);
+        }
         let split = if self.dataset.len(SplitName::UnseenPoses) > 0 {
             SplitName::UnseenPoses
         } else {

@@ -249,6 +249,7 @@ impl ShapeSpec {
             split,
             symmetry: self.family().symmetry(),
             dimensions: self.dimensions(),
+            weight: 1.0,
         }
     }
 }

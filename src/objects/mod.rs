@@ -7,10 +7,12 @@
 //! out by [`ObjectSet::mesh`] is in metres, in its resting pose, with its lowest point at z = 0 and its bounding box
 //! centred on the z axis (the object frame whose SE(2) pose on the table the pose estimator recovers).
 //!
-//! Files: [`shapes`] (procedural closed meshes), [`triangulate`] (ear clipping for extruded caps), `builtin.rs` (the
+//! Files: [`shapes`] (procedural closed meshes), [`procedural`] (thousands of seeded random training objects), [`triangulate`] (ear clipping for extruded caps), `builtin.rs` (the
 //! built-in catalogue), `set.rs` ([`ObjectSet`]: loading, validation, export).
 
 mod builtin;
+pub mod inspect;
+pub mod procedural;
 mod set;
 pub mod shapes;
 pub mod triangulate;
@@ -81,6 +83,12 @@ pub enum ObjectError {
     },
     #[error("{path}: cannot write: {source} (check that the directory is writable)")]
     Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: cannot list the directory: {source}")]
+    ReadDir {
         path: PathBuf,
         #[source]
         source: std::io::Error,
@@ -236,10 +244,18 @@ pub struct ObjectEntry {
     /// Named dimensions in metres (e.g. `radius`, `length`), for display and bookkeeping.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub dimensions: BTreeMap<String, f64>,
+    /// Relative frequency of the object in generated datasets (default 1: every object equally often). Lets a set
+    /// of thousands of procedural objects keep a chosen share for a few hand-picked ones.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub weight: f64,
 }
 
 fn one() -> f64 {
     1.0
+}
+
+fn is_one(x: &f64) -> bool {
+    *x == 1.0
 }
 
 /// The content of an `objects.json` file.

@@ -29,6 +29,9 @@ enum Source {
     Builtin(Vec<ShapeSpec>),
     /// The directory holding `objects.json`; mesh paths are relative to it.
     Dir(PathBuf),
+    /// Meshes held in memory (resting pose, metres), one per entry in the same order; e.g. a procedural set before
+    /// it is exported.
+    Memory { spec: String, meshes: Vec<Mesh> },
 }
 
 impl ObjectSet {
@@ -42,6 +45,51 @@ impl ObjectSet {
             source: Source::Builtin(specs),
             entries,
         }
+    }
+
+    /// A procedural training set ([`super::procedural`]): `config.count` generated objects plus, when
+    /// `builtin_share > 0`, the built-in catalogue (with its seen/unseen splits) weighted so that its objects make up
+    /// `builtin_share` of the pairs of a dataset generated from the set. Export it with [`ObjectSet::export`].
+    pub fn procedural(
+        config: &super::procedural::ProceduralConfig,
+        builtin_share: f64,
+    ) -> Result<Self, ObjectError> {
+        use rayon::prelude::*;
+        if !(builtin_share.is_finite() && (0.0..1.0).contains(&builtin_share)) {
+            return Err(ObjectError::BadShape {
+                shape: "procedural",
+                message: format!("the built-in share {builtin_share} must be in [0, 1)"),
+            });
+        }
+        let generated = (0..config.count)
+            .into_par_iter()
+            .map(|i| super::procedural::generate(config, i))
+            .collect::<Result<Vec<_>, _>>()?;
+        let (mut entries, mut meshes): (Vec<ObjectEntry>, Vec<Mesh>) =
+            generated.into_iter().map(|o| (o.entry, o.mesh)).unzip();
+        if builtin_share > 0.0 {
+            let builtin = Self::builtin();
+            let n_builtin = builtin.entries.len() as f64;
+            let weight =
+                builtin_share / (1.0 - builtin_share) * config.count.max(1) as f64 / n_builtin;
+            for entry in builtin.entries() {
+                meshes.push(builtin.mesh(&entry.name)?);
+                entries.push(ObjectEntry {
+                    weight,
+                    ..entry.clone()
+                });
+            }
+        }
+        Ok(Self {
+            source: Source::Memory {
+                spec: format!(
+                    "procedural(count={}, seed={}, builtin_share={builtin_share})",
+                    config.count, config.seed
+                ),
+                meshes,
+            },
+            entries,
+        })
     }
 
     /// Read and validate `dir/objects.json`: supported version, non-empty unique names, mesh files that exist with a
@@ -96,13 +144,14 @@ impl ObjectSet {
         match &self.source {
             Source::Builtin(_) => "builtin".to_string(),
             Source::Dir(dir) => dir.display().to_string(),
+            Source::Memory { spec, .. } => spec.clone(),
         }
     }
 
     /// The set directory, `None` for the built-in set.
     pub fn dir(&self) -> Option<&Path> {
         match &self.source {
-            Source::Builtin(_) => None,
+            Source::Builtin(_) | Source::Memory { .. } => None,
             Source::Dir(dir) => Some(dir),
         }
     }
@@ -134,6 +183,9 @@ impl ObjectSet {
         let entry = &self.entries[index];
         match &self.source {
             Source::Builtin(specs) => specs.get(index).ok_or_else(|| self.unknown(name))?.build(),
+            Source::Memory { meshes, .. } => {
+                meshes.get(index).cloned().ok_or_else(|| self.unknown(name))
+            }
             Source::Dir(dir) => {
                 let options = LoadOptions {
                     units: Units::Scale(entry.scale_to_m),
@@ -225,13 +277,9 @@ fn validate_entry(dir: &Path, path: &Path, entry: &ObjectEntry) -> Result<(), Ob
             mesh: mesh_path,
         });
     }
-    let extension = mesh_path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    if !matches!(extension.as_deref(), Some("obj" | "stl")) {
+    if !crate::mesh::is_mesh_file(&mesh_path) {
         return Err(bad(format!(
-            "mesh file '{}' is not .obj or .stl; convert it",
+            "mesh file '{}' is not .obj, .stl, .ply, .gltf or .glb; convert it",
             entry.mesh
         )));
     }
@@ -261,6 +309,12 @@ fn validate_entry(dir: &Path, path: &Path, entry: &ObjectEntry) -> Result<(), Ob
                 "translation_axis [{x}, {y}] must be a unit vector in the object's xy plane, e.g. [1, 0]"
             )));
         }
+    }
+    if !(entry.weight.is_finite() && entry.weight >= 0.0) {
+        return Err(bad(format!(
+            "weight = {} must be a non-negative number (relative frequency in generated datasets; default 1)",
+            entry.weight
+        )));
     }
     if let Some((key, value)) = entry.dimensions.iter().find(|(_, v)| !v.is_finite()) {
         return Err(bad(format!(

@@ -55,10 +55,7 @@ pub fn sphere(radius: f64, subdivisions: u32) -> Result<Mesh, ObjectError> {
             ),
         });
     }
-    let (mut vertices, mut triangles) = icosahedron();
-    for _ in 0..subdivisions {
-        (vertices, triangles) = subdivide(&vertices, &triangles);
-    }
+    let (vertices, triangles) = icosphere_directions(subdivisions);
     let vertices = vertices.iter().map(|v| (*v * radius).as_vec3()).collect();
     Ok(Mesh::from_raw(vertices, triangles, "sphere")
         .map_err(mesh_error("sphere"))?
@@ -203,6 +200,16 @@ fn revolve(
         }
     }
     Mesh::from_raw(vertices, triangles, shape).map_err(mesh_error(shape))
+}
+
+/// Unit vectors of an icosphere (an icosahedron subdivided `subdivisions` times, 20 * 4^k outward triangles), for
+/// star-shaped surfaces built by moving each direction to its radius.
+pub(crate) fn icosphere_directions(subdivisions: u32) -> (Vec<glam::DVec3>, Vec<[u32; 3]>) {
+    let (mut vertices, mut triangles) = icosahedron();
+    for _ in 0..subdivisions {
+        (vertices, triangles) = subdivide(&vertices, &triangles);
+    }
+    (vertices, triangles)
 }
 
 /// Unit icosahedron with vertices at the poles and two staggered rings of five (centrally symmetric, so the

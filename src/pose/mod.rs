@@ -7,6 +7,7 @@
 //! about the table normal, metres and radians.
 
 pub mod baseline;
+pub mod from_depth;
 pub mod register;
 pub mod sdf;
 pub mod sdf_grid;

@@ -10,7 +10,7 @@ use parry3d::query::{PointQuery, PointQueryWithLocation};
 use parry3d::shape::{TriMesh, TriMeshFlags, TrianglePointLocation};
 
 use super::PoseError;
-use crate::mesh::Mesh;
+use crate::mesh::{FastWinding, Mesh};
 
 /// A signed distance field in the object frame.
 pub trait ObjectSdf: Send + Sync {
@@ -20,48 +20,66 @@ pub trait ObjectSdf: Send + Sync {
     fn value_grad(&self, p_obj: DVec3) -> (f64, DVec3);
 }
 
-/// Exact signed distance of a closed mesh (object frame): closest point through parry's BVH, sign from the
-/// angle-weighted pseudo-normal of the closest feature (exact for watertight, consistently oriented meshes; vertices
-/// are welded at 1 µm first, and inward-facing meshes are flipped). The gradient is `(p - closest) / d`; within
+/// Exact signed distance of any triangle mesh (object frame): closest point through parry's BVH. The sign comes from
+/// the angle-weighted pseudo-normal of the closest feature on one watertight, consistently oriented shell (vertices
+/// welded at 1 µm first; inward-facing meshes flipped), and from the generalised winding number
+/// ([`crate::mesh::FastWinding`], |w| ≥ ½ is inside) on everything else: open scans, multi-shell convex
+/// decompositions, non-manifold and self-intersecting CAD exports. The gradient is `(p - closest) / d`; within
 /// [`ExactSdf::NEAR_SURFACE_M`] of the surface, where that direction is ill-defined, it is the unit (pseudo-)normal of
-/// the closest feature (the face normal on faces).
+/// the closest feature (the face normal on faces, turned outward on soups).
 pub struct ExactSdf {
     trimesh: TriMesh,
     aabb: (DVec3, DVec3),
+    /// The winding-number tree for meshes that are not closed; `None` uses the pseudo-normals.
+    winding: Option<FastWinding>,
 }
 
 impl ExactSdf {
     /// Distance below which the gradient is the closest feature's normal, metres.
     pub const NEAR_SURFACE_M: f64 = 1e-6;
 
-    /// Prepare a closed mesh (object frame). Open meshes are rejected: their sign would need a winding-number
-    /// query per point, far too slow for registration.
+    /// Prepare a mesh (object frame); any triangle soup with at least one non-degenerate triangle works.
     pub fn new(mesh: &Mesh) -> Result<Self, PoseError> {
         let welded = mesh.welded(1e-6);
         let report = welded.report();
-        if !report.closed {
-            return Err(PoseError::Mesh(format!(
-                "the object mesh is not closed ({} boundary edges, {} bad edges); repair it so that its signed \
-                 distance is defined",
-                report.boundary_edges, report.bad_edges
-            )));
-        }
-        let welded = if report.volume_m3 < 0.0 {
-            welded.flipped()
+        // Pseudo-normals are exact for one watertight, consistently oriented shell; overlapping shells (convex
+        // decompositions, assemblies) would be signed wrongly inside their overlaps.
+        let (welded, winding, flags) = if report.closed && welded.shell_count() == 1 {
+            let welded = if report.volume_m3 < 0.0 {
+                welded.flipped()
+            } else {
+                welded
+            };
+            (welded, None, TriMeshFlags::ORIENTED)
         } else {
-            welded
+            let winding = FastWinding::new(&welded);
+            (welded, Some(winding), TriMeshFlags::empty())
         };
         let trimesh = TriMesh::with_flags(
             welded.vertices().to_vec(),
             welded.triangles().to_vec(),
-            TriMeshFlags::ORIENTED,
+            flags,
         )
         .map_err(|e| PoseError::Mesh(e.to_string()))?;
         let (lo, hi) = mesh.aabb();
         Ok(Self {
             trimesh,
             aabb: (lo.as_dvec3(), hi.as_dvec3()),
+            winding,
         })
+    }
+
+    /// Whether the sign comes from the winding number (the mesh is not watertight and consistently oriented).
+    pub fn uses_winding_number(&self) -> bool {
+        self.winding.is_some()
+    }
+
+    /// Whether `p` (object frame) is inside, with `parry_inside` the pseudo-normal verdict of its projection.
+    fn inside(&self, p_obj: DVec3, parry_inside: bool) -> bool {
+        match &self.winding {
+            Some(w) => w.inside(p_obj),
+            None => parry_inside,
+        }
     }
 
     /// Bounds of the mesh, metres (object frame).
@@ -94,7 +112,7 @@ impl ObjectSdf for ExactSdf {
         let p = p_obj.as_vec3();
         let proj = self.trimesh.project_local_point(p, false);
         let d = f64::from((p - proj.point).length());
-        if proj.is_inside {
+        if self.inside(p_obj, proj.is_inside) {
             -d
         } else {
             d
@@ -106,12 +124,17 @@ impl ObjectSdf for ExactSdf {
         let (proj, (tri, location)) = self.trimesh.project_local_point_and_get_location(p, false);
         let offset = p_obj - proj.point.as_dvec3();
         let d = offset.length();
-        let signed = if proj.is_inside { -d } else { d };
+        let inside = self.inside(p_obj, proj.is_inside);
+        let signed = if inside { -d } else { d };
         if d > Self::NEAR_SURFACE_M {
             return (signed, offset / signed);
         }
         let n = self.feature_normal(tri, location).unwrap_or(DVec3::Z);
-        (signed, n)
+        match &self.winding {
+            // A soup's face normal may face inward: outward is where the winding number falls.
+            Some(w) if w.inside(p_obj + n * 1e-4) && !w.inside(p_obj - n * 1e-4) => (signed, -n),
+            _ => (signed, n),
+        }
     }
 }
 
@@ -212,5 +235,69 @@ pub(crate) mod tests {
             / 500.0;
         assert!((on_z - area_z / total).abs() < 0.06, "{on_z}");
         assert_eq!(pts, sample_surface(&box_mesh(h), 500, 7));
+    }
+
+    /// Grid points in and around the box `h`, skipping a shell of `skip` metres about the surface.
+    fn probe_points(h: DVec3, skip: f64) -> Vec<DVec3> {
+        let mut out = Vec::new();
+        for i in 0..9 {
+            for j in 0..9 {
+                for k in 0..9 {
+                    let f = |n: usize, e: f64| (n as f64 / 8.0 - 0.5) * 3.0 * e;
+                    let p = DVec3::new(f(i, h.x), f(j, h.y), f(k, h.z));
+                    if box_sdf(p, h).abs() > skip {
+                        out.push(p);
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn soups_get_the_sign_of_the_solid_they_bound() {
+        let h = DVec3::new(0.02, 0.01, 0.015);
+        let closed = box_mesh(h);
+        // Open: the -x face removed (a 20 x 30 mm hole).
+        let open_tris: Vec<[u32; 3]> = closed.triangles()[..8].to_vec();
+        let open = Mesh::from_raw(closed.vertices().to_vec(), open_tris, "open box").unwrap();
+        // Two overlapping shells: the box and a copy shifted by 5 mm along y (a convex decomposition's overlap).
+        let shifted = closed.transformed(&glam::Affine3A::from_translation(Vec3::Y * 0.005));
+        let union = Mesh::merged(&[closed.clone(), shifted]);
+        let union_sdf = |p: DVec3| box_sdf(p, h).min(box_sdf(p - DVec3::Y * 0.005, h));
+        // Non-manifold: one face duplicated (an edge used by four triangles).
+        let mut dup = closed.triangles().to_vec();
+        dup.push(dup[0]);
+        let non_manifold =
+            Mesh::from_raw(closed.vertices().to_vec(), dup, "duplicate face").unwrap();
+        type Case<'a> = (&'a str, Mesh, &'a dyn Fn(DVec3) -> f64, bool);
+        let cases: [Case; 4] = [
+            ("inward-facing", closed.flipped(), &|p| box_sdf(p, h), false),
+            ("two shells", union, &union_sdf, true),
+            ("non-manifold", non_manifold, &|p| box_sdf(p, h), true),
+            ("open", open, &|p| box_sdf(p, h), true),
+        ];
+        for (name, mesh, truth, winding) in cases {
+            let sdf = ExactSdf::new(&mesh).unwrap();
+            assert_eq!(sdf.uses_winding_number(), winding, "{name}");
+            let points = probe_points(h, 1e-3);
+            for p in points {
+                // The open box's distance near the hole is to the rim, not the missing face: compare signs there.
+                let t = truth(p);
+                if t.abs() < 1e-3 {
+                    continue;
+                }
+                let d = sdf.value(p);
+                if name == "open" && p.x < -0.0199 + 0.002 {
+                    continue;
+                }
+                // Inside overlapping shells the nearest surface may be an inner face: the sign is what holds.
+                if name == "open" || (name == "two shells" && t < 0.0) {
+                    assert_eq!(d < 0.0, t < 0.0, "{name} at {p}: {d} vs {t}");
+                } else {
+                    assert!((d - t).abs() < 1e-6, "{name} at {p}: {d} vs {t}");
+                }
+            }
+        }
     }
 }

@@ -167,7 +167,7 @@ struct Normal {
 }
 
 impl SdfRegistration {
-    /// Prepare a closed object mesh (object frame, resting pose): exact SDF and its grid.
+    /// Prepare an object mesh (object frame, resting pose; any triangle soup): exact SDF and its grid.
     pub fn new(mesh: &Mesh, config: SdfRegistrationConfig) -> Result<Self, PoseError> {
         config.validate()?;
         let exact = ExactSdf::new(mesh)?;

@@ -33,7 +33,7 @@ pub struct ElastomerConfig {
     pub rings: usize,
     /// Tessellation: number of segments around the rim (default 96).
     pub segments: usize,
-    /// A mesh file (OBJ/STL) replacing the parametric membrane, already in the sensor frame.
+    /// A mesh file (OBJ, STL, PLY, glTF/GLB) replacing the parametric membrane, already in the sensor frame.
     pub mesh_file: Option<PathBuf>,
     /// Units of `mesh_file`.
     pub mesh_units: Units,

@@ -1,11 +1,13 @@
 //! The uncertainty analysis of one signature (paper V.D): register every generated sample from one fixed start and
-//! collect the errors (see the module docs of [`super`]).
+//! collect the errors (see the module docs of [`super`]); with two or more samples, also the multi-sample estimate
+//! (the samples' consensus contact, [`crate::pose::from_depth::consensus_depth`], registered from K random starts).
 
 use glam::DAffine3;
 
 use super::{SampleError, UncertaintyReport};
 use crate::image::Image;
 use crate::metrics::evaluate::{EvalContext, EvalError, Evaluator, ObjectModel};
+use crate::pose::from_depth::consensus_depth;
 use crate::pose::InitStrategy;
 use crate::sensor::Se2;
 
@@ -45,8 +47,11 @@ pub fn analyse_with_progress(
     seed: u64,
     progress: &mut dyn FnMut(usize, usize) -> bool,
 ) -> Result<UncertaintyReport, EvalError> {
-    let total =
-        usize::from(sig.init.is_none()) + sig.samples.len() + usize::from(sig.baseline.is_some());
+    let multi = sig.samples.len() > 1;
+    let total = usize::from(sig.init.is_none())
+        + sig.samples.len()
+        + usize::from(sig.baseline.is_some())
+        + usize::from(multi);
     let mut done = 0;
     let mut step = |done: &mut usize| {
         *done += 1;
@@ -60,14 +65,14 @@ pub fn analyse_with_progress(
         object: "uncertainty".into(),
         source,
     };
+    let strategy = InitStrategy::Random {
+        count: evaluator.config.inits,
+        radius_m: evaluator.config.init_radius_m,
+        seed,
+    };
     let init = match sig.init {
         Some(i) => i,
         None => {
-            let strategy = InitStrategy::Random {
-                count: evaluator.config.inits,
-                radius_m: evaluator.config.init_radius_m,
-                seed,
-            };
             let mut found = None;
             for s in sig.samples {
                 if let Some(h) = evaluator
@@ -122,11 +127,27 @@ pub fn analyse_with_progress(
     if sig.baseline.is_some() {
         step(&mut done)?;
     }
-    Ok(UncertaintyReport::new(
-        reference,
-        sig.truth.is_some(),
-        init,
-        samples,
-        baseline,
-    ))
+    let multi_sample = if multi {
+        let consensus = consensus_depth(sig.samples, evaluator.config.consensus_probability)
+            .map_err(pose_err)?;
+        let best = evaluator
+            .register_depth(
+                object,
+                &consensus,
+                ctx,
+                &sig.t_world_camera,
+                &strategy,
+                seed,
+            )
+            .map_err(pose_err)?
+            .and_then(|h| h.first().copied());
+        step(&mut done)?;
+        best.map(|b| SampleError::new(b.pose, b.cost, reference, &object.symmetry))
+    } else {
+        None
+    };
+    let mut report =
+        UncertaintyReport::new(reference, sig.truth.is_some(), init, samples, baseline);
+    report.multi_sample = multi_sample;
+    Ok(report)
 }

@@ -76,6 +76,10 @@ pub struct UncertaintyReport {
     pub samples: Vec<SampleError>,
     /// The threshold baseline's estimate, if it had contact.
     pub baseline: Option<SampleError>,
+    /// The multi-sample estimate (the samples' consensus contact registered from K random starts), with two or
+    /// more samples whose consensus has contact.
+    #[serde(default)]
+    pub multi_sample: Option<SampleError>,
     /// KDE of the position errors, `(mm, density)`; empty when it cannot be fitted (fewer than 2 distinct values).
     pub position_kde: Vec<(f64, f64)>,
     /// KDE of the θ errors, `(deg, density)`; empty when it cannot be fitted or θ is excluded.
@@ -119,10 +123,11 @@ impl UncertaintyReport {
             theta_kde: kde_curve(&theta, 200),
             samples,
             baseline,
+            multi_sample: None,
         }
     }
 
-    /// `samples.csv` text: one row per sample and one for the baseline.
+    /// `samples.csv` text: one row per sample, one for the baseline and one for the multi-sample estimate.
     pub fn samples_csv(&self) -> String {
         let mut s =
             String::from("kind,index,x_m,y_m,theta_rad,cost,position_err_mm,theta_err_deg\n");
@@ -139,6 +144,9 @@ impl UncertaintyReport {
         }
         if let Some(b) = &self.baseline {
             row(&mut s, "baseline", 0, b);
+        }
+        if let Some(m) = &self.multi_sample {
+            row(&mut s, "multi_sample", 0, m);
         }
         s
     }

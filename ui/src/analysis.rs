@@ -44,7 +44,7 @@ pub struct DerenderView {
     /// The loaded model and the checkpoint it came from.
     pub model: Option<(PathBuf, Arc<DiffusionModel>)>,
     pub result: Option<Box<RunResult>>,
-    /// Input Y, truth X0 (if known), mean, std, then the samples.
+    /// Input Y, truth X0 (if known), mean, std, contact probability, consensus, then the samples.
     pub images: Vec<RunImage>,
     /// A dataset pair (or scene) made the current input; shown until a run replaces it.
     pub pending_input: Option<RunInput>,
@@ -149,6 +149,13 @@ fn run_images(ctx: &egui::Context, r: &RunResult) -> Vec<RunImage> {
     }
     add("sample mean".into(), &r.mean, range, true);
     add("sample std".into(), &r.std, own(&r.std, false), false);
+    add(
+        "contact probability".into(),
+        &r.contact_probability,
+        (0.0, 1.0),
+        false,
+    );
+    add("consensus (multi-sample)".into(), &r.consensus, range, true);
     for (i, s) in r.samples.iter().enumerate() {
         add(format!("sample {i}"), s, range, true);
     }
@@ -238,7 +245,10 @@ impl WorkbenchApp {
                     self.select_pair(i);
                 }
             }
-            Err(e) => self.error(format!("dataset: {e:#}")),
+            Err(e) => self.error(format!(
+                "dataset: {}",
+                tactile_derender::error::render_anyhow(&e)
+            )),
         }
     }
 
@@ -311,12 +321,12 @@ impl WorkbenchApp {
     }
 
     /// The model checkpoint a run uses: the chosen one or the bundled default.
-    pub fn model_path(&self) -> Option<PathBuf> {
+    pub fn model_path(&self) -> PathBuf {
         self.state
             .model
             .path
             .clone()
-            .or_else(derender::default_model_path)
+            .unwrap_or_else(derender::default_model_path)
     }
 
     fn derender_input(&self) -> Result<InputSource> {
@@ -364,9 +374,7 @@ impl WorkbenchApp {
             .derender
             .validate()
             .map_err(|e| anyhow!("settings: {e}"))?;
-        let model_path = self
-            .model_path()
-            .ok_or_else(|| anyhow!("{}", derender::MISSING_DEFAULT))?;
+        let model_path = self.model_path();
         let input = self.derender_input()?;
         let w = self
             .worker
@@ -526,7 +534,7 @@ impl WorkbenchApp {
             _ => Ok(()),
         };
         if let Err(e) = result {
-            self.error(format!("{e:#}"));
+            self.error(tactile_derender::error::render_anyhow(&e));
         }
     }
 }

@@ -260,7 +260,7 @@ impl WorkbenchApp {
         let req = self.sim_request();
         if let Some(w) = &self.worker {
             if let Err(e) = w.simulate(req) {
-                self.error(format!("{e:#}"));
+                self.error(tactile_derender::error::render_anyhow(&e));
             }
         }
     }
@@ -277,7 +277,7 @@ impl WorkbenchApp {
                     self.open_dataset(p);
                 }
             }
-            Err(e) => self.error(format!("{e:#}")),
+            Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
         }
     }
 

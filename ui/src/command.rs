@@ -127,7 +127,7 @@ impl WorkbenchApp {
                     self.notice = Some(format!("opened {}", path.display()));
                     self.session_path = Some(path);
                 }
-                Err(e) => self.error(format!("{e:#}")),
+                Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
             },
             Command::SaveSession(path) => match session::write(&path, &self.state) {
                 Ok(()) => {
@@ -135,7 +135,7 @@ impl WorkbenchApp {
                     self.notice = Some(format!("saved {}", path.display()));
                     self.session_path = Some(path);
                 }
-                Err(e) => self.error(format!("{e:#}")),
+                Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
             },
             Command::Browse(purpose) => self.browse(purpose),
             Command::LoadMeasured(path) => {
@@ -146,12 +146,18 @@ impl WorkbenchApp {
                         self.state.calibration.measured = Some(path);
                         self.measured = Some(m);
                     }
-                    Err(e) => self.error(format!("measured imprint: {e:#}")),
+                    Err(e) => self.error(format!(
+                        "measured imprint: {}",
+                        tactile_derender::error::render_anyhow(&e)
+                    )),
                 }
             }
             Command::UseMeasuredScene => {
                 if let Err(e) = self.use_measured_scene() {
-                    self.error(format!("measured scene: {e:#}"));
+                    self.error(format!(
+                        "measured scene: {}",
+                        tactile_derender::error::render_anyhow(&e)
+                    ));
                 }
             }
             Command::ClearMeasured => {
@@ -172,7 +178,10 @@ impl WorkbenchApp {
             }
             Command::Export { image, png } => {
                 if let Err(e) = self.export(image, png) {
-                    self.error(format!("export: {e:#}"));
+                    self.error(format!(
+                        "export: {}",
+                        tactile_derender::error::render_anyhow(&e)
+                    ));
                 }
             }
             Command::DismissErrors => self.errors.clear(),
@@ -208,7 +217,10 @@ impl WorkbenchApp {
             let c = &self.state.calibration;
             match measured::load(&p, c.measured_split, c.measured_index) {
                 Ok(m) => self.measured = Some(m),
-                Err(e) => self.error(format!("measured imprint: {e:#}")),
+                Err(e) => self.error(format!(
+                    "measured imprint: {}",
+                    tactile_derender::error::render_anyhow(&e)
+                )),
             }
         }
         self.analysis = Default::default();

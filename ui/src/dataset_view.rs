@@ -318,14 +318,11 @@ fn planned_objects(ds: &Dataset) -> [Option<Vec<u16>>; 3] {
     let Some(gen) = &m.generation else {
         return Default::default();
     };
-    let splits: Vec<_> = m
-        .object_set
-        .manifest
-        .objects
-        .iter()
-        .map(|e| e.split)
-        .collect();
-    let plan = split::plan(gen.seed, gen.pairs, &splits, gen.holdout_every);
+    let objects = &m.object_set.manifest.objects;
+    let splits: Vec<_> = objects.iter().map(|e| e.split).collect();
+    let weights: Vec<f64> = objects.iter().map(|e| e.weight).collect();
+    let draw = split::ObjectDraw::new(&weights);
+    let plan = split::plan(gen.seed, gen.pairs, &splits, &draw, gen.holdout_every);
     let mut out: [Vec<u16>; 3] = Default::default();
     for p in plan {
         out[p.split.code()].push(p.object as u16);

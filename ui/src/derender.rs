@@ -11,30 +11,32 @@ use std::time::Instant;
 
 use anyhow::{anyhow, Result};
 use tactile_derender::image::Image;
+use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::metrics::{depth_metrics, DepthMetrics, DepthMetricsConfig};
 use tactile_derender::model::{DiffusionModel, ModelError, SamplerKind};
+use tactile_derender::pose::from_depth::{consensus_depth, contact_probability};
 
 use crate::worker::{JobKind, WorkerMsg};
 
 /// The bundled model, relative to the working directory (the repository root when run with `cargo run`).
 pub const DEFAULT_MODEL: &str = "assets/models/default.safetensors";
 
-/// Where the bundled default model is, if it exists (working directory first, then the source checkout).
-pub fn default_model_path() -> Option<PathBuf> {
+/// The default model: `assets/models/default.safetensors` where it exists (working directory first, then the source
+/// checkout, so a freshly trained file is picked up without a rebuild), otherwise the copy compiled into the binary
+/// (the name `default`), so the workbench works from any directory.
+pub fn default_model_path() -> PathBuf {
     let here = PathBuf::from(DEFAULT_MODEL);
     if here.is_file() {
-        return Some(here);
+        return here;
     }
     let built = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("..")
         .join(DEFAULT_MODEL);
-    built.is_file().then_some(built)
+    if built.is_file() {
+        return built;
+    }
+    PathBuf::from(tactile_derender::model::checkpoint::BUNDLED_MODEL_NAME)
 }
-
-/// The message shown when no model is chosen and the bundled one is missing.
-pub const MISSING_DEFAULT: &str =
-    "the bundled model (assets/models/default.safetensors) is not there yet — \
-     it is still being trained; open a checkpoint (.safetensors) instead";
 
 /// What pose estimation needs to know about an input (simulated scenes and dataset pairs).
 #[derive(Clone, Debug)]
@@ -154,6 +156,11 @@ pub struct RunResult {
     pub mean: Image,
     /// Per-pixel (population) standard deviation of the samples, metres.
     pub std: Image,
+    /// Per-pixel fraction of the samples in contact, 0..1.
+    pub contact_probability: Image,
+    /// The samples' consensus X̂0 (pixels at least half of them mark as contact, at their median depth), metres: what
+    /// the multi-sample pose registers.
+    pub consensus: Image,
     /// Scores of each sample against the ground truth (empty without one).
     pub scores: Vec<DepthMetrics>,
     /// Sampler wall time, seconds.
@@ -225,6 +232,8 @@ pub fn run(
     let seconds = t0.elapsed().as_secs_f64();
     let (mean, std) =
         mean_std(&samples).ok_or_else(|| anyhow!("the sampler returned no samples"))?;
+    let contact_probability = contact_probability(&samples)?;
+    let consensus = consensus_depth(&samples, EvalConfig::default().consensus_probability)?;
     let scores = match &input.truth {
         Some(truth) => samples
             .iter()
@@ -239,6 +248,8 @@ pub fn run(
         samples,
         mean,
         std,
+        contact_probability,
+        consensus,
         scores,
         seconds,
         sampler: req.sampler,
@@ -267,7 +278,7 @@ pub fn spawn(
                 Ok(Err(e)) => WorkerMsg::Error {
                     job: JobKind::Derender,
                     generation,
-                    message: format!("de-render: {e:#}"),
+                    message: format!("de-render: {}", tactile_derender::error::render_anyhow(&e)),
                 },
                 Err(_) => WorkerMsg::Error {
                     job: JobKind::Derender,

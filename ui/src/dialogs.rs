@@ -23,7 +23,12 @@ pub fn run(purpose: DialogPurpose, start_dir: Option<PathBuf>) -> Option<PathBuf
             .save_file(),
         DialogPurpose::OpenObjectMesh | DialogPurpose::OpenElastomerMesh => d
             .set_title("Open mesh")
-            .add_filter("mesh", &["obj", "stl", "OBJ", "STL"])
+            .add_filter(
+                "mesh",
+                &[
+                    "obj", "stl", "ply", "gltf", "glb", "OBJ", "STL", "PLY", "GLTF", "GLB",
+                ],
+            )
             .pick_file(),
         DialogPurpose::OpenMeasured => d
             .set_title("Open measured imprint")

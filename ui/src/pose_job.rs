@@ -92,8 +92,9 @@ pub fn run(
         )
         .with_context(|| format!("registering sample {first}"))?
         .unwrap_or_default();
-    // Step 1 of 1 + samples + baseline: the K-start search above; `analyse` reports the rest.
-    let total = 2 + req.samples.len();
+    // Step 1 of 1 + samples + baseline (+ the multi-sample estimate): the K-start search above; `analyse` reports
+    // the rest.
+    let total = 2 + req.samples.len() + usize::from(req.samples.len() > 1);
     progress(1, total);
     if cancel.load(Ordering::Relaxed) {
         return Err(anyhow!("cancelled"));
@@ -156,7 +157,7 @@ pub fn spawn(
                 Ok(Err(e)) => WorkerMsg::Error {
                     job: JobKind::Pose,
                     generation,
-                    message: format!("pose: {e:#}"),
+                    message: format!("pose: {}", tactile_derender::error::render_anyhow(&e)),
                 },
                 Err(_) => WorkerMsg::Error {
                     job: JobKind::Pose,

@@ -62,7 +62,7 @@ impl Default for State {
 pub enum ObjectSource {
     /// An object of an object set: `set` is `"builtin"` or a directory holding `objects.json`.
     Library { set: String, name: String },
-    /// A mesh file (OBJ or STL) in `units`, placed in its resting pose (lowest point on the table).
+    /// A mesh file (OBJ, STL, PLY, glTF/GLB) in `units`, placed in its resting pose (lowest point on the table).
     File { path: PathBuf, units: Units },
 }
 

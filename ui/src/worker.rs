@@ -253,7 +253,10 @@ impl Worker {
                     Err(e) => WorkerMsg::Error {
                         job: JobKind::Calibration,
                         generation,
-                        message: format!("inflation sweep: {e:#}"),
+                        message: format!(
+                            "inflation sweep: {}",
+                            tactile_derender::error::render_anyhow(&e)
+                        ),
                     },
                 };
                 let _ = tx.send(msg);
@@ -301,7 +304,7 @@ fn simulation_loop(rx: &Receiver<SimRequest>, tx: &Sender<WorkerMsg>, ctx: &egui
             Ok(Err(e)) => WorkerMsg::Error {
                 job: JobKind::Simulation,
                 generation: req.generation,
-                message: format!("simulation: {e:#}"),
+                message: format!("simulation: {}", tactile_derender::error::render_anyhow(&e)),
             },
             Err(_) => {
                 cache = SimCache::default();

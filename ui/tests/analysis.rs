@@ -335,19 +335,20 @@ fn a_long_run_can_be_cancelled_and_a_bad_checkpoint_shows_an_error() {
 }
 
 #[test]
-fn without_a_checkpoint_the_missing_bundled_model_is_explained() {
+fn without_a_checkpoint_the_bundled_model_is_used() {
     let mut state = State::default();
     state.view.tab = Tab::Derender;
     let mut h = harness(WorkbenchApp::with_state(state));
     h.run_ok();
-    match tnd_workbench::derender::default_model_path() {
-        None => assert!(h
-            .query_by_label(tnd_workbench::derender::MISSING_DEFAULT)
-            .is_some()),
-        Some(p) => assert!(h
-            .query_by_label_contains(&format!("using {}", p.display()))
-            .is_some()),
-    }
+    let p = tnd_workbench::derender::default_model_path();
+    let shown = if p.as_os_str() == "default" {
+        "the bundled default model".to_string()
+    } else {
+        p.display().to_string()
+    };
+    assert!(h
+        .query_by_label_contains(&format!("using {shown}"))
+        .is_some());
 }
 
 #[test]
@@ -468,7 +469,9 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
         );
     }
     let csv = std::fs::read_to_string(dir.path().join("out/pose/samples.csv")).unwrap();
-    assert_eq!(csv.lines().count(), 1 + 4 + 1, "{csv}");
+    // Header, four samples, the baseline and the multi-sample estimate.
+    assert_eq!(csv.lines().count(), 1 + 4 + 1 + 1, "{csv}");
+    assert!(csv.contains("\nmulti_sample,0,"), "{csv}");
 
     // A cancelled registration leaves no result (even if its thread was about to finish) and no error.
     h.get_by_label("Register samples").click();

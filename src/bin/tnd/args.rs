@@ -21,7 +21,7 @@ pub struct SensorArgs {
     /// Elastomer footprint LENGTHxWIDTH in metres (e.g. 0.12x0.08).
     #[arg(long)]
     pub footprint: Option<String>,
-    /// Elastomer mesh file (OBJ/STL, sensor frame) instead of the parametric membrane.
+    /// Elastomer mesh file (OBJ, STL, PLY, glTF/GLB; sensor frame) instead of the parametric membrane.
     #[arg(long)]
     pub elastomer_mesh: Option<PathBuf>,
     /// Units of --elastomer-mesh (m, cm, mm or metres per unit).
@@ -74,7 +74,7 @@ impl SensorArgs {
 /// Which object to use: a name from an object set, or a mesh file.
 #[derive(Args, Clone, Debug)]
 pub struct ObjectArgs {
-    /// Object name from the object set, or a path to an OBJ/STL mesh.
+    /// Object name from the object set, or a path to a mesh file (OBJ, STL, PLY, glTF/GLB).
     #[arg(long)]
     pub object: String,
     /// Object set: "builtin" or a directory with objects.json.

@@ -24,7 +24,7 @@ use tactile_derender::uncertainty::analysis::{analyse, Signature};
 pub struct EvalArgs {
     /// The generator: a model checkpoint (default: the bundled model), or `ground-truth` (the true X0: tests
     /// everything but the model).
-    #[arg(long, default_value = "assets/models/default.safetensors")]
+    #[arg(long, default_value = "default")]
     pub model: String,
     /// Dataset directory (`tnd dataset gen`).
     #[arg(long)]
@@ -35,6 +35,16 @@ pub struct EvalArgs {
     /// At most this many pairs per split.
     #[arg(long)]
     pub limit: Option<usize>,
+    /// Skip the first N pairs of each split (e.g. the pairs looked at while tuning), then take --limit.
+    #[arg(long, default_value_t = 0)]
+    pub skip: usize,
+    /// Model samples per pair: above 1 the model is also scored on the multi-sample estimate (registration of the
+    /// samples' consensus contact), shown as an extra row.
+    #[arg(long, default_value_t = 1)]
+    pub pose_samples: usize,
+    /// Also print the rows per contact-size bin and per object (always in --json and --report).
+    #[arg(long)]
+    pub breakdown: bool,
     /// Model sampler: ddpm (all training steps) or ddim (deterministic, eta 0).
     #[arg(long, default_value = "ddim")]
     pub sampler: String,
@@ -97,11 +107,15 @@ fn splits(s: &str) -> Result<Vec<SplitName>> {
 pub fn run(a: EvalArgs) -> Result<()> {
     let gen = generator(&a.model, &a.sampler, a.steps, a.spacing)?;
     let dataset = Dataset::open(&a.data)?;
-    let evaluator = Evaluator::new(EvalConfig::default());
+    let evaluator = Evaluator::new(EvalConfig {
+        pose_samples: a.pose_samples.max(1),
+        ..EvalConfig::default()
+    });
     let mut markdown = String::new();
     let mut records = String::new();
+    let mut failed = 0;
     for split in splits(&a.split)? {
-        let source = DatasetSource::new(&dataset, split, a.limit)?;
+        let source = DatasetSource::new(&dataset, split, None)?.skip(a.skip, a.limit);
         if source.is_empty() {
             eprintln!("{}: split {split} has no pairs; skipped", a.data.display());
             continue;
@@ -122,16 +136,28 @@ pub fn run(a: EvalArgs) -> Result<()> {
         })?;
         eprintln!();
         let table = markdown_table(split.as_str(), &report);
+        let breakdown = breakdown_tables(&report);
         if a.json {
             println!(
                 "{}",
                 json!({"split": split.as_str(), "generator": report.generator, "pairs": report.pairs,
-                       "model": report.model, "baseline": report.baseline})
+                       "model": report.model, "model_multi": report.model_multi,
+                       "baseline": report.baseline, "breakdown": report.breakdown,
+                       "failed": report.failed})
             );
         } else {
             println!("{table}");
+            if a.breakdown {
+                println!("{breakdown}");
+            }
         }
         markdown.push_str(&table);
+        markdown.push_str(&breakdown);
+        for f in &report.failed {
+            eprintln!("failed: {} ({}): {}", f.name, f.object, f.reason);
+            let _ = writeln!(records, "{}", json!({"split": split.as_str(), "failed": f}));
+        }
+        failed += report.failed.len();
         for r in &report.records {
             let _ = writeln!(records, "{}", json!({"split": split.as_str(), "record": r}));
         }
@@ -165,6 +191,9 @@ pub fn run(a: EvalArgs) -> Result<()> {
         tactile_derender::io::write_atomic(&path, text.as_bytes())
             .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
         eprintln!("report: {}", path.display());
+    }
+    if failed > 0 {
+        bail!("{failed} pair(s) could not be scored (listed above and in --records); the tables cover the others");
     }
     Ok(())
 }
@@ -211,12 +240,60 @@ fn row(name: &str, s: &MethodSummary) -> String {
 
 /// Table I and II rows of one split as markdown.
 pub fn markdown_table(split: &str, r: &EvalReport) -> String {
-    let mut s = format!("## {split} ({} pairs)\n\n", r.pairs);
+    let failed = if r.failed.is_empty() {
+        String::new()
+    } else {
+        format!(", {} failed", r.failed.len())
+    };
+    let mut s = format!("## {split} ({} pairs{failed})\n\n", r.pairs);
     s.push_str("| method | L1 [mm] | L1 on masks [mm] | PSNR [dB] | SSIM | position [mm] | θ [deg] | Chamfer [mm²] | no contact / θ excl. / axis excl. |\n");
     s.push_str("| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
     s.push_str(&row(&r.generator, &r.model));
+    if let Some(m) = &r.model_multi {
+        s.push_str(&row(&format!("{} (multi-sample)", r.generator), m));
+    }
     s.push_str(&row("threshold baseline", &r.baseline));
     s.push('\n');
+    s
+}
+
+/// Position error per contact-size bin and per object, model against baseline, as markdown.
+fn breakdown_tables(r: &EvalReport) -> String {
+    let multi = r.model_multi.is_some();
+    let mut s = String::new();
+    for (title, groups) in [
+        ("contact size", &r.breakdown.contact_size),
+        ("object", &r.breakdown.object),
+    ] {
+        let _ = writeln!(
+            s,
+            "| {title} | pairs | model position [mm] |{} baseline position [mm] | model / baseline |{}",
+            if multi { " multi-sample position [mm] |" } else { "" },
+            if multi { " multi-sample / baseline |" } else { "" }
+        );
+        s.push_str(if multi {
+            "| --- | --- | --- | --- | --- | --- | --- |\n"
+        } else {
+            "| --- | --- | --- | --- | --- |\n"
+        });
+        for g in groups {
+            let m = g.model_multi.as_ref().map(|m| median_cell(&m.position_mm));
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} |{} {} | {:.2} |{}",
+                g.label,
+                g.pairs,
+                median_cell(&g.model.position_mm),
+                m.map(|c| format!(" {c} |")).unwrap_or_default(),
+                median_cell(&g.baseline.position_mm),
+                g.position_ratio,
+                g.position_ratio_multi
+                    .map(|x| format!(" {x:.2} |"))
+                    .unwrap_or_default(),
+            );
+        }
+        s.push('\n');
+    }
     s
 }
 

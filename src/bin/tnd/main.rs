@@ -64,7 +64,7 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", tactile_derender::error::render_anyhow(&e));
             std::process::ExitCode::FAILURE
         }
     }

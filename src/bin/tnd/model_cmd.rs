@@ -31,7 +31,7 @@ pub enum ModelCommand {
 #[derive(Args, Debug)]
 pub struct DiagnoseArgs {
     /// Checkpoint (default: the bundled model).
-    #[arg(long, default_value = "assets/models/default.safetensors")]
+    #[arg(long, default_value = "default")]
     pub model: PathBuf,
     /// Dataset directory.
     #[arg(long)]

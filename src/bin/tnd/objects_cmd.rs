@@ -1,10 +1,14 @@
-//! `tnd objects`: list an object set, or export the built-in set as meshes plus an `objects.json` manifest.
+//! `tnd objects`: list an object set, export the built-in set, or generate a procedural training set, as meshes
+//! plus an `objects.json` manifest.
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{anyhow, bail, Result};
 use clap::{Args, Subcommand};
-use tactile_derender::objects::ObjectSet;
+use tactile_derender::mesh::{LoadOptions, Units};
+use tactile_derender::objects::inspect::{self, ImportOptions};
+use tactile_derender::objects::procedural::ProceduralConfig;
+use tactile_derender::objects::{ObjectSet, Split, MANIFEST_FILE};
 
 #[derive(Args, Debug)]
 pub struct ObjectsArgs {
@@ -22,6 +26,49 @@ pub enum ObjectsCommand {
     },
     /// Write the built-in set to DIR (OBJ meshes in metres + objects.json).
     Export { dir: PathBuf },
+    /// Report what a mesh file holds: shells, holes, non-manifold edges, volume, extent, and a unit warning when the
+    /// size is implausible for a pressed object (e.g. a millimetre file read as metres).
+    Check {
+        mesh: PathBuf,
+        /// Units of the file: m, cm, mm or metres per file unit.
+        #[arg(long, default_value = "m")]
+        units: Units,
+    },
+    /// Turn a folder of meshes (.obj, .stl, .ply, .gltf, .glb) into an object set: writes DIR/objects.json with each file's units (or
+    /// a scale-to-fit), closedness report and a symmetry guess to check and edit.
+    Import {
+        dir: PathBuf,
+        /// Units of the files (default: metres, or the plausible unit when a file's size says otherwise).
+        #[arg(long)]
+        units: Option<Units>,
+        /// Scale every mesh so its largest extent is this many metres (e.g. 0.05).
+        #[arg(long)]
+        fit: Option<f64>,
+        /// Split of the imported objects: seen (may be trained on) or unseen (held out).
+        #[arg(long, default_value = "seen")]
+        split: String,
+        /// Replace an existing objects.json.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Generate a procedural training set into DIR (OBJ meshes in metres + objects.json): superquadrics, convex
+    /// polytopes, blobs, rocks, extrusions with chamfered or filleted rims, lying profiles, unions of primitives,
+    /// thin fins and blocks with small bumps, plus (by default) the built-in catalogue.
+    Generate {
+        dir: PathBuf,
+        /// Number of procedural objects.
+        #[arg(long, default_value_t = ProceduralConfig::default().count)]
+        count: usize,
+        /// Seed: object i depends only on (seed, i).
+        #[arg(long, default_value_t = ProceduralConfig::default().seed)]
+        seed: u64,
+        /// Smallest and largest value of each object's largest extent, metres, as MIN,MAX.
+        #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = ProceduralConfig::default().extent_m)]
+        extent: Vec<f64>,
+        /// Share of a generated dataset's pairs that go to the built-in catalogue's objects (0 leaves them out).
+        #[arg(long, default_value_t = 0.25)]
+        builtin_share: f64,
+    },
 }
 
 pub fn run(a: ObjectsArgs) -> Result<()> {
@@ -44,6 +91,99 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
             println!(
                 "{}",
                 serde_json::json!({"exported": set.entries().len(), "dir": dir})
+            );
+        }
+        ObjectsCommand::Check { mesh, units } => {
+            let c = inspect::check(
+                &mesh,
+                &LoadOptions {
+                    units,
+                    fit_to_size: None,
+                },
+            )?;
+            for note in &c.notes {
+                eprintln!("{}: {note}", mesh.display());
+            }
+            println!("{}", serde_json::to_string(&c)?);
+        }
+        ObjectsCommand::Import {
+            dir,
+            units,
+            fit,
+            split,
+            force,
+        } => {
+            let split = match split.as_str() {
+                "seen" => Split::Seen,
+                "unseen" => Split::Unseen,
+                other => bail!("--split must be seen or unseen, got '{other}'"),
+            };
+            let path = dir.join(MANIFEST_FILE);
+            if path.exists() && !force {
+                bail!(
+                    "{}: already exists; pass --force to replace it",
+                    path.display()
+                );
+            }
+            let options = ImportOptions {
+                units,
+                fit_m: fit,
+                split,
+            };
+            let (manifest, imported, failed) = inspect::import_dir(&dir, &options)?;
+            for (file, e) in &failed {
+                eprintln!(
+                    "skipped {}: {}",
+                    file.display(),
+                    tactile_derender::error::render(e)
+                );
+            }
+            if imported.is_empty() {
+                bail!(
+                    "{}: no readable mesh files (.obj, .stl, .ply, .gltf, .glb)",
+                    dir.display()
+                );
+            }
+            for m in &imported {
+                for note in &m.check.notes {
+                    eprintln!("{}: {note}", m.entry.name);
+                }
+                println!(
+                    "{}",
+                    serde_json::json!({"name": m.entry.name, "scale_to_m": m.entry.scale_to_m,
+                        "symmetry_guess": m.entry.symmetry, "check": m.check})
+                );
+            }
+            let mut json = serde_json::to_string_pretty(&manifest)?;
+            json.push('\n');
+            tactile_derender::io::write_atomic(&path, json.as_bytes())
+                .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
+            // Read back what was written: the same validation `--objects DIR` will do.
+            ObjectSet::load_dir(&dir)?;
+            eprintln!(
+                "{}: {} objects ({} skipped); check the symmetry guesses",
+                path.display(),
+                imported.len(),
+                failed.len()
+            );
+        }
+        ObjectsCommand::Generate {
+            dir,
+            count,
+            seed,
+            extent,
+            builtin_share,
+        } => {
+            let config = ProceduralConfig {
+                count,
+                seed,
+                extent_m: [extent[0], extent[1]],
+            };
+            let set = ObjectSet::procedural(&config, builtin_share)?;
+            set.export(&dir)?;
+            println!(
+                "{}",
+                serde_json::json!({"generated": count, "objects": set.entries().len(), "dir": dir})
             );
         }
     }

@@ -1,6 +1,7 @@
 //! `tnd pose`: one tactile signature end to end — N samples of the in-contact depth from the generator, the pose
-//! from a K-start registration of the first, every sample registered from that fixed start, the threshold baseline,
-//! and the uncertainty outputs (samples.csv, kde.csv, uncertainty.png, pose.json).
+//! from a K-start registration of the first, every sample registered from that fixed start, the multi-sample
+//! estimate (the samples' consensus contact), the threshold baseline, and the uncertainty outputs (samples.csv,
+//! kde.csv, uncertainty.png, contact_probability.npy, pose.json).
 
 use std::path::{Path, PathBuf};
 
@@ -11,6 +12,7 @@ use tactile_derender::image::Image;
 use tactile_derender::io::npy;
 use tactile_derender::metrics::evaluate::{EvalConfig, EvalContext, EvalPair, Evaluator};
 use tactile_derender::objects::ObjectSet;
+use tactile_derender::pose::from_depth::contact_probability;
 use tactile_derender::pose::threshold_contact;
 use tactile_derender::sensor::Se2;
 use tactile_derender::sim::{PreparedObject, SimConfig, Simulator};
@@ -130,8 +132,14 @@ pub fn run(a: PoseArgs) -> Result<()> {
     };
     let report = analyse(&evaluator, &object, &ctx, &sig, a.seed)?;
     report.write(&a.out)?;
+    if samples.len() > 1 {
+        let p = contact_probability(&samples)?;
+        let path = a.out.join("contact_probability.npy");
+        npy::write_image(&path, &p)?;
+    }
     let summary = json!({"object": name, "generator": gen.name(), "samples": report.samples.len(),
-        "estimate": report.init, "truth": truth, "baseline": report.baseline,
+        "estimate": report.init, "estimate_multi_sample": report.multi_sample.map(|m| m.pose),
+        "truth": truth, "baseline": report.baseline, "multi_sample": report.multi_sample,
         "position_err_mm": report.samples.iter().map(|s| s.position_mm).collect::<Vec<_>>(),
         "out": a.out});
     let path = a.out.join("pose.json");

@@ -22,7 +22,7 @@ pub enum SamplerArg {
 #[derive(Args, Debug)]
 pub struct SampleArgs {
     /// Model checkpoint (.safetensors with config, or a diffusers directory); default: the bundled model.
-    #[arg(long, default_value = "assets/models/default.safetensors")]
+    #[arg(long, default_value = "default")]
     pub model: PathBuf,
     /// Imprint Y as a 2-D .npy array in metres, at the model's resolution.
     #[arg(long)]

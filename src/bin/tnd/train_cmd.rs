@@ -32,14 +32,23 @@ pub struct TrainArgs {
     /// Total epochs over the train split (default 1 when --steps is not given).
     #[arg(long)]
     pub epochs: Option<u64>,
+    /// Pairs per optimiser step.
     #[arg(long, default_value_t = 16)]
     pub batch: usize,
+    /// Adam learning rate.
     #[arg(long, default_value_t = 1e-4)]
     pub lr: f64,
+    /// Loss on the network's prediction: l2 (the paper's) or l1.
     #[arg(long, value_enum, default_value = "l2")]
     pub loss: Loss,
+    /// Seed of the batch order, timesteps and noise (a run is reproducible from it and the data).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// A separate validation dataset (e.g. `tnd dataset gen` with another seed and object set): the logged
+    /// validation loss uses a fixed draw of its pairs instead of the training dataset's unseen_poses test split, so
+    /// that stopping and tuning never look at test pairs.
+    #[arg(long)]
+    pub val_data: Option<PathBuf>,
     /// EMA decay of the weights (e.g. 0.999); the saved model then holds the EMA weights.
     #[arg(long)]
     pub ema: Option<f64>,
@@ -100,7 +109,24 @@ pub fn run(a: TrainArgs) -> Result<()> {
             return Err(anyhow!("--ema must be in [0, 1), found {d}"));
         }
     }
+    let val_dataset = a.val_data.as_deref().map(Dataset::open).transpose()?;
+    if let Some(v) = &val_dataset {
+        if v.resolution() != dataset.resolution() {
+            bail!(
+                "--val-data {}: images are {:?}, the training data's {:?}",
+                a.val_data
+                    .as_deref()
+                    .unwrap_or(std::path::Path::new(""))
+                    .display(),
+                v.resolution(),
+                dataset.resolution()
+            );
+        }
+    }
     let mut data = DatasetTraining::new(&dataset);
+    if let Some(v) = &val_dataset {
+        data = data.with_validation(v);
+    }
     let mut bar = kdam::tqdm!(desc = "training", unit = " steps");
     let summary = train(&a.out, &tc, &cfg, a.init.as_deref(), &mut data, &mut |p| {
         bar.total = p.total as usize;

@@ -6,7 +6,7 @@
 use crate::analysis::RunImage;
 use crate::app::WorkbenchApp;
 use crate::command::Command;
-use crate::derender::{self, MISSING_DEFAULT};
+use crate::derender;
 use crate::panels::image_card::{self, Scale};
 use crate::panels::widgets::path_field;
 use crate::state::{DerenderInput, ModelSettings, SamplerChoice};
@@ -105,29 +105,28 @@ fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>)
             cmds.push(Command::Browse(DialogPurpose::OpenCheckpoint));
         }
     });
-    match app.model_path() {
-        Some(p) => {
-            let loaded = app
-                .analysis
-                .derender
-                .model
-                .as_ref()
-                .filter(|(q, _)| *q == p)
-                .map(|(_, m)| {
-                    let (w, h) = m.resolution();
-                    let predicts = match m.config().tactile_derender.prediction_type {
-                        PredictionType::Epsilon => "ε",
-                        PredictionType::VPrediction => "v",
-                    };
-                    format!(" · loaded, {w}x{h} px, predicts {predicts}")
-                })
-                .unwrap_or_default();
-            ui.weak(format!("using {}{loaded}", p.display()));
-        }
-        None => {
-            ui.colored_label(egui::Color32::from_rgb(230, 160, 40), MISSING_DEFAULT);
-        }
-    }
+    let p = app.model_path();
+    let loaded = app
+        .analysis
+        .derender
+        .model
+        .as_ref()
+        .filter(|(q, _)| *q == p)
+        .map(|(_, m)| {
+            let (w, h) = m.resolution();
+            let predicts = match m.config().tactile_derender.prediction_type {
+                PredictionType::Epsilon => "ε",
+                PredictionType::VPrediction => "v",
+            };
+            format!(" · loaded, {w}x{h} px, predicts {predicts}")
+        })
+        .unwrap_or_default();
+    let shown = if p.as_os_str() == tactile_derender::model::checkpoint::BUNDLED_MODEL_NAME {
+        "the bundled default model".to_string()
+    } else {
+        p.display().to_string()
+    };
+    ui.weak(format!("using {shown}{loaded}"));
 }
 
 fn run_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
@@ -145,12 +144,7 @@ fn run_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
                     .text(format!("step {done}/{total} · {secs:.1} s")),
             );
         } else {
-            let can = app.model_path().is_some();
-            if ui
-                .add_enabled(can, egui::Button::new("Run de-rendering"))
-                .on_disabled_hover_text(MISSING_DEFAULT)
-                .clicked()
-            {
+            if ui.button("Run de-rendering").clicked() {
                 cmds.push(Command::RunDerender);
             }
             if let Some(i) = &view.pending_input {

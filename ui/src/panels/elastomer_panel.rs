@@ -35,7 +35,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     });
     ui.horizontal(|ui| {
         ui.label("or membrane mesh")
-            .on_hover_text("an OBJ/STL in the sensor frame");
+            .on_hover_text("a mesh file (OBJ, STL, PLY, glTF/GLB) in the sensor frame");
         units_combo(ui, "membrane_units", &mut e.mesh_units);
         if ui.button("Browse…").clicked() {
             cmds.push(Command::Browse(DialogPurpose::OpenElastomerMesh));

@@ -15,6 +15,7 @@ const TRUE_COLOUR: Color32 = Color32::from_rgb(90, 200, 90);
 const ESTIMATE_COLOUR: Color32 = Color32::from_rgb(240, 150, 40);
 const BASELINE_COLOUR: Color32 = Color32::from_rgb(230, 70, 70);
 const HIGHLIGHT_COLOUR: Color32 = Color32::from_rgb(80, 170, 255);
+const MULTI_COLOUR: Color32 = Color32::from_rgb(190, 110, 240);
 const KDE_COLOUR: Color32 = Color32::from_rgb(200, 200, 210);
 
 pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
@@ -128,6 +129,15 @@ fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, heigh
                     );
                 }
             }
+            if let Some(m) = &r.report.multi_sample {
+                for l in placed_mm(&r.outline, &m.pose) {
+                    p.line(
+                        Line::new("multi-sample estimate", PlotPoints::from(l))
+                            .color(MULTI_COLOUR)
+                            .width(2.0),
+                    );
+                }
+            }
             if let Some(b) = &r.report.baseline {
                 for l in placed_mm(&r.outline, &b.pose) {
                     p.line(
@@ -213,6 +223,20 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
         rep.samples.len(),
         r.sample_index.len().max(rep.samples.len())
     ));
+    if let Some(m) = &rep.multi_sample {
+        ui.label(format!(
+            "multi-sample estimate (consensus of {} samples): position error {:.2} mm{}",
+            r.sample_index.len().max(rep.samples.len()),
+            m.position_mm,
+            m.theta_deg
+                .map(|t| format!(", θ error {t:.1}°"))
+                .unwrap_or_default()
+        ))
+        .on_hover_text(
+            "the pixels at least half of the samples mark as contact, at their median depth, registered from \
+             K random starts (the De-render tab shows this consensus and the per-pixel contact probability)",
+        );
+    }
     match &rep.baseline {
         Some(b) => ui.label(format!(
             "baseline: position error {:.2} mm{}",

@@ -1,4 +1,4 @@
-//! Scene panel: the object (built-in library or an OBJ/STL file with its units), its SE(2) pose on the table, and
+//! Scene panel: the object (built-in library or a mesh file (OBJ, STL, PLY, glTF/GLB) with its units), its SE(2) pose on the table, and
 //! the sensor's pose and press depth (paper IV.A inputs).
 
 use std::path::PathBuf;

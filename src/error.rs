@@ -1,0 +1,71 @@
+//! Rendering errors **once**, at the edge (CLI `main`, the workbench's status bar): an error's message followed by
+//! those of its sources that it does not already contain.
+//!
+//! Library errors keep their cause as `#[source]`, and many also quote it in their own message so that a plain
+//! `to_string()` is useful; printing the whole chain naively (anyhow's `{:#}`) then says the same thing twice
+//! ("object mesh: …: object mesh: …"). [`render`] walks the chain and skips every source whose text is already part
+//! of what has been written.
+
+/// `err` and the sources it does not already quote, joined by `": "`.
+///
+/// ```
+/// #[derive(Debug, thiserror::Error)]
+/// #[error("cannot open mesh.obj: {0}")]
+/// struct Outer(#[source] std::io::Error);
+/// let io = std::io::Error::new(std::io::ErrorKind::NotFound, "no such file");
+/// assert_eq!(tactile_derender::error::render(&Outer(io)), "cannot open mesh.obj: no such file");
+/// ```
+pub fn render(err: &dyn std::error::Error) -> String {
+    let mut out = err.to_string();
+    let mut source = err.source();
+    while let Some(s) = source {
+        let message = s.to_string();
+        if !message.is_empty() && !out.contains(&message) {
+            out.push_str(": ");
+            out.push_str(&message);
+        }
+        source = s.source();
+    }
+    out
+}
+
+/// [`render`] for an `anyhow::Error` (its context lines and the library error beneath them).
+pub fn render_anyhow(err: &anyhow::Error) -> String {
+    render(err.as_ref())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("object 'bunny': {0}")]
+    struct Quoting(#[source] Inner);
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("bunny.obj: 4 bad edges")]
+    struct Inner;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("evaluation stopped")]
+    struct Terse(#[source] Inner);
+
+    #[test]
+    fn quoted_sources_are_said_once_and_unquoted_ones_are_appended() {
+        assert_eq!(
+            render(&Quoting(Inner)),
+            "object 'bunny': bunny.obj: 4 bad edges"
+        );
+        assert_eq!(
+            render(&Terse(Inner)),
+            "evaluation stopped: bunny.obj: 4 bad edges"
+        );
+        let any = anyhow::Error::new(Quoting(Inner)).context("tnd eval data/real");
+        assert_eq!(
+            render_anyhow(&any),
+            "tnd eval data/real: object 'bunny': bunny.obj: 4 bad edges"
+        );
+        // anyhow's alternate form repeats the quoted source: what this module exists to avoid.
+        assert_eq!(format!("{any:#}").matches("4 bad edges").count(), 2);
+    }
+}

@@ -1,0 +1,388 @@
+//! **Users' own meshes** for the object library (paper V.A objects): what a mesh file holds ([`check`]: shells,
+//! holes, non-manifold edges, volume, extent, a unit guess) and a folder of meshes turned into an object set
+//! ([`import_dir`]: `objects.json` with units, scale-to-fit, closedness and a symmetry guess the user can edit).
+//!
+//! Real meshes (scans, CAD exports, convex decompositions) are often open, non-manifold or made of several shells;
+//! nothing here refuses them — the simulator ray-casts any triangle soup and registration signs its distance with
+//! the winding number — but the report says what was found so surprises are visible.
+
+use std::path::{Path, PathBuf};
+
+use glam::{DQuat, DVec3};
+use parry3d::query::PointQuery;
+use parry3d::shape::TriMesh;
+use serde::{Deserialize, Serialize};
+
+use super::{ObjectEntry, ObjectError, ObjectManifest, RotationSymmetry, Split, Symmetry};
+use crate::mesh::{self, LoadOptions, Mesh, Units};
+
+/// Largest extents, metres, that a pressed object plausibly has; outside, the units are probably wrong.
+pub const PLAUSIBLE_EXTENT_M: [f64; 2] = [0.003, 0.5];
+
+/// What [`check`] found in a mesh file (after its units).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MeshCheck {
+    pub path: PathBuf,
+    pub units: Units,
+    pub vertices: usize,
+    pub triangles: usize,
+    /// Connected pieces (after welding vertices closer than a millionth of the extent).
+    pub shells: usize,
+    /// Edges used by one triangle only (the rims of holes).
+    pub boundary_edges: usize,
+    /// Edges used by more than two triangles, or twice in the same direction.
+    pub non_manifold_edges: usize,
+    /// Watertight and consistently oriented.
+    pub closed: bool,
+    /// Enclosed volume, m³ (meaningful when closed; negative: inward-facing).
+    pub volume_m3: f64,
+    /// Bounding-box size, metres.
+    pub extent_m: [f64; 3],
+    /// A likely unit when the extent is implausible in the given one (e.g. a millimetre file read as metres).
+    pub likely_units: Option<Units>,
+    /// Plain-language findings.
+    pub notes: Vec<String>,
+}
+
+/// Load `path` with `options` and report what it holds.
+pub fn check(path: &Path, options: &LoadOptions) -> Result<MeshCheck, ObjectError> {
+    let mesh = mesh::load(path, options).map_err(|source| ObjectError::Mesh {
+        name: path.display().to_string(),
+        source,
+    })?;
+    let (lo, hi) = mesh.aabb();
+    let size = (hi - lo).as_dvec3();
+    let largest = size.max_element();
+    let welded = mesh.welded((largest * 1e-6).max(1e-9) as f32);
+    let report = welded.report();
+    let shells = welded.shell_count();
+    let likely_units = if options.fit_to_size.is_none() {
+        likely_units(largest, options.units)
+    } else {
+        None
+    };
+    let mut notes = Vec::new();
+    if let Some(u) = likely_units {
+        notes.push(format!(
+            "largest extent {largest:.4} m is implausible for a pressed object; the file is probably in {u} \
+             (--units {u} gives {:.1} mm)",
+            largest / options.units.to_metres() * u.to_metres() * 1e3
+        ));
+    }
+    if shells > 1 {
+        notes.push(format!(
+            "{shells} separate shells (e.g. a convex decomposition or an assembly)"
+        ));
+    }
+    if report.boundary_edges > 0 {
+        notes.push(format!(
+            "open: {} boundary edges (holes)",
+            report.boundary_edges
+        ));
+    }
+    if report.bad_edges > 0 {
+        notes.push(format!(
+            "{} non-manifold or inconsistently oriented edges",
+            report.bad_edges
+        ));
+    }
+    if report.closed && report.volume_m3 < 0.0 {
+        notes.push("faces point inwards (negative volume)".into());
+    }
+    Ok(MeshCheck {
+        path: path.to_path_buf(),
+        units: options.units,
+        vertices: mesh.vertices().len(),
+        triangles: mesh.triangles().len(),
+        shells,
+        boundary_edges: report.boundary_edges,
+        non_manifold_edges: report.bad_edges,
+        closed: report.closed,
+        volume_m3: report.volume_m3,
+        extent_m: size.to_array(),
+        likely_units,
+        notes,
+    })
+}
+
+/// The unit under which a largest extent of `largest_m` metres (read with `units`) becomes plausible, if the given
+/// one is not.
+pub fn likely_units(largest_m: f64, units: Units) -> Option<Units> {
+    let plausible = |m: f64| (PLAUSIBLE_EXTENT_M[0]..=PLAUSIBLE_EXTENT_M[1]).contains(&m);
+    if plausible(largest_m) {
+        return None;
+    }
+    // Of the plausible units, the one that brings the object closest (in ratio) to a typical 50 mm.
+    let in_file_units = largest_m / units.to_metres();
+    [Units::Mm, Units::Cm, Units::M]
+        .into_iter()
+        .filter(|u| *u != units && plausible(in_file_units * u.to_metres()))
+        .min_by(|a, b| {
+            let off = |u: &Units| (in_file_units * u.to_metres() / 0.05).ln().abs();
+            off(a).total_cmp(&off(b))
+        })
+}
+
+/// Guess the rotational symmetry of a resting mesh about the vertical axis through its bounding-box centre: the
+/// largest n in {6, 4, 3, 2} for which the mesh rotated by 2π/n lies on itself (surface samples within 1 % of the
+/// extent, on average), or continuous when seven irregular angles all do. A guess for the user to check.
+pub fn guess_symmetry(mesh: &Mesh) -> Symmetry {
+    let (lo, hi) = mesh.aabb();
+    let centre = (0.5 * (lo + hi)).as_dvec3();
+    let extent = f64::from((hi - lo).max_element()).max(1e-9);
+    let Ok(trimesh) = TriMesh::new(mesh.vertices().to_vec(), mesh.triangles().to_vec()) else {
+        return Symmetry::default();
+    };
+    let samples = crate::pose::sample_surface(mesh, 400, 7);
+    let fits = |angle: f64| {
+        let q = DQuat::from_rotation_z(angle);
+        let mean = samples
+            .iter()
+            .map(|&p| {
+                let r = centre + q * DVec3::new(p.x - centre.x, p.y - centre.y, p.z - centre.z);
+                f64::from(trimesh.distance_to_local_point(r.as_vec3(), true))
+            })
+            .sum::<f64>()
+            / samples.len().max(1) as f64;
+        mean < 0.01 * extent
+    };
+    let rotation = if [0.37, 1.1, 1.9, 2.6, 3.3, 4.4, 5.5]
+        .iter()
+        .all(|&a| fits(a))
+    {
+        RotationSymmetry::Continuous
+    } else if let Some(n) = [6u32, 4, 3, 2]
+        .into_iter()
+        .find(|&n| fits(std::f64::consts::TAU / f64::from(n)))
+    {
+        RotationSymmetry::NFold(n)
+    } else {
+        RotationSymmetry::None
+    };
+    Symmetry {
+        rotation,
+        translation_axis: None,
+    }
+}
+
+/// Options of [`import_dir`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ImportOptions {
+    /// Units of the files; `None`: metres, unless the extent is implausible and another unit makes it plausible.
+    pub units: Option<Units>,
+    /// Scale every mesh so its largest extent is this many metres (overrides the units).
+    pub fit_m: Option<f64>,
+    /// Split of every imported object (default seen).
+    pub split: Split,
+}
+
+/// One imported file.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ImportedMesh {
+    pub entry: ObjectEntry,
+    pub check: MeshCheck,
+}
+
+/// What [`import_dir`] made of a folder: the manifest, each imported mesh with its check, and the files that could
+/// not be read with their errors.
+pub type Imported = (
+    ObjectManifest,
+    Vec<ImportedMesh>,
+    Vec<(PathBuf, ObjectError)>,
+);
+
+/// Turn every mesh file ([`mesh::MESH_EXTENSIONS`]) directly in `dir` into an object entry (name from the file stem,
+/// `scale_to_m` from the units or the fit, symmetry guessed) and return them with their checks; files that cannot be
+/// read are returned as errors beside the others, so one bad file does not stop the import.
+pub fn import_dir(dir: &Path, options: &ImportOptions) -> Result<Imported, ObjectError> {
+    let read = std::fs::read_dir(dir).map_err(|source| ObjectError::ReadDir {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut files: Vec<PathBuf> = read
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_file() && mesh::is_mesh_file(p))
+        .collect();
+    files.sort();
+    let mut imported = Vec::new();
+    let mut failed = Vec::new();
+    let mut names = std::collections::HashSet::new();
+    for path in files {
+        match import_file(&path, dir, options, &mut names) {
+            Ok(m) => imported.push(m),
+            Err(e) => failed.push((path, e)),
+        }
+    }
+    let manifest = ObjectManifest {
+        version: super::MANIFEST_VERSION,
+        objects: imported.iter().map(|m| m.entry.clone()).collect(),
+    };
+    Ok((manifest, imported, failed))
+}
+
+fn import_file(
+    path: &Path,
+    dir: &Path,
+    options: &ImportOptions,
+    names: &mut std::collections::HashSet<String>,
+) -> Result<ImportedMesh, ObjectError> {
+    let given = options.units.unwrap_or(Units::M);
+    let first = check(
+        path,
+        &LoadOptions {
+            units: given,
+            fit_to_size: None,
+        },
+    )?;
+    let largest = first.extent_m.iter().copied().fold(0.0, f64::max);
+    let scale_to_m = match (options.fit_m, options.units, first.likely_units) {
+        (Some(fit), _, _) => fit / (largest / given.to_metres()).max(1e-12),
+        (None, None, Some(likely)) => likely.to_metres(),
+        (None, _, _) => given.to_metres(),
+    };
+    let units = Units::Scale(scale_to_m);
+    let check = check(
+        path,
+        &LoadOptions {
+            units,
+            fit_to_size: None,
+        },
+    )?;
+    let mesh = mesh::load(
+        path,
+        &LoadOptions {
+            units,
+            fit_to_size: None,
+        },
+    )
+    .map_err(|source| ObjectError::Mesh {
+        name: path.display().to_string(),
+        source,
+    })?
+    .rest_on_table();
+    let stem: String = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default()
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    let mut name = if stem.is_empty() {
+        "object".to_string()
+    } else {
+        stem
+    };
+    let base = name.clone();
+    let mut k = 1;
+    while !names.insert(name.clone()) {
+        k += 1;
+        name = format!("{base}_{k}");
+    }
+    let relative = path.strip_prefix(dir).unwrap_or(path);
+    Ok(ImportedMesh {
+        entry: ObjectEntry {
+            name,
+            family: None,
+            mesh: relative.display().to_string(),
+            scale_to_m,
+            rotation: None,
+            split: options.split,
+            symmetry: guess_symmetry(&mesh),
+            dimensions: Default::default(),
+            weight: 1.0,
+        },
+        check,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::objects::shapes;
+
+    #[test]
+    fn units_guess_names_the_plausible_unit() {
+        assert_eq!(likely_units(50.0, Units::M), Some(Units::Mm));
+        assert_eq!(likely_units(0.05, Units::M), None);
+        assert_eq!(likely_units(5.0, Units::M), Some(Units::Cm));
+        assert_eq!(likely_units(0.00005, Units::Mm), Some(Units::M));
+    }
+
+    #[test]
+    fn symmetry_guesses_match_the_built_in_shapes() {
+        let cross = shapes::cross(0.012, 0.05, 0.02).unwrap();
+        assert_eq!(guess_symmetry(&cross).rotation, RotationSymmetry::NFold(4));
+        let sphere = shapes::sphere(0.02, 3).unwrap();
+        assert_eq!(
+            guess_symmetry(&sphere).rotation,
+            RotationSymmetry::Continuous
+        );
+        let lying = shapes::cylinder_lying(0.01, 0.05, 32).unwrap();
+        assert_eq!(guess_symmetry(&lying).rotation, RotationSymmetry::NFold(2));
+        let tri = [
+            glam::Vec2::new(0.0, 0.0),
+            glam::Vec2::new(0.03, 0.0),
+            glam::Vec2::new(0.005, 0.02),
+        ];
+        let wedge = shapes::extrude_z(&tri, 0.01).unwrap();
+        assert_eq!(guess_symmetry(&wedge).rotation, RotationSymmetry::None);
+    }
+
+    #[test]
+    fn check_counts_shells_and_holes_and_import_reads_a_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = shapes::sphere(0.01, 2).unwrap();
+        let b = a.transformed(&glam::Affine3A::from_translation(glam::Vec3::new(
+            0.05, 0.0, 0.0,
+        )));
+        let two = Mesh::merged(&[a.clone(), b]);
+        // Millimetre coordinates: a 70 mm pair of spheres written as numbers in millimetres.
+        let mm = two.transformed(&glam::Affine3A::from_scale(glam::Vec3::splat(1000.0)));
+        std::fs::write(dir.path().join("Two Spheres.obj"), mm.to_obj_string()).unwrap();
+        let mut holed = a.clone();
+        holed = Mesh::from_raw(
+            holed.vertices().to_vec(),
+            holed.triangles()[3..].to_vec(),
+            "holed",
+        )
+        .unwrap();
+        std::fs::write(dir.path().join("holed.obj"), holed.to_obj_string()).unwrap();
+        std::fs::write(dir.path().join("broken.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
+
+        let c = check(&dir.path().join("Two Spheres.obj"), &LoadOptions::default()).unwrap();
+        assert_eq!(c.shells, 2);
+        assert!(c.closed);
+        assert_eq!(c.likely_units, Some(Units::Mm));
+        let h = check(&dir.path().join("holed.obj"), &LoadOptions::default()).unwrap();
+        assert!(!h.closed && h.boundary_edges > 0, "{h:?}");
+
+        let (manifest, imported, failed) =
+            import_dir(dir.path(), &ImportOptions::default()).unwrap();
+        assert_eq!(failed.len(), 1, "{failed:?}");
+        assert_eq!(imported.len(), 2);
+        let two = manifest
+            .objects
+            .iter()
+            .find(|e| e.name == "two_spheres")
+            .unwrap();
+        assert!((two.scale_to_m - 0.001).abs() < 1e-12);
+        let fit = import_dir(
+            dir.path(),
+            &ImportOptions {
+                fit_m: Some(0.05),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let c = &fit
+            .1
+            .iter()
+            .find(|m| m.entry.name == "two_spheres")
+            .unwrap()
+            .check;
+        assert!((c.extent_m[0] - 0.05).abs() < 1e-6, "{:?}", c.extent_m);
+    }
+}
