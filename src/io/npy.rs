@@ -172,7 +172,15 @@ pub fn decode(bytes: &[u8]) -> Result<NpyArray, NpyError> {
         .filter(|s| !s.is_empty())
         .map(|s| s.parse::<usize>().map_err(|_| fmt("bad shape")))
         .collect::<Result<_, _>>()?;
-    let count: usize = shape.iter().product();
+    // Checked: a header may claim 2^62 elements (refused below by the data length, without allocating).
+    let count = shape
+        .iter()
+        .try_fold(1usize, |acc, &d| acc.checked_mul(d))
+        .ok_or_else(|| {
+            fmt(&format!(
+                "shape {shape:?} has more elements than memory can hold"
+            ))
+        })?;
     let body = &bytes[start + header_len..];
     let (size, conv): (usize, fn(&[u8]) -> f32) = match descr.as_str() {
         "<f4" => (4, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
@@ -190,12 +198,16 @@ pub fn decode(bytes: &[u8]) -> Result<NpyArray, NpyError> {
             })
         }
     };
-    if body.len() != count * size {
+    let needed = count.checked_mul(size);
+    if needed != Some(body.len()) {
         return Err(fmt(&format!(
             "data holds {} bytes, shape {:?} of {descr} needs {} (truncated file?)",
             body.len(),
             shape,
-            count * size
+            needed.map_or_else(
+                || "more than memory can hold".to_string(),
+                |n| n.to_string()
+            )
         )));
     }
     let data = body.chunks_exact(size).map(conv).collect();

@@ -30,6 +30,20 @@ pub fn read(path: &Path) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), MeshError> {
 
 /// Decode glTF or GLB bytes; external buffers are looked up in `dir` (refused when `None`).
 pub fn decode(bytes: &[u8], dir: Option<&Path>) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
+    // gltf-json 1.4.1's validation indexes some references before checking them (a POSITION accessor index out of
+    // range panics; found by tests/fuzz_loaders.rs): a panic inside the crate becomes an error naming the file.
+    std::panic::catch_unwind(|| decode_unguarded(bytes, dir)).unwrap_or_else(|_| {
+        Err(
+            "the file's JSON refers to objects it does not define (the glTF library stopped on it)"
+                .into(),
+        )
+    })
+}
+
+fn decode_unguarded(
+    bytes: &[u8],
+    dir: Option<&Path>,
+) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
     let doc = gltf::Gltf::from_slice(bytes).map_err(|e| e.to_string())?;
     let mut buffers = Vec::new();
     for buffer in doc.buffers() {
@@ -221,5 +235,9 @@ mod tests {
         assert!(decode(triangle_gltf(&short, 42).as_bytes(), None).is_err());
         assert!(decode(b"glTF\x02\x00\x00\x00garbage", None).is_err());
         assert!(decode(b"{not json", None).is_err());
+        // A POSITION accessor that does not exist (gltf-json panics on it in validation): an error.
+        let dangling =
+            triangle_gltf(&triangle_buffer(), 42).replace(r#""POSITION":0"#, r#""POSITION":7"#);
+        assert!(decode(dangling.as_bytes(), None).is_err());
     }
 }

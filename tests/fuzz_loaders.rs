@@ -1,0 +1,397 @@
+//! Mutation fuzzing of every file loader users feed (stable Rust, no cargo-fuzz needed): OBJ, STL, PLY, glTF, GLB,
+//! `.npy`, `.npz`, safetensors checkpoints and `objects.json`. Each loader is driven with its seed corpus
+//! (`tests/fixtures/fuzz/<kind>/`, written by the ignored test `write_fuzz_corpus`) and then with seeded mutations of
+//! it: bit flips, interesting bytes, truncation, insertion, deletion, duplicated chunks and huge or malformed numbers
+//! spliced in. Every input must come back as `Ok` or `Err` — a panic fails the test, as does one input taking longer
+//! than a few seconds (a hang) — and headers claiming 2^62 elements must be refused before anything is allocated.
+//!
+//! CI runs `TND_FUZZ_ITERS` inputs per loader (default 3 000, a few seconds each); a long run:
+//! `TND_FUZZ_ITERS=100000 cargo test --release --test fuzz_loaders`.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use tactile_derender::mesh::{self, LoadOptions};
+
+/// Inputs per loader.
+fn iterations() -> usize {
+    std::env::var("TND_FUZZ_ITERS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(3000)
+}
+
+/// The longest one input may take before it counts as a hang.
+const HANG: Duration = Duration::from_secs(5);
+
+fn corpus_dir(kind: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/fuzz")
+        .join(kind)
+}
+
+/// The committed seeds of one loader.
+fn seeds(kind: &str) -> Vec<Vec<u8>> {
+    let dir = corpus_dir(kind);
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    let seeds: Vec<Vec<u8>> = files.iter().map(|p| std::fs::read(p).unwrap()).collect();
+    assert!(!seeds.is_empty(), "{}: no seeds", dir.display());
+    seeds
+}
+
+const INTERESTING_BYTES: [u8; 12] = [
+    0, 0xff, 0x7f, 0x80, b'-', b'9', b'\n', b' ', b'e', b'.', b'"', b'{',
+];
+const INTERESTING_TEXT: [&str; 10] = [
+    "4611686018427387904",
+    "18446744073709551615",
+    "-1",
+    "nan",
+    "inf",
+    "1e308",
+    "-0",
+    "2147483648",
+    "0",
+    "999999999",
+];
+
+/// One mutated copy of `seed`.
+fn mutate(seed: &[u8], rng: &mut ChaCha8Rng) -> Vec<u8> {
+    let mut b = seed.to_vec();
+    for _ in 0..rng.random_range(1..=6) {
+        let len = b.len();
+        let at = if len == 0 {
+            0
+        } else {
+            rng.random_range(0..len)
+        };
+        match rng.random_range(0..8) {
+            0 if len > 0 => b[at] ^= 1 << rng.random_range(0..8),
+            1 if len > 0 => b[at] = INTERESTING_BYTES[rng.random_range(0..INTERESTING_BYTES.len())],
+            2 => b.truncate(at),
+            3 => {
+                let n = rng.random_range(1..16);
+                let extra: Vec<u8> = (0..n).map(|_| rng.random()).collect();
+                b.splice(at..at, extra);
+            }
+            4 if len > 0 => {
+                let end = (at + rng.random_range(1..64)).min(len);
+                b.drain(at..end);
+            }
+            5 if len > 0 => {
+                let end = (at + rng.random_range(1..256)).min(len);
+                let chunk = b[at..end].to_vec();
+                let to = rng.random_range(0..=b.len());
+                b.splice(to..to, chunk);
+            }
+            6 => {
+                let s = INTERESTING_TEXT[rng.random_range(0..INTERESTING_TEXT.len())];
+                let end = (at + rng.random_range(0..4)).min(len);
+                b.splice(at..end, s.bytes());
+            }
+            _ if len >= 8 => {
+                // A little-endian u64 field overwritten with a huge or negative value (binary headers, counts).
+                let at = rng.random_range(0..len - 7);
+                let v: u64 = [u64::MAX, 1 << 62, 1 << 31, 0x7fff_ffff][rng.random_range(0..4)];
+                b[at..at + 8].copy_from_slice(&v.to_le_bytes());
+            }
+            _ => {}
+        }
+    }
+    b
+}
+
+/// Drive `load` (true: the input was accepted) with the seeds of `kind`, which must all be accepted, and their
+/// mutations.
+fn fuzz(kind: &str, load: &dyn Fn(&[u8]) -> bool) {
+    let seeds = seeds(kind);
+    let mut rng = ChaCha8Rng::seed_from_u64(kind.bytes().fold(0u64, |h, c| h * 31 + u64::from(c)));
+    let n = iterations().max(seeds.len());
+    let mut panics = 0;
+    let mut slowest = Duration::ZERO;
+    for i in 0..n {
+        let seed = &seeds[i % seeds.len()];
+        let input = if i < seeds.len() {
+            seed.clone()
+        } else {
+            mutate(seed, &mut rng)
+        };
+        let t0 = Instant::now();
+        let outcome = catch_unwind(AssertUnwindSafe(|| load(&input)));
+        if i < seeds.len() {
+            assert!(
+                matches!(outcome, Ok(true)),
+                "{kind}: seed {i} is not accepted"
+            );
+        }
+        // A panic caught inside a loader and turned into an error is not a panic here; the default hook still
+        // prints it, so only what reaches this point counts.
+        if outcome.is_err() {
+            panics += 1;
+            let path = std::env::temp_dir().join(format!("tnd-fuzz-{kind}-panic-{i}"));
+            std::fs::write(&path, &input).unwrap();
+            eprintln!("{kind}: input {i} panicked; saved to {}", path.display());
+        }
+        let dt = t0.elapsed();
+        slowest = slowest.max(dt);
+        assert!(dt < HANG, "{kind}: input {i} took {dt:?} (a hang?)");
+    }
+    eprintln!("{kind}: {n} inputs, {panics} panics, slowest {slowest:?}");
+    assert_eq!(panics, 0, "{kind}: {panics} of {n} inputs panicked");
+}
+
+/// Loaders that read a path: write each input to one file in a temporary folder.
+fn via_file(name: &str, read: impl Fn(&Path) -> bool) -> impl Fn(&[u8]) -> bool {
+    let dir = tempfile::tempdir().unwrap().keep();
+    let path = dir.join(name);
+    move |bytes: &[u8]| {
+        std::fs::write(&path, bytes).unwrap();
+        read(&path)
+    }
+}
+
+fn load_mesh(path: &Path) -> bool {
+    mesh::load(path, &LoadOptions::default()).is_ok()
+}
+
+#[test]
+fn obj() {
+    fuzz("obj", &via_file("m.obj", load_mesh));
+}
+
+#[test]
+fn stl() {
+    fuzz("stl", &via_file("m.stl", load_mesh));
+}
+
+#[test]
+fn ply() {
+    fuzz("ply", &via_file("m.ply", load_mesh));
+}
+
+#[test]
+fn gltf_and_glb() {
+    fuzz("gltf", &via_file("m.gltf", load_mesh));
+    fuzz("glb", &via_file("m.glb", load_mesh));
+}
+
+#[test]
+fn npy() {
+    fuzz("npy", &|b| tactile_derender::io::npy::decode(b).is_ok());
+}
+
+#[test]
+fn npz() {
+    fuzz("npz", &|b| {
+        tactile_derender::dataset::npz::NpzIndex::read(
+            std::io::Cursor::new(b),
+            Path::new("fuzz.npz"),
+        )
+        .is_ok()
+    });
+}
+
+#[test]
+fn safetensors_checkpoint() {
+    fuzz(
+        "safetensors",
+        &via_file("m.safetensors", |p| {
+            tactile_derender::model::checkpoint::locate(p).is_ok()
+        }),
+    );
+}
+
+#[test]
+fn objects_json() {
+    let dir = tempfile::tempdir().unwrap().keep();
+    std::fs::write(
+        dir.join("m.obj"),
+        std::fs::read(corpus_dir("obj").join("sphere.obj")).unwrap(),
+    )
+    .unwrap();
+    fuzz("objects_json", &|b| {
+        std::fs::write(dir.join("objects.json"), b).unwrap();
+        match tactile_derender::objects::ObjectSet::load_dir(&dir) {
+            Ok(set) => set.entries().iter().all(|e| set.mesh(&e.name).is_ok()),
+            Err(_) => false,
+        }
+    });
+}
+
+/// Regenerate the seed corpus: `cargo test --test fuzz_loaders -- --ignored write_fuzz_corpus`.
+#[test]
+#[ignore]
+fn write_fuzz_corpus() {
+    use tactile_derender::objects::shapes;
+    let put = |kind: &str, name: &str, bytes: &[u8]| {
+        let dir = corpus_dir(kind);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join(name), bytes).unwrap();
+    };
+    let sphere = shapes::sphere(0.01, 1).unwrap();
+    put("obj", "sphere.obj", sphere.to_obj_string().as_bytes());
+    put(
+        "obj",
+        "groups_quads_negative.obj",
+        b"o a\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\ng b\nv 0 0 1\nf -1 -4 -3\n# comment\nvn 0 0 1\nf 1//1 2//1 5//1\n",
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let stl = dir.path().join("s.stl");
+    mesh::stl::write_binary(&stl, &sphere).unwrap();
+    put("stl", "sphere_binary.stl", &std::fs::read(&stl).unwrap());
+    put(
+        "stl",
+        "ascii.stl",
+        b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n",
+    );
+    let mut ply = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        sphere.vertices().len(),
+        sphere.triangles().len()
+    );
+    for v in sphere.vertices() {
+        ply.push_str(&format!("{} {} {}\n", v.x, v.y, v.z));
+    }
+    for t in sphere.triangles() {
+        ply.push_str(&format!("3 {} {} {}\n", t[0], t[1], t[2]));
+    }
+    put("ply", "sphere_ascii.ply", ply.as_bytes());
+    let mut bin = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar uint vertex_indices\nend_header\n",
+        sphere.vertices().len(),
+        sphere.triangles().len()
+    )
+    .into_bytes();
+    for v in sphere.vertices() {
+        for c in v.to_array() {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for t in sphere.triangles() {
+        bin.push(3);
+        for i in t {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    put("ply", "sphere_binary.ply", &bin);
+    // glTF with an embedded buffer, and the same as GLB with a BIN chunk.
+    let mut buffer = Vec::new();
+    for v in sphere.vertices() {
+        for c in v.to_array() {
+            buffer.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    let positions_len = buffer.len();
+    for t in sphere.triangles() {
+        for i in t {
+            buffer.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    let (lo, hi) = sphere.aabb();
+    let json = |uri: &str| {
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0,"scale":[1,1,2]}}],"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"indices":1}}]}}],"buffers":[{{"byteLength":{}{uri}}}],"bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":{positions_len}}},{{"buffer":0,"byteOffset":{positions_len},"byteLength":{}}}],"accessors":[{{"bufferView":0,"componentType":5126,"count":{},"type":"VEC3","min":[{},{},{}],"max":[{},{},{}]}},{{"bufferView":1,"componentType":5125,"count":{},"type":"SCALAR"}}]}}"#,
+            buffer.len(),
+            buffer.len() - positions_len,
+            sphere.vertices().len(),
+            lo.x,
+            lo.y,
+            lo.z,
+            hi.x,
+            hi.y,
+            hi.z,
+            sphere.triangles().len() * 3
+        )
+    };
+    use base64::Engine;
+    let data = base64::engine::general_purpose::STANDARD.encode(&buffer);
+    put(
+        "gltf",
+        "sphere_embedded.gltf",
+        json(&format!(
+            r#","uri":"data:application/octet-stream;base64,{data}""#
+        ))
+        .as_bytes(),
+    );
+    let mut chunk_json = json("").into_bytes();
+    while chunk_json.len() % 4 != 0 {
+        chunk_json.push(b' ');
+    }
+    let mut chunk_bin = buffer.clone();
+    while chunk_bin.len() % 4 != 0 {
+        chunk_bin.push(0);
+    }
+    let total = 12 + 8 + chunk_json.len() + 8 + chunk_bin.len();
+    let mut glb = Vec::new();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&(total as u32).to_le_bytes());
+    glb.extend_from_slice(&(chunk_json.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&chunk_json);
+    glb.extend_from_slice(&(chunk_bin.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"BIN\0");
+    glb.extend_from_slice(&chunk_bin);
+    put("glb", "sphere.glb", &glb);
+    // .npy and .npz.
+    let image: Vec<f32> = (0..64).map(|i| i as f32 * 1e-3).collect();
+    put(
+        "npy",
+        "f32_8x8.npy",
+        &tactile_derender::io::npy::encode_f32(&[8, 8], &image),
+    );
+    let mut f64_npy = tactile_derender::io::npy::header("<f8", &[2, 3]);
+    for i in 0..6 {
+        f64_npy.extend_from_slice(&(i as f64 * 0.01).to_le_bytes());
+    }
+    put("npy", "f64_2x3.npy", &f64_npy);
+    use tactile_derender::dataset::npz::{encode, ArrayData};
+    let npz = encode(&[
+        ArrayData::f32("imprint", vec![2, 4, 4], (0..32).map(|i| i as f32)),
+        ArrayData::u64("seed", vec![2], [1, 2]),
+        ArrayData::i32("split", vec![2], [0, 1]),
+    ])
+    .unwrap();
+    put("npz", "shard.npz", &npz);
+    // A tiny checkpoint: tests/fixtures/unet_small's weights with its config in the metadata.
+    let weights = std::fs::read(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/fixtures/unet_small/unet_ref.safetensors"),
+    )
+    .unwrap();
+    put("safetensors", "unet_small.safetensors", &weights);
+    // objects.json naming m.obj (the harness writes the sphere there).
+    let manifest = r#"{"version":1,"objects":[{"name":"m","mesh":"m.obj","scale_to_m":1.0,"split":"seen","family":"sphere","symmetry":{"rotation":{"n_fold":4}},"dimensions":{"radius":0.01}}]}"#;
+    put("objects_json", "one_object.json", manifest.as_bytes());
+}
+
+/// Headers that claim more elements than memory holds are errors before anything is allocated.
+#[test]
+fn huge_headers_are_refused() {
+    use tactile_derender::io::npy;
+    for shape in [
+        vec![1usize << 62],
+        vec![1 << 31, 1 << 31, 1 << 4],
+        vec![usize::MAX, 2],
+    ] {
+        let mut b = npy::header("<f4", &shape);
+        b.extend_from_slice(&[0; 16]);
+        let e = npy::decode(&b).unwrap_err().to_string();
+        assert!(
+            e.contains("memory") || e.contains("truncated"),
+            "{shape:?}: {e}"
+        );
+    }
+    let ply = "ply\nformat binary_little_endian 1.0\nelement vertex 4611686018427387904\nproperty float x\n\
+        property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    assert!(tactile_derender::mesh::ply::decode(ply.as_bytes()).is_err());
+}
