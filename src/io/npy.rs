@@ -22,6 +22,8 @@ pub enum NpyError {
     Dtype { path: PathBuf, descr: String },
     #[error("{path}: expected a 2-D array (H, W) or (1, H, W), found shape {shape:?}")]
     Shape { path: PathBuf, shape: Vec<usize> },
+    #[error("{path}: {message}")]
+    Units { path: PathBuf, message: String },
     #[error("{path}: array contains {count} NaN or infinite values (first at flat index {first})")]
     NonFinite {
         path: PathBuf,
@@ -35,7 +37,13 @@ pub enum NpyError {
 pub struct NpyArray {
     pub shape: Vec<usize>,
     pub data: Vec<f32>,
+    /// The file's dtype as numpy wrote it (e.g. `<f4`, `<u2`).
+    pub descr: String,
 }
+
+/// Largest magnitude, metres, that a depth or imprint image of a hand-sized sensor plausibly holds; larger values
+/// are taken for millimetres.
+pub const PLAUSIBLE_METRES: f32 = 2.0;
 
 /// A `.npy` (format 1.0) header for a C-order array of dtype `descr` (e.g. `<f4`), padded with spaces and a final
 /// `\n` so that magic(6) + version(2) + length(2) + header is a multiple of 64 bytes (the data start aligned).
@@ -91,9 +99,41 @@ pub fn read(path: &Path) -> Result<NpyArray, NpyError> {
     decode(&bytes).map_err(|e| e.with_path(path))
 }
 
-/// Read a 2-D (or `(1, H, W)`) `.npy` file as an image, rejecting NaN/inf values.
-pub fn read_image(path: &Path) -> Result<Image, NpyError> {
+/// Read a 2-D (or `(1, H, W)`) `.npy` depth or imprint image in **metres** (float32 or float64): integer arrays
+/// (sensor millimetres, say) and values beyond [`PLAUSIBLE_METRES`] are refused with the conversion to make, rather
+/// than read as silently wrong depths.
+pub fn read_metres_image(path: &Path) -> Result<Image, NpyError> {
     let a = read(path)?;
+    let units = |message: String| NpyError::Units {
+        path: path.to_path_buf(),
+        message,
+    };
+    if !matches!(a.descr.as_str(), "<f4" | "<f8") {
+        return Err(units(format!(
+            "integer array ({}); images here are float metres — if it holds millimetres, save              np.asarray(a, np.float32) / 1000",
+            a.descr
+        )));
+    }
+    let largest = a
+        .data
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(0.0f32, |m, v| m.max(v.abs()));
+    if largest > PLAUSIBLE_METRES {
+        return Err(units(format!(
+            "values up to {largest}: images here are metres, and no depth of a tactile sensor is that large —              millimetres? divide by 1000"
+        )));
+    }
+    image_of(path, a)
+}
+
+/// Read a 2-D (or `(1, H, W)`) `.npy` file of any numeric dtype as an image, rejecting NaN/inf values (the caller
+/// applies units; see [`read_metres_image`] for metre images from users).
+pub fn read_image(path: &Path) -> Result<Image, NpyError> {
+    image_of(path, read(path)?)
+}
+
+fn image_of(path: &Path, a: NpyArray) -> Result<Image, NpyError> {
     let (h, w) = match a.shape.as_slice() {
         [h, w] => (*h, *w),
         [1, h, w] => (*h, *w),
@@ -211,7 +251,7 @@ pub fn decode(bytes: &[u8]) -> Result<NpyArray, NpyError> {
         )));
     }
     let data = body.chunks_exact(size).map(conv).collect();
-    Ok(NpyArray { shape, data })
+    Ok(NpyArray { shape, data, descr })
 }
 
 /// The text after `'key':` in a numpy header dict, up to the next top-level comma.
@@ -294,5 +334,31 @@ mod tests {
         assert!(err.contains("depth.npy") && err.contains("NaN"), "{err}");
         std::fs::write(&p, encode_f32(&[2, 2, 2], &[0.0; 8])).unwrap();
         assert!(matches!(read_image(&p), Err(NpyError::Shape { .. })));
+    }
+
+    #[test]
+    fn metre_images_refuse_integers_and_millimetres() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("imprint.npy");
+        let mut u2 = header("<u2", &[1, 2]);
+        for x in [7u16, 1200] {
+            u2.extend_from_slice(&x.to_le_bytes());
+        }
+        std::fs::write(&p, &u2).unwrap();
+        let err = read_metres_image(&p).unwrap_err().to_string();
+        assert!(
+            err.contains("imprint.npy") && err.contains("integer") && err.contains("/ 1000"),
+            "{err}"
+        );
+        // The same values as float millimetres.
+        std::fs::write(&p, encode_f32(&[1, 2], &[7.0, 12.0])).unwrap();
+        let err = read_metres_image(&p).unwrap_err().to_string();
+        assert!(err.contains("millimetres"), "{err}");
+        // Metres are read as they are.
+        std::fs::write(&p, encode_f32(&[1, 2], &[0.007, -0.012])).unwrap();
+        assert_eq!(read_metres_image(&p).unwrap().data, vec![0.007, -0.012]);
+        // The generic reader still converts integers (for imports that apply their own scale).
+        std::fs::write(&p, &u2).unwrap();
+        assert_eq!(read_image(&p).unwrap().data, vec![7.0, 1200.0]);
     }
 }

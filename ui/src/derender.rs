@@ -120,7 +120,7 @@ impl InputSource {
                 })
             }
             InputSource::Npy(path) => {
-                let imprint = tactile_derender::io::npy::read_image(&path)?;
+                let imprint = tactile_derender::io::npy::read_metres_image(&path)?;
                 Ok(RunInput {
                     label: format!("measurement {}", path.display()),
                     imprint,

@@ -69,7 +69,7 @@ pub fn load(path: &Path, split: SplitName, index: usize) -> Result<Measured> {
             imprint: pair.imprint,
         })
     } else {
-        let imprint = npy::read_image(path)?;
+        let imprint = npy::read_metres_image(path)?;
         Ok(Measured {
             path: path.to_path_buf(),
             description: format!("{} ({}x{})", path.display(), imprint.width, imprint.height),

@@ -63,7 +63,7 @@ pub struct PoseArgs {
 }
 
 fn read(path: &Path, want: (usize, usize)) -> Result<Image> {
-    let img = npy::read_image(path)?;
+    let img = npy::read_metres_image(path)?;
     if (img.width, img.height) != want {
         bail!(
             "{}: image is {}x{}, the sensor renders {}x{}",

@@ -50,7 +50,7 @@ pub struct SampleArgs {
 
 pub fn run(a: SampleArgs) -> Result<()> {
     let model = DiffusionModel::load(&a.model)?;
-    let imprint = npy::read_image(&a.imprint)?;
+    let imprint = npy::read_metres_image(&a.imprint)?;
     let kind = match a.sampler {
         SamplerArg::Ddpm => SamplerKind::Ddpm,
         SamplerArg::Ddim => SamplerKind::Ddim {
