@@ -287,11 +287,19 @@ fn de_rendering_a_dataset_pair_with_a_tiny_model_matches_the_core_sampler() {
         "X0 ground truth",
         "sample mean",
         "sample std",
+        "contact probability",
+        "consensus (multi-sample)",
         "sample 2",
     ] {
         assert!(h.query_by_label(title).is_some(), "no {title}");
     }
     assert!(h.query_by_label_contains("mean over samples: L1").is_some());
+    // The contact probability is the fraction of samples in contact at each pixel.
+    let p = &r.contact_probability;
+    for i in [0, p.data.len() / 2, p.data.len() - 1] {
+        let in_contact = r.samples.iter().filter(|s| s.data[i] > 0.0).count() as f32;
+        assert_eq!(p.data[i], in_contact / r.samples.len() as f32);
+    }
 }
 
 #[test]
@@ -418,6 +426,16 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     assert!(r.report.baseline.is_some(), "the baseline found no contact");
     assert!(h
         .query_by_label_contains("4 of 4 samples registered")
+        .is_some());
+    // The multi-sample estimate (consensus of the four samples) is shown beside the single-sample fits.
+    let multi = r
+        .report
+        .multi_sample
+        .as_ref()
+        .expect("multi-sample estimate");
+    assert!(multi.position_mm < 1.5, "{multi:?}");
+    assert!(h
+        .query_by_label_contains("multi-sample estimate (consensus of 4 samples)")
         .is_some());
 
     // Hovering the position KDE highlights the sample nearest to the pointer: near its left end (below every error:

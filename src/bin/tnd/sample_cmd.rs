@@ -30,6 +30,7 @@ pub struct SampleArgs {
     /// Number of samples.
     #[arg(long, default_value_t = 50)]
     pub n: usize,
+    /// Sampler: ddpm (all training steps, the paper's) or ddim (--steps deterministic steps with η = --eta).
     #[arg(long, value_enum, default_value = "ddpm")]
     pub sampler: SamplerArg,
     /// DDIM steps.
@@ -41,6 +42,7 @@ pub struct SampleArgs {
     /// DDIM timestep spacing: trailing (starts at t = T−1, like DDPM) or leading (diffusers' default).
     #[arg(long, default_value = "trailing")]
     pub spacing: TimestepSpacing,
+    /// Seed of the initial noise and of DDPM's (or DDIM η > 0's) per-step noise: the same seed gives the same samples.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Output directory.
