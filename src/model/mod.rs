@@ -51,7 +51,7 @@ pub(crate) fn contiguous_f32<'a>(
 pub use config::{PredictionType, TactileConfig, UNet2DConfig};
 pub use diffusion::DiffusionModel;
 pub use normalise::Normalisation;
-pub use sampler::{SamplerKind, TimestepSpacing};
+pub use sampler::{SamplerConfig, SamplerKind, SamplerName, TimestepSpacing};
 pub use schedule::NoiseSchedule;
 pub use unet::UNet2DModel;
 

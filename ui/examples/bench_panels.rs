@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 use egui_kittest::Harness;
 use tnd_workbench::app::WorkbenchApp;
 use tnd_workbench::command::Command;
-use tnd_workbench::state::{SamplerChoice, State, Tab};
+use tnd_workbench::state::{SamplerName, State, Tab};
 
 fn harness(state: State) -> Harness<'static, WorkbenchApp> {
     Harness::builder()
@@ -143,8 +143,8 @@ fn sample(model: &str, samples: usize, steps: usize) {
     let mut state = State::default();
     state.view.tab = Tab::Derender;
     state.model.path = Some(model.into());
-    state.derender.sampler = SamplerChoice::Ddim;
-    state.derender.ddim_steps = steps;
+    state.derender.sampler.kind = SamplerName::Ddim;
+    state.derender.sampler.steps = steps;
     state.derender.samples = samples;
     let mut h = harness(state);
     let t0 = Instant::now();

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 use tactile_derender::dataset::SplitName;
-use tactile_derender::model::{SamplerKind, TimestepSpacing};
+use tactile_derender::model::{SamplerConfig, SamplerKind};
 
 /// The dataset inspector's settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -36,16 +36,6 @@ impl Default for DatasetSettings {
     }
 }
 
-/// Which reverse process a de-rendering run uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SamplerChoice {
-    /// Ancestral DDPM over all 250 steps (the paper's sampler).
-    Ddpm,
-    /// DDIM over [`DerenderSettings::ddim_steps`] steps.
-    Ddim,
-}
-
 /// What is de-rendered.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -66,14 +56,11 @@ pub enum DerenderInput {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DerenderSettings {
-    /// DDPM (250 steps) or DDIM.
-    pub sampler: SamplerChoice,
-    /// DDIM steps K (1..=250).
-    pub ddim_steps: usize,
-    /// DDIM η: 0 is deterministic, 1 DDPM-like noise (dimensionless).
-    pub eta: f64,
-    /// Where DDIM's K steps sit among the 250 (trailing starts from pure noise at t = 249, like DDPM).
-    pub spacing: TimestepSpacing,
+    /// The sampler: the core's [`SamplerConfig`], the same settings and defaults as `tnd sample/eval/pose`
+    /// (stored flat in the session: `sampler`, `steps` — older sessions' `ddim_steps` is read too — `eta`,
+    /// `spacing`).
+    #[serde(flatten)]
+    pub sampler: SamplerConfig,
     /// Number of samples drawn for the imprint (the paper's uncertainty analysis uses 50).
     pub samples: usize,
     /// Seed of the sampler's noise.
@@ -85,10 +72,7 @@ pub struct DerenderSettings {
 impl Default for DerenderSettings {
     fn default() -> Self {
         Self {
-            sampler: SamplerChoice::Ddim,
-            ddim_steps: 50,
-            eta: 0.0,
-            spacing: TimestepSpacing::Trailing,
+            sampler: SamplerConfig::default(),
             samples: 8,
             seed: 0,
             input: DerenderInput::Scene,
@@ -99,27 +83,12 @@ impl Default for DerenderSettings {
 impl DerenderSettings {
     /// The core's sampler for these settings.
     pub fn sampler_kind(&self) -> SamplerKind {
-        match self.sampler {
-            SamplerChoice::Ddpm => SamplerKind::Ddpm,
-            SamplerChoice::Ddim => SamplerKind::Ddim {
-                steps: self.ddim_steps,
-                eta: self.eta,
-                spacing: self.spacing,
-            },
-        }
+        self.sampler.sampler_kind()
     }
 
     /// Check the numbers (sessions may carry anything).
     pub fn validate(&self) -> Result<(), String> {
-        if self.sampler == SamplerChoice::Ddim && !(1..=1000).contains(&self.ddim_steps) {
-            return Err(format!(
-                "DDIM steps must be 1..=1000, got {}",
-                self.ddim_steps
-            ));
-        }
-        if !(self.eta.is_finite() && (0.0..=1.0).contains(&self.eta)) {
-            return Err(format!("DDIM eta must be in [0, 1], got {}", self.eta));
-        }
+        self.sampler.validate(None)?;
         if !(1..=256).contains(&self.samples) {
             return Err(format!(
                 "number of samples must be 1..=256, got {}",

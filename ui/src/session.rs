@@ -93,6 +93,41 @@ mod tests {
         assert_eq!((s.seed, s.scene), (5, State::default().scene));
     }
 
+    #[test]
+    fn sessions_from_before_the_shared_sampler_config_still_load() {
+        use tactile_derender::model::{SamplerConfig, SamplerName, TimestepSpacing};
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("old.json");
+        // The De-render settings as sessions stored them before `SamplerConfig` (`ddim_steps`).
+        std::fs::write(
+            &p,
+            r#"{"derender": {"sampler": "ddim", "ddim_steps": 40, "eta": 0.5, "spacing": "leading", "samples": 3}}"#,
+        )
+        .unwrap();
+        let s = read(&p).unwrap();
+        assert_eq!(
+            s.derender.sampler,
+            SamplerConfig {
+                kind: SamplerName::Ddim,
+                steps: 40,
+                eta: 0.5,
+                spacing: TimestepSpacing::Leading
+            }
+        );
+        assert_eq!(s.derender.samples, 3);
+        // Written back with the shared names, and read the same.
+        write(&p, &s).unwrap();
+        let text = std::fs::read_to_string(&p).unwrap();
+        assert!(
+            text.contains("\"steps\": 40") && !text.contains("ddim_steps"),
+            "{text}"
+        );
+        assert_eq!(read(&p).unwrap(), s);
+        // A bad value is refused with the setting named.
+        std::fs::write(&p, r#"{"derender": {"sampler": "ddim", "steps": 0}}"#).unwrap();
+        assert!(read(&p).unwrap_err().to_string().contains("DDIM steps"));
+    }
+
     /// Regenerates `sessions/example.json`: `cargo test -p tnd-workbench -- --ignored write_example_session`.
     #[test]
     #[ignore]

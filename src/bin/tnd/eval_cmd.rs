@@ -16,7 +16,7 @@ use tactile_derender::metrics::evaluate::{
 use tactile_derender::metrics::model_generator::ModelGenerator;
 use tactile_derender::metrics::sources::DatasetSource;
 use tactile_derender::metrics::MeanStd;
-use tactile_derender::model::{DiffusionModel, SamplerKind, TimestepSpacing};
+use tactile_derender::model::{DiffusionModel, SamplerConfig};
 use tactile_derender::pose::threshold_contact;
 use tactile_derender::uncertainty::analysis::{analyse, Signature};
 
@@ -45,15 +45,8 @@ pub struct EvalArgs {
     /// Also print the rows per contact-size bin and per object (always in --json and --report).
     #[arg(long)]
     pub breakdown: bool,
-    /// Model sampler: ddpm (all training steps) or ddim (deterministic, eta 0).
-    #[arg(long, default_value = "ddim")]
-    pub sampler: String,
-    /// DDIM steps.
-    #[arg(long, default_value_t = 25)]
-    pub steps: usize,
-    /// DDIM timestep spacing: trailing (starts at t = T−1, like DDPM) or leading (diffusers' default).
-    #[arg(long, default_value = "trailing")]
-    pub spacing: TimestepSpacing,
+    #[command(flatten)]
+    pub sampler: SamplerConfig,
     /// Seed of the sampler and the registration starts.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -75,26 +68,16 @@ pub struct EvalArgs {
 }
 
 /// The generator named by `--model`.
-pub fn generator(
-    model: &str,
-    sampler: &str,
-    steps: usize,
-    spacing: TimestepSpacing,
-) -> Result<Box<dyn Generator>> {
+pub fn generator(model: &str, sampler: &SamplerConfig) -> Result<Box<dyn Generator>> {
     if model == "ground-truth" {
         return Ok(Box::new(GroundTruthGenerator));
     }
-    let sampler = match sampler {
-        "ddpm" => SamplerKind::Ddpm,
-        "ddim" if steps > 0 => SamplerKind::Ddim {
-            steps,
-            eta: 0.0,
-            spacing,
-        },
-        _ => bail!("--sampler must be ddpm or ddim (with --steps > 0), got '{sampler}'"),
-    };
+    sampler.validate(None).map_err(anyhow::Error::msg)?;
     let model = DiffusionModel::load(Path::new(model))?;
-    Ok(Box::new(ModelGenerator { model, sampler }))
+    Ok(Box::new(ModelGenerator {
+        model,
+        sampler: sampler.sampler_kind(),
+    }))
 }
 
 fn splits(s: &str) -> Result<Vec<SplitName>> {
@@ -105,7 +88,7 @@ fn splits(s: &str) -> Result<Vec<SplitName>> {
 }
 
 pub fn run(a: EvalArgs) -> Result<()> {
-    let gen = generator(&a.model, &a.sampler, a.steps, a.spacing)?;
+    let gen = generator(&a.model, &a.sampler)?;
     let dataset = Dataset::open(&a.data)?;
     let evaluator = Evaluator::new(EvalConfig {
         pose_samples: a.pose_samples.max(1),

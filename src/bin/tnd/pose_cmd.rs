@@ -45,15 +45,8 @@ pub struct PoseArgs {
     /// Model samples.
     #[arg(long, default_value_t = 50)]
     pub samples: usize,
-    /// Model sampler: ddpm or ddim.
-    #[arg(long, default_value = "ddim")]
-    pub sampler: String,
-    /// DDIM steps.
-    #[arg(long, default_value_t = 25)]
-    pub steps: usize,
-    /// DDIM timestep spacing: trailing (starts at t = T−1, like DDPM) or leading (diffusers' default).
-    #[arg(long, default_value = "trailing")]
-    pub spacing: tactile_derender::model::TimestepSpacing,
+    #[command(flatten)]
+    pub sampler: tactile_derender::model::SamplerConfig,
     /// Seed of the sampler and the registration starts.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -101,7 +94,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     if a.model == "ground-truth" && a.target.is_none() {
         bail!("--model ground-truth needs --target FILE.npy (the in-contact depth to use as every sample)");
     }
-    let gen = super::eval_cmd::generator(&a.model, &a.sampler, a.steps, a.spacing)?;
+    let gen = super::eval_cmd::generator(&a.model, &a.sampler)?;
     let signature = a.signature.as_ref().map(|p| read(p, res)).transpose()?;
     let pair = EvalPair {
         name: a.imprint.display().to_string(),

@@ -4,20 +4,14 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use image::RgbImage;
 use kdam::BarExt;
 use serde_json::json;
 use tactile_derender::image::Image;
 use tactile_derender::io::preview::{render_panel, save_png, side_by_side, PanelStyle};
 use tactile_derender::io::{npy, write_atomic};
-use tactile_derender::model::{DiffusionModel, SamplerKind, TimestepSpacing};
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum SamplerArg {
-    Ddpm,
-    Ddim,
-}
+use tactile_derender::model::{DiffusionModel, SamplerConfig};
 
 #[derive(Args, Debug)]
 pub struct SampleArgs {
@@ -30,18 +24,8 @@ pub struct SampleArgs {
     /// Number of samples.
     #[arg(long, default_value_t = 50)]
     pub n: usize,
-    /// Sampler: ddpm (all training steps, the paper's) or ddim (--steps deterministic steps with η = --eta).
-    #[arg(long, value_enum, default_value = "ddpm")]
-    pub sampler: SamplerArg,
-    /// DDIM steps.
-    #[arg(long, default_value_t = 25)]
-    pub steps: usize,
-    /// DDIM η (0 = deterministic).
-    #[arg(long, default_value_t = 0.0)]
-    pub eta: f64,
-    /// DDIM timestep spacing: trailing (starts at t = T−1, like DDPM) or leading (diffusers' default).
-    #[arg(long, default_value = "trailing")]
-    pub spacing: TimestepSpacing,
+    #[command(flatten)]
+    pub sampler: SamplerConfig,
     /// Seed of the initial noise and of DDPM's (or DDIM η > 0's) per-step noise: the same seed gives the same samples.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -53,14 +37,8 @@ pub struct SampleArgs {
 pub fn run(a: SampleArgs) -> Result<()> {
     let model = DiffusionModel::load(&a.model)?;
     let imprint = npy::read_metres_image(&a.imprint)?;
-    let kind = match a.sampler {
-        SamplerArg::Ddpm => SamplerKind::Ddpm,
-        SamplerArg::Ddim => SamplerKind::Ddim {
-            steps: a.steps,
-            eta: a.eta,
-            spacing: a.spacing,
-        },
-    };
+    a.sampler.validate(None).map_err(anyhow::Error::msg)?;
+    let kind = a.sampler.sampler_kind();
     let mut bar = kdam::tqdm!(desc = "sampling", unit = " steps");
     let samples = model.sample(&imprint, a.n, kind, a.seed, &mut |i, total| {
         bar.total = total;

@@ -29,6 +29,85 @@ pub enum SamplerKind {
     },
 }
 
+/// The reverse process by name (the `--sampler` value).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum SamplerName {
+    /// Ancestral DDPM over all T training steps (the paper's sampler).
+    Ddpm,
+    /// DDIM over `steps` steps.
+    Ddim,
+}
+
+/// Which sampler runs and how: the one definition behind `tnd sample`, `tnd eval` and `tnd pose` (flattened into
+/// their arguments) and the workbench's De-render tab (stored in its session), with one set of defaults: DDIM, 25
+/// steps, η = 0, trailing spacing (within 5 % of DDPM-250 on the depth metrics at a tenth of the time; see
+/// `assets/models/README.md`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
+#[serde(default)]
+pub struct SamplerConfig {
+    /// Sampler: ddpm (all training steps, the paper's) or ddim (--steps steps, noise η = --eta).
+    #[arg(long = "sampler", value_enum, default_value_t = SamplerConfig::default().kind)]
+    #[serde(rename = "sampler")]
+    pub kind: SamplerName,
+    /// DDIM steps, 1 up to the model's training steps (250 for the shipped model).
+    #[arg(long, default_value_t = SamplerConfig::default().steps)]
+    #[serde(alias = "ddim_steps")]
+    pub steps: usize,
+    /// DDIM η: 0 is deterministic, 1 adds DDPM-like noise (dimensionless).
+    #[arg(long, default_value_t = SamplerConfig::default().eta)]
+    pub eta: f64,
+    /// DDIM timestep spacing: trailing (starts at t = T−1, like DDPM) or leading (diffusers' default).
+    #[arg(long, default_value_t = SamplerConfig::default().spacing)]
+    pub spacing: TimestepSpacing,
+}
+
+impl Default for SamplerConfig {
+    fn default() -> Self {
+        Self {
+            kind: SamplerName::Ddim,
+            steps: 25,
+            eta: 0.0,
+            spacing: TimestepSpacing::Trailing,
+        }
+    }
+}
+
+impl SamplerConfig {
+    /// The sampler to run.
+    pub fn sampler_kind(&self) -> SamplerKind {
+        match self.kind {
+            SamplerName::Ddpm => SamplerKind::Ddpm,
+            SamplerName::Ddim => SamplerKind::Ddim {
+                steps: self.steps,
+                eta: self.eta,
+                spacing: self.spacing,
+            },
+        }
+    }
+
+    /// Check the numbers (sessions and command lines may carry anything); `train_steps` is the model's T when
+    /// known.
+    pub fn validate(&self, train_steps: Option<usize>) -> Result<(), String> {
+        if self.kind == SamplerName::Ddim {
+            let max = train_steps.unwrap_or(usize::MAX);
+            if self.steps == 0 || self.steps > max {
+                return Err(match train_steps {
+                    Some(t) => format!(
+                        "DDIM steps must be 1..={t} (the model's training steps), got {}",
+                        self.steps
+                    ),
+                    None => format!("DDIM steps must be at least 1, got {}", self.steps),
+                });
+            }
+        }
+        if !(self.eta.is_finite() && (0.0..=1.0).contains(&self.eta)) {
+            return Err(format!("DDIM eta must be in [0, 1], got {}", self.eta));
+        }
+        Ok(())
+    }
+}
+
 /// Where DDIM's `K` timesteps sit among the `T` training steps (diffusers' `timestep_spacing`), with `r = T / K`
 /// (integer division) and `T = 250, K = 25` as example.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -135,4 +214,66 @@ pub(crate) fn check_lengths(
         )));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        sampler: SamplerConfig,
+    }
+
+    #[test]
+    fn command_line_defaults_are_the_config_defaults() {
+        let none = Cli::try_parse_from(["tnd"]).unwrap();
+        assert_eq!(none.sampler, SamplerConfig::default());
+        let some = Cli::try_parse_from([
+            "tnd",
+            "--sampler",
+            "ddpm",
+            "--steps",
+            "10",
+            "--eta",
+            "1",
+            "--spacing",
+            "leading",
+        ])
+        .unwrap();
+        assert_eq!(some.sampler.sampler_kind(), SamplerKind::Ddpm);
+        assert_eq!(
+            (some.sampler.steps, some.sampler.eta, some.sampler.spacing),
+            (10, 1.0, TimestepSpacing::Leading)
+        );
+        assert!(Cli::try_parse_from(["tnd", "--sampler", "euler"]).is_err());
+    }
+
+    #[test]
+    fn validation_names_the_bad_setting() {
+        let bad_steps = SamplerConfig {
+            steps: 300,
+            ..SamplerConfig::default()
+        };
+        assert!(bad_steps
+            .validate(Some(250))
+            .unwrap_err()
+            .contains("1..=250"));
+        assert!(bad_steps.validate(None).is_ok());
+        let bad_eta = SamplerConfig {
+            eta: 1.5,
+            ..SamplerConfig::default()
+        };
+        assert!(bad_eta.validate(None).unwrap_err().contains("eta"));
+        // DDPM ignores the DDIM settings.
+        let ddpm = SamplerConfig {
+            kind: SamplerName::Ddpm,
+            steps: 0,
+            ..SamplerConfig::default()
+        };
+        assert!(ddpm.validate(Some(250)).is_ok());
+    }
 }

@@ -9,7 +9,7 @@ use crate::command::Command;
 use crate::derender;
 use crate::panels::image_card::{self, Scale};
 use crate::panels::widgets::path_field;
-use crate::state::{DerenderInput, ModelSettings, SamplerChoice};
+use crate::state::{DerenderInput, ModelSettings, SamplerName};
 use crate::worker::DialogPurpose;
 use tactile_derender::model::{PredictionType, TimestepSpacing};
 
@@ -18,16 +18,25 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     let mut d = app.state.derender.clone();
     ui.horizontal(|ui| {
         ui.label("sampler");
-        ui.radio_value(&mut d.sampler, SamplerChoice::Ddpm, "DDPM (250 steps)");
-        ui.radio_value(&mut d.sampler, SamplerChoice::Ddim, "DDIM");
-        ui.add_enabled_ui(d.sampler == SamplerChoice::Ddim, |ui| {
-            ui.add(egui::Slider::new(&mut d.ddim_steps, 1..=250).text("steps K"));
-            ui.add(egui::Slider::new(&mut d.eta, 0.0..=1.0).text("η"));
+        let s = &mut d.sampler;
+        ui.radio_value(&mut s.kind, SamplerName::Ddpm, "DDPM (all steps)")
+            .on_hover_text(
+                "ancestral DDPM over all the model's training steps (the paper's sampler)",
+            );
+        ui.radio_value(&mut s.kind, SamplerName::Ddim, "DDIM")
+            .on_hover_text("DDIM over K steps: about T/K times faster");
+        ui.add_enabled_ui(s.kind == SamplerName::Ddim, |ui| {
+            ui.add(egui::Slider::new(&mut s.steps, 1..=250).text("steps K"))
+                .on_hover_text(
+                    "DDIM steps, up to the model's training steps (250 for the shipped model)",
+                );
+            ui.add(egui::Slider::new(&mut s.eta, 0.0..=1.0).text("η"))
+                .on_hover_text("0: deterministic; 1: DDPM-like fresh noise at every step");
             egui::ComboBox::from_id_salt("ddim_spacing")
-                .selected_text(format!("{} spacing", d.spacing))
+                .selected_text(format!("{} spacing", s.spacing))
                 .show_ui(ui, |ui| {
-                    for s in [TimestepSpacing::Trailing, TimestepSpacing::Leading] {
-                        ui.selectable_value(&mut d.spacing, s, s.to_string());
+                    for sp in [TimestepSpacing::Trailing, TimestepSpacing::Leading] {
+                        ui.selectable_value(&mut s.spacing, sp, sp.to_string());
                     }
                 })
                 .response
