@@ -28,9 +28,11 @@ use crate::worker::raise_cancel;
 pub struct RunImage {
     pub title: String,
     pub texture: TextureHandle,
-    /// Colour range, metres.
+    /// Colour range, metres (or 0..1 for the contact probability).
     pub range: (f32, f32),
     pub zero_is_missing: bool,
+    /// Values are lengths (shown in mm); false for the contact probability (a fraction).
+    pub millimetres: bool,
 }
 
 /// A de-rendering run as the UI sees it.
@@ -133,6 +135,7 @@ fn run_images(ctx: &egui::Context, r: &RunResult) -> Vec<RunImage> {
     let mut add = |title: String, img: &Image, range: (f32, f32), zim: bool| {
         out.push(RunImage {
             texture: texture(ctx, &format!("run-{title}"), img, range, zim),
+            millimetres: title != "contact probability",
             title,
             range,
             zero_is_missing: zim,

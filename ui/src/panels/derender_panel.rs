@@ -228,7 +228,7 @@ fn fixed_image(r: &derender::RunResult, k: usize) -> &tactile_derender::image::I
 fn card(ui: &mut egui::Ui, img: &RunImage, data: &tactile_derender::image::Image, side: f32) {
     let scale = Scale {
         range: img.range,
-        millimetres: true,
+        millimetres: img.millimetres,
         zero_is_missing: img.zero_is_missing,
     };
     image_card::card(ui, &img.title, img.texture.id(), data, &scale, side);
