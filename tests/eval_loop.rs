@@ -129,6 +129,29 @@ fn uncertainty_analysis_reports_each_registration_and_can_cancel() {
     });
     assert!(matches!(r, Err(EvalError::Cancelled)));
     assert_eq!(calls, 2);
+
+    // A sample that cannot be registered (wrong size for this sensor) is recorded; the other fits stand.
+    let wrong = tactile_derender::image::Image::filled(8, 8, 0.08);
+    let samples = vec![pair.target.clone(), wrong, pair.target.clone()];
+    let sig = Signature {
+        samples: &samples,
+        ..sig
+    };
+    let report = analyse_with_progress(&eval, &object, ctx, &sig, 3, &mut |_, _| true).unwrap();
+    assert_eq!(report.samples.len(), 2);
+    assert!(report.baseline.is_some());
+    let what: Vec<&str> = report.failed.iter().map(|f| f.what.as_str()).collect();
+    assert_eq!(
+        what,
+        ["sample 1", "multi-sample estimate"],
+        "{:?}",
+        report.failed
+    );
+    assert!(
+        report.failed[0].reason.contains("8x8"),
+        "{:?}",
+        report.failed
+    );
 }
 
 #[test]

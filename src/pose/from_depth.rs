@@ -34,6 +34,12 @@ pub fn register_depth(
     strategy: &InitStrategy,
     seed: u64,
 ) -> Result<Option<Vec<Hypothesis>>, PoseError> {
+    if (x0.width, x0.height) != (view.membrane.width, view.membrane.height) {
+        return Err(PoseError::Config(format!(
+            "the in-contact depth is {}x{} pixels, the sensor's membrane image {}x{}",
+            x0.width, x0.height, view.membrane.width, view.membrane.height
+        )));
+    }
     let surface = back_project(x0, view.intrinsics, view.t_world_camera).p_world;
     if surface.is_empty() {
         return Ok(None);

@@ -4,7 +4,7 @@
 
 use glam::DAffine3;
 
-use super::{SampleError, UncertaintyReport};
+use super::{FailedRegistration, SampleError, UncertaintyReport};
 use crate::image::Image;
 use crate::metrics::evaluate::{EvalContext, EvalError, Evaluator, ObjectModel};
 use crate::pose::from_depth::consensus_depth;
@@ -73,21 +73,30 @@ pub fn analyse_with_progress(
     let init = match sig.init {
         Some(i) => i,
         None => {
+            // The first sample with contact that registers gives the start (a sample that fails is skipped here
+            // and recorded below with the others).
             let mut found = None;
+            let mut last_error = None;
             for s in sig.samples {
-                if let Some(h) = evaluator
-                    .register_depth(object, s, ctx, &sig.t_world_camera, &strategy, seed)
-                    .map_err(pose_err)?
+                match evaluator.register_depth(object, s, ctx, &sig.t_world_camera, &strategy, seed)
                 {
-                    found = h.first().map(|b| b.pose);
-                    break;
+                    Ok(Some(h)) => {
+                        found = h.first().map(|b| b.pose);
+                        break;
+                    }
+                    Ok(None) => {}
+                    Err(e) => last_error = Some(e),
                 }
             }
-            let found = found.ok_or_else(|| {
-                EvalError::Generator(
-                    "no generated sample has any contact; nothing to register".into(),
-                )
-            })?;
+            let found = match (found, last_error) {
+                (Some(f), _) => f,
+                (None, Some(e)) => return Err(pose_err(e)),
+                (None, None) => {
+                    return Err(EvalError::Generator(
+                        "no generated sample has any contact; nothing to register".into(),
+                    ))
+                }
+            };
             step(&mut done)?;
             found
         }
@@ -95,17 +104,29 @@ pub fn analyse_with_progress(
     let reference = sig.truth.unwrap_or(init);
     let fixed = InitStrategy::Fixed(init);
     let mut samples = Vec::with_capacity(sig.samples.len());
+    // One sample (or the baseline, or the consensus) that cannot be registered is recorded and the others go on.
+    let mut failed = Vec::new();
+    let mut record = |what: String, e: &dyn std::error::Error| {
+        failed.push(FailedRegistration {
+            what,
+            reason: crate::error::render(e),
+        })
+    };
     for (i, s) in sig.samples.iter().enumerate() {
-        let hyps = evaluator
-            .register_depth(
-                object,
-                s,
-                ctx,
-                &sig.t_world_camera,
-                &fixed,
-                seed.wrapping_add(i as u64),
-            )
-            .map_err(pose_err)?;
+        let hyps = match evaluator.register_depth(
+            object,
+            s,
+            ctx,
+            &sig.t_world_camera,
+            &fixed,
+            seed.wrapping_add(i as u64),
+        ) {
+            Ok(h) => h,
+            Err(e) => {
+                record(format!("sample {i}"), &e);
+                None
+            }
+        };
         if let Some(best) = hyps.as_ref().and_then(|h| h.first()) {
             samples.push(SampleError::new(
                 best.pose,
@@ -117,37 +138,50 @@ pub fn analyse_with_progress(
         step(&mut done)?;
     }
     let baseline = match sig.baseline {
-        Some(b) => evaluator
-            .register_depth(object, b, ctx, &sig.t_world_camera, &fixed, seed)
-            .map_err(pose_err)?
-            .and_then(|h| h.first().copied())
-            .map(|best| SampleError::new(best.pose, best.cost, reference, &object.symmetry)),
+        Some(b) => {
+            match evaluator.register_depth(object, b, ctx, &sig.t_world_camera, &fixed, seed) {
+                Ok(h) => h.and_then(|h| h.first().copied()).map(|best| {
+                    SampleError::new(best.pose, best.cost, reference, &object.symmetry)
+                }),
+                Err(e) => {
+                    record("baseline".into(), &e);
+                    None
+                }
+            }
+        }
         None => None,
     };
     if sig.baseline.is_some() {
         step(&mut done)?;
     }
     let multi_sample = if multi {
-        let consensus = consensus_depth(sig.samples, evaluator.config.consensus_probability)
-            .map_err(pose_err)?;
-        let best = evaluator
-            .register_depth(
-                object,
-                &consensus,
-                ctx,
-                &sig.t_world_camera,
-                &strategy,
-                seed,
-            )
-            .map_err(pose_err)?
-            .and_then(|h| h.first().copied());
+        let registered = consensus_depth(sig.samples, evaluator.config.consensus_probability)
+            .and_then(|consensus| {
+                evaluator.register_depth(
+                    object,
+                    &consensus,
+                    ctx,
+                    &sig.t_world_camera,
+                    &strategy,
+                    seed,
+                )
+            });
         step(&mut done)?;
-        best.map(|b| SampleError::new(b.pose, b.cost, reference, &object.symmetry))
+        match registered {
+            Ok(h) => h
+                .and_then(|h| h.first().copied())
+                .map(|b| SampleError::new(b.pose, b.cost, reference, &object.symmetry)),
+            Err(e) => {
+                record("multi-sample estimate".into(), &e);
+                None
+            }
+        }
     } else {
         None
     };
     let mut report =
         UncertaintyReport::new(reference, sig.truth.is_some(), init, samples, baseline);
     report.multi_sample = multi_sample;
+    report.failed = failed;
     Ok(report)
 }

@@ -63,6 +63,15 @@ impl SampleError {
     }
 }
 
+/// A registration of the analysis that failed (the others stand).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FailedRegistration {
+    /// What was registered: `sample 3`, `baseline` or `multi-sample estimate`.
+    pub what: String,
+    /// The error, said once.
+    pub reason: String,
+}
+
 /// The analysis of one signature: sample errors, the baseline's, and the KDE curves.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct UncertaintyReport {
@@ -80,6 +89,9 @@ pub struct UncertaintyReport {
     /// more samples whose consensus has contact.
     #[serde(default)]
     pub multi_sample: Option<SampleError>,
+    /// Registrations that failed; the rest of the report stands without them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub failed: Vec<FailedRegistration>,
     /// KDE of the position errors, `(mm, density)`; empty when it cannot be fitted (fewer than 2 distinct values).
     pub position_kde: Vec<(f64, f64)>,
     /// KDE of the θ errors, `(deg, density)`; empty when it cannot be fitted or θ is excluded.
@@ -124,6 +136,7 @@ impl UncertaintyReport {
             samples,
             baseline,
             multi_sample: None,
+            failed: Vec::new(),
         }
     }
 

@@ -133,6 +133,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let summary = json!({"object": name, "generator": gen.name(), "samples": report.samples.len(),
         "estimate": report.init, "estimate_multi_sample": report.multi_sample.map(|m| m.pose),
         "truth": truth, "baseline": report.baseline, "multi_sample": report.multi_sample,
+        "failed": report.failed,
         "position_err_mm": report.samples.iter().map(|s| s.position_mm).collect::<Vec<_>>(),
         "out": a.out});
     let path = a.out.join("pose.json");

@@ -247,6 +247,12 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
         )),
         None => ui.weak("baseline: no contact above the threshold"),
     };
+    for f in &rep.failed {
+        ui.colored_label(
+            ui.visuals().warn_fg_color,
+            format!("{} not registered: {}", f.what, f.reason),
+        );
+    }
 }
 
 /// KDE of the position (mm) or yaw (degrees) errors, the samples as a rug, the baseline as a point; hovering picks
