@@ -10,144 +10,12 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+mod fuzz_common;
 
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use std::path::Path;
+
+use fuzz_common::{corpus_dir, fuzz};
 use tactile_derender::mesh::{self, LoadOptions};
-
-/// Inputs per loader.
-fn iterations() -> usize {
-    std::env::var("TND_FUZZ_ITERS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(3000)
-}
-
-/// The longest one input may take before it counts as a hang.
-const HANG: Duration = Duration::from_secs(5);
-
-fn corpus_dir(kind: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures/fuzz")
-        .join(kind)
-}
-
-/// The committed seeds of one loader.
-fn seeds(kind: &str) -> Vec<Vec<u8>> {
-    let dir = corpus_dir(kind);
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
-        .map(|e| e.unwrap().path())
-        .collect();
-    files.sort();
-    let seeds: Vec<Vec<u8>> = files.iter().map(|p| std::fs::read(p).unwrap()).collect();
-    assert!(!seeds.is_empty(), "{}: no seeds", dir.display());
-    seeds
-}
-
-const INTERESTING_BYTES: [u8; 12] = [
-    0, 0xff, 0x7f, 0x80, b'-', b'9', b'\n', b' ', b'e', b'.', b'"', b'{',
-];
-const INTERESTING_TEXT: [&str; 10] = [
-    "4611686018427387904",
-    "18446744073709551615",
-    "-1",
-    "nan",
-    "inf",
-    "1e308",
-    "-0",
-    "2147483648",
-    "0",
-    "999999999",
-];
-
-/// One mutated copy of `seed`.
-fn mutate(seed: &[u8], rng: &mut ChaCha8Rng) -> Vec<u8> {
-    let mut b = seed.to_vec();
-    for _ in 0..rng.random_range(1..=6) {
-        let len = b.len();
-        let at = if len == 0 {
-            0
-        } else {
-            rng.random_range(0..len)
-        };
-        match rng.random_range(0..8) {
-            0 if len > 0 => b[at] ^= 1 << rng.random_range(0..8),
-            1 if len > 0 => b[at] = INTERESTING_BYTES[rng.random_range(0..INTERESTING_BYTES.len())],
-            2 => b.truncate(at),
-            3 => {
-                let n = rng.random_range(1..16);
-                let extra: Vec<u8> = (0..n).map(|_| rng.random()).collect();
-                b.splice(at..at, extra);
-            }
-            4 if len > 0 => {
-                let end = (at + rng.random_range(1..64)).min(len);
-                b.drain(at..end);
-            }
-            5 if len > 0 => {
-                let end = (at + rng.random_range(1..256)).min(len);
-                let chunk = b[at..end].to_vec();
-                let to = rng.random_range(0..=b.len());
-                b.splice(to..to, chunk);
-            }
-            6 => {
-                let s = INTERESTING_TEXT[rng.random_range(0..INTERESTING_TEXT.len())];
-                let end = (at + rng.random_range(0..4)).min(len);
-                b.splice(at..end, s.bytes());
-            }
-            _ if len >= 8 => {
-                // A little-endian u64 field overwritten with a huge or negative value (binary headers, counts).
-                let at = rng.random_range(0..len - 7);
-                let v: u64 = [u64::MAX, 1 << 62, 1 << 31, 0x7fff_ffff][rng.random_range(0..4)];
-                b[at..at + 8].copy_from_slice(&v.to_le_bytes());
-            }
-            _ => {}
-        }
-    }
-    b
-}
-
-/// Drive `load` (true: the input was accepted) with the seeds of `kind`, which must all be accepted, and their
-/// mutations.
-fn fuzz(kind: &str, load: &dyn Fn(&[u8]) -> bool) {
-    let seeds = seeds(kind);
-    let mut rng = ChaCha8Rng::seed_from_u64(kind.bytes().fold(0u64, |h, c| h * 31 + u64::from(c)));
-    let n = iterations().max(seeds.len());
-    let mut panics = 0;
-    let mut slowest = Duration::ZERO;
-    for i in 0..n {
-        let seed = &seeds[i % seeds.len()];
-        let input = if i < seeds.len() {
-            seed.clone()
-        } else {
-            mutate(seed, &mut rng)
-        };
-        let t0 = Instant::now();
-        let outcome = catch_unwind(AssertUnwindSafe(|| load(&input)));
-        if i < seeds.len() {
-            assert!(
-                matches!(outcome, Ok(true)),
-                "{kind}: seed {i} is not accepted"
-            );
-        }
-        // A panic caught inside a loader and turned into an error is not a panic here; the default hook still
-        // prints it, so only what reaches this point counts.
-        if outcome.is_err() {
-            panics += 1;
-            let path = std::env::temp_dir().join(format!("tnd-fuzz-{kind}-panic-{i}"));
-            std::fs::write(&path, &input).unwrap();
-            eprintln!("{kind}: input {i} panicked; saved to {}", path.display());
-        }
-        let dt = t0.elapsed();
-        slowest = slowest.max(dt);
-        assert!(dt < HANG, "{kind}: input {i} took {dt:?} (a hang?)");
-    }
-    eprintln!("{kind}: {n} inputs, {panics} panics, slowest {slowest:?}");
-    assert_eq!(panics, 0, "{kind}: {panics} of {n} inputs panicked");
-}
 
 /// Loaders that read a path: write each input to one file in a temporary folder.
 fn via_file(name: &str, read: impl Fn(&Path) -> bool) -> impl Fn(&[u8]) -> bool {
@@ -222,6 +90,24 @@ fn objects_json() {
         std::fs::write(dir.join("objects.json"), b).unwrap();
         match tactile_derender::objects::ObjectSet::load_dir(&dir) {
             Ok(set) => set.entries().iter().all(|e| set.mesh(&e.name).is_ok()),
+            Err(_) => false,
+        }
+    });
+}
+
+#[test]
+fn pairs_csv() {
+    fuzz("pairs_csv", &|b| {
+        // The table as `tnd dataset import` reads it (text decoding included), then every number it holds.
+        let Ok(text) = std::str::from_utf8(b) else {
+            return false;
+        };
+        match tactile_derender::dataset::import::parse_csv(text) {
+            Ok(rows) => rows.iter().all(|r| {
+                ["x", "y", "theta"]
+                    .iter()
+                    .all(|k| r.get(*k).is_some_and(|v| v.parse::<f64>().is_ok()))
+            }),
             Err(_) => false,
         }
     });
@@ -372,6 +258,25 @@ fn write_fuzz_corpus() {
     // objects.json naming m.obj (the harness writes the sphere there).
     let manifest = r#"{"version":1,"objects":[{"name":"m","mesh":"m.obj","scale_to_m":1.0,"split":"seen","family":"sphere","symmetry":{"rotation":{"n_fold":4}},"dimensions":{"radius":0.01}}]}"#;
     put("objects_json", "one_object.json", manifest.as_bytes());
+    put(
+        "pairs_csv",
+        "pairs.csv",
+        &std::fs::read(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/dataset_import/pairs.csv"),
+        )
+        .unwrap(),
+    );
+    put(
+        "session",
+        "example.json",
+        &std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("sessions/example.json"))
+            .unwrap(),
+    );
+    put(
+        "session",
+        "derender.json",
+        br#"{"version": 1, "scene": {"press": 0.004, "object": {"library": {"set": "builtin", "name": "sphere_r20"}}}, "derender": {"sampler": "ddim", "steps": 10, "eta": 0.2, "spacing": "leading", "samples": 4, "input": "scene"}, "view": {"tab": "derender"}}"#,
+    );
 }
 
 /// Headers that claim more elements than memory holds are errors before anything is allocated.

@@ -421,8 +421,9 @@ fn read_table(from: &Path) -> Result<(PathBuf, Vec<Row>), DatasetError> {
     }
 }
 
-/// A header line and comma-separated rows (no quoting; `#` starts a comment line).
-fn parse_csv(text: &str) -> Result<Vec<Row>, String> {
+/// `pairs.csv` text: a header line and comma-separated rows (no quoting; `#` starts a comment line), as rows of
+/// trimmed strings keyed by the lower-case header.
+pub fn parse_csv(text: &str) -> Result<Vec<BTreeMap<String, String>>, String> {
     let mut lines = text
         .lines()
         .enumerate()
