@@ -124,13 +124,12 @@ impl SignedDistance {
             Some(w) => w.winding_number(p) as f32,
             None => {
                 let v = self.trimesh.vertices();
-                let tris: Vec<[glam::DVec3; 3]> = self
+                let tris = self
                     .trimesh
                     .indices()
                     .iter()
-                    .map(|t| t.map(|i| v[i as usize].as_dvec3()))
-                    .collect();
-                super::winding::winding_number_of(&tris, p) as f32
+                    .map(|t| t.map(|i| v[i as usize].as_dvec3()));
+                super::winding::winding_number_of(tris, p) as f32
             }
         }
     }

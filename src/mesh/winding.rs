@@ -127,13 +127,13 @@ impl FastWinding {
 
     /// The exact winding number (every triangle's solid angle): the reference the tree approximates.
     pub fn exact_winding_number(&self, p: DVec3) -> f64 {
-        winding_number_of(&self.tris, p)
+        winding_number_of(self.tris.iter().copied(), p)
     }
 }
 
 /// The exact generalised winding number of the triangles `tris` around `p` (O(triangles)).
-pub fn winding_number_of(tris: &[[DVec3; 3]], p: DVec3) -> f64 {
-    tris.iter().map(|t| solid_angle(t, p)).sum::<f64>() / (4.0 * std::f64::consts::PI)
+pub fn winding_number_of(tris: impl IntoIterator<Item = [DVec3; 3]>, p: DVec3) -> f64 {
+    tris.into_iter().map(|t| solid_angle(&t, p)).sum::<f64>() / (4.0 * std::f64::consts::PI)
 }
 
 /// Signed solid angle of triangle `t` seen from `p` (Van Oosterom & Strackee 1983).

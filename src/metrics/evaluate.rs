@@ -252,16 +252,15 @@ pub struct EvalReport {
 impl EvalReport {
     /// Summarise scored records and failures.
     pub fn new(generator: String, records: Vec<PairRecord>, failed: Vec<FailedPair>) -> Self {
-        let multi: Vec<&MethodResult> = records
-            .iter()
-            .filter_map(|r| r.model_multi.as_ref())
-            .collect();
+        // All pairs as one group: the same rows as each group of the breakdown.
+        let all: Vec<&PairRecord> = records.iter().collect();
+        let rows = super::breakdown::GroupSummary::of(String::new(), &all);
         Self {
             generator,
             pairs: records.len(),
-            model: MethodSummary::of(records.iter().map(|r| &r.model)),
-            model_multi: (!multi.is_empty()).then(|| MethodSummary::of(multi.iter().copied())),
-            baseline: MethodSummary::of(records.iter().map(|r| &r.baseline)),
+            model: rows.model,
+            model_multi: rows.model_multi,
+            baseline: rows.baseline,
             breakdown: super::breakdown::Breakdown::of(&records),
             records,
             failed,

@@ -46,10 +46,18 @@ pub struct MeshCheck {
 
 /// Load `path` with `options` and report what it holds.
 pub fn check(path: &Path, options: &LoadOptions) -> Result<MeshCheck, ObjectError> {
-    let mesh = mesh::load(path, options).map_err(|source| ObjectError::Mesh {
+    Ok(check_mesh(path, &load(path, options)?, options))
+}
+
+fn load(path: &Path, options: &LoadOptions) -> Result<Mesh, ObjectError> {
+    mesh::load(path, options).map_err(|source| ObjectError::Mesh {
         name: path.display().to_string(),
         source,
-    })?;
+    })
+}
+
+/// What `mesh`, read from `path` with `options`, holds.
+fn check_mesh(path: &Path, mesh: &Mesh, options: &LoadOptions) -> MeshCheck {
     let (lo, hi) = mesh.aabb();
     let size = (hi - lo).as_dvec3();
     let largest = size.max_element();
@@ -89,7 +97,7 @@ pub fn check(path: &Path, options: &LoadOptions) -> Result<MeshCheck, ObjectErro
     if report.closed && report.volume_m3 < 0.0 {
         notes.push("faces point inwards (negative volume)".into());
     }
-    Ok(MeshCheck {
+    MeshCheck {
         path: path.to_path_buf(),
         units: options.units,
         vertices: mesh.vertices().len(),
@@ -102,7 +110,7 @@ pub fn check(path: &Path, options: &LoadOptions) -> Result<MeshCheck, ObjectErro
         extent_m: size.to_array(),
         likely_units,
         notes,
-    })
+    }
 }
 
 /// The unit under which a largest extent of `largest_m` metres (read with `units`) becomes plausible, if the given
@@ -228,40 +236,33 @@ fn import_file(
     options: &ImportOptions,
     names: &mut std::collections::HashSet<String>,
 ) -> Result<ImportedMesh, ObjectError> {
-    let given = options.units.unwrap_or(Units::M);
-    let first = check(
-        path,
-        &LoadOptions {
-            units: given,
+    // The file is read once, in file units; each scale is applied to that mesh as `mesh::load` would.
+    let raw = load(path, &LoadOptions::default())?;
+    let scaled = |units: Units| {
+        let options = LoadOptions {
+            units,
             fit_to_size: None,
-        },
-    )?;
+        };
+        raw.clone()
+            .apply_units(&options, &path.display().to_string())
+            .map(|m| (m, options))
+            .map_err(|source| ObjectError::Mesh {
+                name: path.display().to_string(),
+                source,
+            })
+    };
+    let given = options.units.unwrap_or(Units::M);
+    let (mesh, read_as) = scaled(given)?;
+    let first = check_mesh(path, &mesh, &read_as);
     let largest = first.extent_m.iter().copied().fold(0.0, f64::max);
     let scale_to_m = match (options.fit_m, options.units, first.likely_units) {
         (Some(fit), _, _) => fit / (largest / given.to_metres()).max(1e-12),
         (None, None, Some(likely)) => likely.to_metres(),
         (None, _, _) => given.to_metres(),
     };
-    let units = Units::Scale(scale_to_m);
-    let check = check(
-        path,
-        &LoadOptions {
-            units,
-            fit_to_size: None,
-        },
-    )?;
-    let mesh = mesh::load(
-        path,
-        &LoadOptions {
-            units,
-            fit_to_size: None,
-        },
-    )
-    .map_err(|source| ObjectError::Mesh {
-        name: path.display().to_string(),
-        source,
-    })?
-    .rest_on_table();
+    let (mesh, read_as) = scaled(Units::Scale(scale_to_m))?;
+    let check = check_mesh(path, &mesh, &read_as);
+    let mesh = mesh.rest_on_table();
     let stem: String = path
         .file_stem()
         .map(|s| s.to_string_lossy().to_ascii_lowercase())

@@ -6,6 +6,7 @@
 
 use egui::Color32;
 use egui_plot::{Legend, Line, Plot, PlotPoints, Points, VLine};
+use tactile_derender::sensor::Se2;
 
 use crate::app::WorkbenchApp;
 use crate::command::Command;
@@ -120,41 +121,26 @@ fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, heigh
                     );
                 }
             }
-            if let Some(best) = r.hypotheses.first() {
-                for l in placed_mm(&r.outline, &best.pose) {
+            let mut outline = |name: &str, pose: &Se2, colour: Color32, width: f32| {
+                for l in placed_mm(&r.outline, pose) {
                     p.line(
-                        Line::new("best hypothesis", PlotPoints::from(l))
-                            .color(ESTIMATE_COLOUR)
-                            .width(2.0),
+                        Line::new(name, PlotPoints::from(l))
+                            .color(colour)
+                            .width(width),
                     );
                 }
+            };
+            if let Some(best) = r.hypotheses.first() {
+                outline("best hypothesis", &best.pose, ESTIMATE_COLOUR, 2.0);
             }
             if let Some(m) = &r.report.multi_sample {
-                for l in placed_mm(&r.outline, &m.pose) {
-                    p.line(
-                        Line::new("multi-sample estimate", PlotPoints::from(l))
-                            .color(MULTI_COLOUR)
-                            .width(2.0),
-                    );
-                }
+                outline("multi-sample estimate", &m.pose, MULTI_COLOUR, 2.0);
             }
             if let Some(b) = &r.report.baseline {
-                for l in placed_mm(&r.outline, &b.pose) {
-                    p.line(
-                        Line::new("baseline", PlotPoints::from(l))
-                            .color(BASELINE_COLOUR)
-                            .width(1.5),
-                    );
-                }
+                outline("baseline", &b.pose, BASELINE_COLOUR, 1.5);
             }
             if let Some(t) = &r.truth {
-                for l in placed_mm(&r.outline, t) {
-                    p.line(
-                        Line::new("true pose", PlotPoints::from(l))
-                            .color(TRUE_COLOUR)
-                            .width(2.0),
-                    );
-                }
+                outline("true pose", t, TRUE_COLOUR, 2.0);
             }
             let contacts: Vec<[f64; 2]> = r
                 .contacts
