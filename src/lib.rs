@@ -16,6 +16,7 @@ pub mod mesh;
 pub mod metrics;
 pub mod model;
 pub mod objects;
+pub mod pipeline;
 pub mod pose;
 pub mod recon;
 pub mod sensor;

@@ -230,52 +230,6 @@ fn im2col_conv_matches_candle_forward_and_backward() {
     }
 }
 
-/// The direct convolution on the portable GEMM loop (CPUs without AVX-512, and 1-row products) against candle's
-/// `conv2d`, values and gradients; the default test above covers the AVX-512 kernels where the CPU has them.
-#[test]
-fn direct_conv_portable_gemm_matches_candle() {
-    use tactile_derender::model::conv_direct::DirectConv;
-    use tactile_derender::model::sgemm::GemmBackend;
-    for (i, &(b, ci, co, h, w, k)) in [(2, 3, 9, 6, 5, 3), (1, 8, 16, 12, 9, 1), (2, 4, 3, 5, 5, 5)]
-        .iter()
-        .enumerate()
-    {
-        let x = Var::from_tensor(&rand_t(&[b, ci, h, w], 40 + i as u64)).unwrap();
-        let kw = Var::from_tensor(&rand_t(&[co, ci, k, k], 50 + i as u64)).unwrap();
-        let bias = Var::from_tensor(&rand_t(&[co], 60 + i as u64)).unwrap();
-        let r = rand_t(&[b, co, h, w], 70 + i as u64);
-        let grads = |y: &Tensor| {
-            let g = (y * &r).unwrap().sum_all().unwrap().backward().unwrap();
-            [&x, &kw, &bias].map(|v| g.get(v).unwrap().clone())
-        };
-        let op = DirectConv {
-            kernel: k,
-            backend: GemmBackend::GemmCrate,
-        };
-        let ours = x
-            .as_tensor()
-            .apply_op3(kw.as_tensor(), bias.as_tensor(), op)
-            .unwrap();
-        let reference = x
-            .as_tensor()
-            .conv2d(kw.as_tensor(), k / 2, 1, 1, 1)
-            .unwrap()
-            .broadcast_add(&bias.as_tensor().reshape((1, co, 1, 1)).unwrap())
-            .unwrap();
-        let (go, gr) = (grads(&ours), grads(&reference));
-        for (what, a, b) in [
-            ("forward", &reference, &ours),
-            ("grad x", &gr[0], &go[0]),
-            ("grad w", &gr[1], &go[1]),
-            ("grad b", &gr[2], &go[2]),
-        ] {
-            let scale = max_abs(a, &a.zeros_like().unwrap()).max(1.0);
-            let err = max_abs(a, b);
-            assert!(err < 1e-5 * scale, "{what} case {i}: {err} (scale {scale})");
-        }
-    }
-}
-
 #[test]
 fn checkpoint_round_trip_and_errors() {
     let dir = tempfile::tempdir().unwrap();
@@ -511,7 +465,7 @@ fn loads_a_diffusers_save_pretrained_directory() {
 /// treats samples independently), and a timestep count that fits neither is an error.
 #[test]
 fn half_batches_match_the_whole_batch() {
-    use tactile_derender::model::parallel_batch::{halves, loss_and_grads};
+    use tactile_derender::model::kernels::parallel_batch::{halves, loss_and_grads};
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(2)
         .build()

@@ -74,6 +74,17 @@ pub struct EvalContext {
     pub objects: ObjectSet,
 }
 
+impl EvalContext {
+    /// The camera and undeformed membrane of `sim`'s sensor, with `objects`.
+    pub fn of_simulator(sim: &crate::sim::Simulator, objects: ObjectSet) -> Self {
+        Self {
+            intrinsics: *sim.intrinsics(),
+            membrane: sim.nominal_depth().clone(),
+            objects,
+        }
+    }
+}
+
 /// A source of evaluation pairs (a dataset split, or pairs simulated on the fly).
 pub trait PairSource: Sync {
     /// Number of pairs.

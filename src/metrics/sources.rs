@@ -40,11 +40,7 @@ impl<'a> DatasetSource<'a> {
             split,
             skip: 0,
             len: limit.map_or(n, |l| l.min(n)),
-            ctx: EvalContext {
-                intrinsics: *sim.intrinsics(),
-                membrane: sim.nominal_depth().clone(),
-                objects,
-            },
+            ctx: EvalContext::of_simulator(&sim, objects),
             t_sensor_camera: sim.t_sensor_camera(),
         })
     }
@@ -120,11 +116,7 @@ impl SimSource {
         specs: Vec<SimSpec>,
     ) -> Result<Self, EvalError> {
         let sim = Simulator::new(config).map_err(|e| EvalError::Source(e.to_string()))?;
-        let ctx = EvalContext {
-            intrinsics: *sim.intrinsics(),
-            membrane: sim.nominal_depth().clone(),
-            objects,
-        };
+        let ctx = EvalContext::of_simulator(&sim, objects);
         Ok(Self { sim, specs, ctx })
     }
 }

@@ -105,7 +105,7 @@ impl CustomOp1 for ScaledSoftmax {
         let x = super::contiguous_f32(s, l, "softmax: input")?;
         let n = l.shape().dims().last().copied().unwrap_or(1).max(1);
         // SAFETY: every row is written by softmax_rows.
-        let mut y = unsafe { super::alloc::output_vec(x.len()) };
+        let mut y = unsafe { super::kernels::alloc::output_vec(x.len()) };
         let (scale, level) = (self.scale, simd_level());
         // Rows in blocks of ~16 K values per task (one row of N ≤ 4096 scores is too little work to schedule).
         let rows = (16384 / n).max(1) * n;
@@ -141,7 +141,7 @@ impl CustomOp1 for ScaledSoftmaxBackward {
         let n = dims.last().copied().unwrap_or(1).max(1);
         let (y, dy) = both.split_at(both.len() / 2);
         // SAFETY: every element is written below.
-        let mut dx = unsafe { super::alloc::output_vec(y.len()) };
+        let mut dx = unsafe { super::kernels::alloc::output_vec(y.len()) };
         dx.par_chunks_mut(n)
             .zip(y.par_chunks(n).zip(dy.par_chunks(n)))
             .for_each(|(dxr, (yr, dyr))| {

@@ -9,16 +9,14 @@
 //! scatter ([`Col2Im`]); the GEMM, bias and layout change are ordinary candle ops, so autograd handles the rest.
 //! Tests check it against candle's `conv2d` forward and backward.
 
-use std::sync::atomic::{AtomicU8, Ordering};
-
 use candle_core::{CpuStorage, CustomOp1, Layout, Module, Result, Shape, Tensor};
 use candle_nn::VarBuilder;
 
-use super::sgemm::GemmBackend;
+use super::kernels::sgemm::GemmBackend;
 use rayon::prelude::*;
 
-/// Which convolution implementation the model uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Which convolution implementation a model uses (per model: [`super::UNet2DModel::set_conv_backend`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ConvBackend {
     /// candle's `Tensor::conv2d` (and its `conv_transpose2d`-based backward).
     Candle,
@@ -28,24 +26,8 @@ pub enum ConvBackend {
     Tiled,
     /// Our direct convolution ([`super::conv_direct`]) where the geometry allows it and the CPU has AVX-512,
     /// else [`ConvBackend::Tiled`] (default).
+    #[default]
     Direct,
-}
-
-static BACKEND: AtomicU8 = AtomicU8::new(3);
-
-/// Select the convolution implementation for all convolutions run afterwards (process-wide; for benchmarks).
-pub fn set_conv_backend(b: ConvBackend) {
-    BACKEND.store(b as u8, Ordering::Relaxed);
-}
-
-/// The convolution implementation in use.
-pub fn conv_backend() -> ConvBackend {
-    match BACKEND.load(Ordering::Relaxed) {
-        0 => ConvBackend::Candle,
-        1 => ConvBackend::Im2colGemm,
-        2 => ConvBackend::Tiled,
-        _ => ConvBackend::Direct,
-    }
 }
 
 /// Geometry of one convolution: kernel size, stride and zero padding before/after (rows and columns alike).
@@ -69,6 +51,8 @@ pub struct Conv2d {
     pub weight: Tensor,
     pub bias: Option<Tensor>,
     pub geom: ConvGeom,
+    /// The implementation (default: [`ConvBackend::Direct`]).
+    pub backend: ConvBackend,
 }
 
 impl Conv2d {
@@ -91,6 +75,7 @@ impl Conv2d {
         Ok(Self {
             weight,
             bias,
+            backend: ConvBackend::default(),
             geom: ConvGeom {
                 kernel,
                 stride,
@@ -103,13 +88,7 @@ impl Conv2d {
 
 impl Module for Conv2d {
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        conv2d(
-            x,
-            &self.weight,
-            self.bias.as_ref(),
-            self.geom,
-            conv_backend(),
-        )
+        conv2d(x, &self.weight, self.bias.as_ref(), self.geom, self.backend)
     }
 }
 
@@ -134,12 +113,12 @@ pub fn conv2d(
                 }
             };
             let direct = backend == ConvBackend::Direct
-                && super::conv_direct::supports(geom)
+                && super::kernels::conv_direct::supports(geom)
                 && GemmBackend::detect() == GemmBackend::Avx512;
             if direct {
-                super::conv_direct::conv2d_direct(x, w, bias, geom)?
+                super::kernels::conv_direct::conv2d_direct(x, w, bias, geom)?
             } else {
-                super::conv_tiled::conv2d_tiled(x, w, bias, geom)?
+                super::kernels::conv_tiled::conv2d_tiled(x, w, bias, geom)?
             }
         }
         ConvBackend::Candle => {

@@ -368,7 +368,7 @@ impl CustomOp3 for GnOp {
         }
         let (w, b) = wb.split_at(c);
         // SAFETY: fwd_group writes every value of every (sample, group) chunk.
-        let mut y = unsafe { super::alloc::output_vec(x.len()) };
+        let mut y = unsafe { super::kernels::alloc::output_vec(x.len()) };
         let (op, fast) = (*self, simd_level());
         y.par_chunks_mut(cpg * hw)
             .zip(x.par_chunks(cpg * hw))
@@ -443,7 +443,7 @@ impl CustomOp3 for GnBackward {
         let cpg = c / op.groups;
         let n = x.len();
         // SAFETY: dx by bwd_group (every value), the parameter gradients by the loops below (every entry).
-        let mut out = unsafe { super::alloc::output_vec(n + 2 * c + bsz * c) };
+        let mut out = unsafe { super::kernels::alloc::output_vec(n + 2 * c + bsz * c) };
         let (dx, _) = out.split_at_mut(n);
         // Per (sample, channel) sums of dL/dw, dL/db and dL/dshift.
         let mut partial = vec![[0f64; 3]; bsz * c];

@@ -9,24 +9,20 @@
 //! ε-prediction training loop (Adam, EMA, resumable).
 
 pub mod adam;
-pub mod alloc;
 pub mod attention;
 pub mod checkpoint;
 pub mod config;
 pub mod conv;
-pub mod conv_direct;
-pub mod conv_tiled;
 pub mod diagnose;
 pub mod diffusion;
 pub mod embeddings;
 pub mod group_norm;
 pub mod init;
+pub mod kernels;
 pub mod normalise;
-pub mod parallel_batch;
 pub mod resnet;
 pub mod sampler;
 pub mod schedule;
-pub mod sgemm;
 pub mod train;
 pub mod train_data;
 pub mod unet;

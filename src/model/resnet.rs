@@ -35,6 +35,13 @@ pub struct ResnetCfg {
 }
 
 impl ResnetBlock2D {
+    /// Every convolution of the block.
+    pub(crate) fn convs_mut(&mut self) -> impl Iterator<Item = &mut Conv2d> {
+        [&mut self.conv1, &mut self.conv2]
+            .into_iter()
+            .chain(self.conv_shortcut.as_mut())
+    }
+
     pub fn new(vb: VarBuilder, c_in: usize, c_out: usize, cfg: ResnetCfg) -> Result<Self> {
         let conv_shortcut = if c_in != c_out {
             Some(Conv2d::new(

@@ -209,7 +209,7 @@ pub fn train(
             tc.seed,
         )?;
         let (input, tf, target) = prepare(&run, &schedule, &b, tc, s)?;
-        let (value, grads) = super::parallel_batch::loss_and_grads(b.n, |r| {
+        let (value, grads) = super::kernels::parallel_batch::loss_and_grads(b.n, |r| {
             mean_loss(&run, tc, (&input, &tf, &target), r, true)
         })?;
         if !value.is_finite() {

@@ -26,6 +26,25 @@ pub struct UNet2DModel {
 }
 
 impl UNet2DModel {
+    /// Run every convolution with `backend` (benchmarks compare them; the default is the fastest).
+    pub fn set_conv_backend(&mut self, backend: super::conv::ConvBackend) {
+        let mut convs: Vec<&mut Conv2d> = vec![&mut self.conv_in, &mut self.conv_out];
+        for b in &mut self.down_blocks {
+            convs.extend(b.resnets.iter_mut().flat_map(|r| r.convs_mut()));
+            convs.extend(b.downsamplers.as_mut().map(|d| &mut d.conv));
+        }
+        if let Some(m) = &mut self.mid_block {
+            convs.extend(m.resnets.iter_mut().flat_map(|r| r.convs_mut()));
+        }
+        for b in &mut self.up_blocks {
+            convs.extend(b.resnets.iter_mut().flat_map(|r| r.convs_mut()));
+            convs.extend(b.upsamplers.as_mut().map(|u| &mut u.conv));
+        }
+        for c in convs {
+            c.backend = backend;
+        }
+    }
+
     /// Build from `vb` (names as in diffusers); `config` must have passed [`UNet2DConfig::validate`].
     pub fn new(vb: VarBuilder, config: &UNet2DConfig) -> Result<Self> {
         let ch = &config.block_out_channels;
@@ -120,7 +139,7 @@ impl UNet2DModel {
         if timesteps.len() != 1 && timesteps.len() != b {
             candle_core::bail!("{} timesteps for a batch of {b}", timesteps.len());
         }
-        super::parallel_batch::forward_halves(x, |xh, r| {
+        super::kernels::parallel_batch::forward_halves(x, |xh, r| {
             let t = if timesteps.len() == 1 {
                 timesteps
             } else {

@@ -143,9 +143,9 @@ fn sample(model: &str, samples: usize, steps: usize) {
     let mut state = State::default();
     state.view.tab = Tab::Derender;
     state.model.path = Some(model.into());
-    state.derender.sampler.kind = SamplerName::Ddim;
-    state.derender.sampler.steps = steps;
-    state.derender.samples = samples;
+    state.derender.config.sampler.kind = SamplerName::Ddim;
+    state.derender.config.sampler.steps = steps;
+    state.derender.config.samples = samples;
     let mut h = harness(state);
     let t0 = Instant::now();
     while h.state().sim.is_none() && t0.elapsed() < Duration::from_secs(60) {

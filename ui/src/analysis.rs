@@ -373,10 +373,7 @@ impl WorkbenchApp {
 
     /// Start a run with the current settings (cancelling a running one).
     pub(crate) fn run_derender(&mut self) -> Result<()> {
-        self.state
-            .derender
-            .validate()
-            .map_err(|e| anyhow!("settings: {e}"))?;
+        self.state.derender.config.validate(None)?;
         let model_path = self.model_path();
         let input = self.derender_input()?;
         let w = self
@@ -397,9 +394,7 @@ impl WorkbenchApp {
             model_path,
             cached,
             input,
-            samples: self.state.derender.samples,
-            sampler: self.state.derender.sampler_kind(),
-            seed: self.state.derender.seed,
+            config: self.state.derender.config,
         };
         let cancel = Arc::new(AtomicBool::new(false));
         view.cancel = Some(cancel.clone());
@@ -445,7 +440,7 @@ impl WorkbenchApp {
             context,
             imprint: r.input.imprint.clone(),
             samples: r.samples.clone(),
-            seed: r.seed,
+            seed: r.config.seed,
         };
         raise_cancel(&mut view.cancel);
         let cancel = Arc::new(AtomicBool::new(false));

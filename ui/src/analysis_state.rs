@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 use tactile_derender::dataset::SplitName;
-use tactile_derender::model::{SamplerConfig, SamplerKind};
+use tactile_derender::pipeline::DerenderConfig;
 
 /// The dataset inspector's settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -56,15 +56,11 @@ pub enum DerenderInput {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DerenderSettings {
-    /// The sampler: the core's [`SamplerConfig`], the same settings and defaults as `tnd sample/eval/pose`
-    /// (stored flat in the session: `sampler`, `steps` — older sessions' `ddim_steps` is read too — `eta`,
-    /// `spacing`).
+    /// Samples, sampler and seed: the core's [`DerenderConfig`], the same settings and defaults as `tnd sample` and
+    /// `tnd pose` (stored flat in the session: `samples`, `seed`, `sampler`, `steps` — older sessions'
+    /// `ddim_steps` is read too — `eta`, `spacing`).
     #[serde(flatten)]
-    pub sampler: SamplerConfig,
-    /// Number of samples drawn for the imprint (the paper's uncertainty analysis uses 50).
-    pub samples: usize,
-    /// Seed of the sampler's noise.
-    pub seed: u64,
+    pub config: DerenderConfig,
     /// The input imprint.
     pub input: DerenderInput,
 }
@@ -72,29 +68,8 @@ pub struct DerenderSettings {
 impl Default for DerenderSettings {
     fn default() -> Self {
         Self {
-            sampler: SamplerConfig::default(),
-            samples: 8,
-            seed: 0,
+            config: DerenderConfig::default(),
             input: DerenderInput::Scene,
         }
-    }
-}
-
-impl DerenderSettings {
-    /// The core's sampler for these settings.
-    pub fn sampler_kind(&self) -> SamplerKind {
-        self.sampler.sampler_kind()
-    }
-
-    /// Check the numbers (sessions may carry anything).
-    pub fn validate(&self) -> Result<(), String> {
-        self.sampler.validate(None)?;
-        if !(1..=256).contains(&self.samples) {
-            return Err(format!(
-                "number of samples must be 1..=256, got {}",
-                self.samples
-            ));
-        }
-        Ok(())
     }
 }

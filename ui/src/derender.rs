@@ -7,14 +7,13 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Sender;
 use std::sync::Arc;
-use std::time::Instant;
 
 use anyhow::{anyhow, Result};
 use tactile_derender::image::Image;
 use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::metrics::{depth_metrics, DepthMetrics, DepthMetricsConfig};
-use tactile_derender::model::{DiffusionModel, ModelError, SamplerKind};
-use tactile_derender::pose::from_depth::{consensus_depth, contact_probability};
+use tactile_derender::model::DiffusionModel;
+use tactile_derender::pipeline::{self, DerenderConfig};
 
 use crate::worker::{JobKind, WorkerMsg};
 
@@ -140,9 +139,8 @@ pub struct RunRequest {
     /// The already loaded model, when it is the one at `model_path`.
     pub cached: Option<Arc<DiffusionModel>>,
     pub input: InputSource,
-    pub samples: usize,
-    pub sampler: SamplerKind,
-    pub seed: u64,
+    /// Samples, sampler and seed.
+    pub config: DerenderConfig,
 }
 
 /// A finished run.
@@ -165,34 +163,12 @@ pub struct RunResult {
     pub scores: Vec<DepthMetrics>,
     /// Sampler wall time, seconds.
     pub seconds: f64,
-    pub sampler: SamplerKind,
-    pub seed: u64,
+    /// The settings it ran with.
+    pub config: DerenderConfig,
 }
 
-/// Per-pixel mean and population standard deviation of equally sized images (`None` for an empty list).
-pub fn mean_std(samples: &[Image]) -> Option<(Image, Image)> {
-    let first = samples.first()?;
-    let (w, h) = (first.width, first.height);
-    let n = samples.len() as f64;
-    let mut mean = vec![0.0f64; w * h];
-    for s in samples {
-        for (m, &v) in mean.iter_mut().zip(&s.data) {
-            *m += f64::from(v) / n;
-        }
-    }
-    let mut var = vec![0.0f64; w * h];
-    for s in samples {
-        for ((q, &v), &m) in var.iter_mut().zip(&s.data).zip(&mean) {
-            let d = f64::from(v) - m;
-            *q += d * d / n;
-        }
-    }
-    let mean = Image::from_vec(w, h, mean.iter().map(|&v| v as f32).collect())?;
-    let std = Image::from_vec(w, h, var.iter().map(|&v| v.sqrt() as f32).collect())?;
-    Some((mean, std))
-}
-
-/// Load (unless cached), sample, and summarise one run; `cancel` stops it between steps.
+/// Load (unless cached), sample, and summarise one run ([`tactile_derender::pipeline::derender`], as `tnd sample`
+/// and `tnd pose` do); `cancel` stops it between steps.
 pub fn run(
     req: RunRequest,
     cancel: &AtomicBool,
@@ -203,39 +179,19 @@ pub fn run(
         Some(m) => m,
         None => Arc::new(DiffusionModel::load(&req.model_path)?),
     };
-    let (w, h) = model.resolution();
-    if (input.imprint.width, input.imprint.height) != (w, h) {
-        return Err(anyhow!(
-            "{}: the model works at {w}x{h} pixels but the imprint is {}x{} (set the sensor resolution to {w}x{h} \
-             or use a model trained at this resolution)",
-            req.model_path.display(),
-            input.imprint.width,
-            input.imprint.height
-        ));
-    }
-    let t0 = Instant::now();
-    let samples = model
-        .sample(
-            &input.imprint,
-            req.samples,
-            req.sampler,
-            req.seed,
-            &mut |done, total| {
-                progress(done, total);
-                !cancel.load(Ordering::Relaxed)
-            },
-        )
-        .map_err(|e| match e {
-            ModelError::Cancelled => anyhow!("cancelled"),
-            e => anyhow!("{e}"),
-        })?;
-    let seconds = t0.elapsed().as_secs_f64();
-    let (mean, std) =
-        mean_std(&samples).ok_or_else(|| anyhow!("the sampler returned no samples"))?;
-    let contact_probability = contact_probability(&samples)?;
-    let consensus = consensus_depth(&samples, EvalConfig::default().consensus_probability)?;
+    let out = pipeline::derender(
+        &model,
+        &input.imprint,
+        &req.config,
+        EvalConfig::default().consensus_probability,
+        &mut |done, total| {
+            progress(done, total);
+            !cancel.load(Ordering::Relaxed)
+        },
+    )?;
     let scores = match &input.truth {
-        Some(truth) => samples
+        Some(truth) => out
+            .samples
             .iter()
             .map(|s| depth_metrics(s, truth, &DepthMetricsConfig::default()))
             .collect::<Result<Vec<_>, _>>()?,
@@ -245,15 +201,14 @@ pub fn run(
         generation: req.generation,
         model,
         input,
-        samples,
-        mean,
-        std,
-        contact_probability,
-        consensus,
+        samples: out.samples,
+        mean: out.mean,
+        std: out.std,
+        contact_probability: out.contact_probability,
+        consensus: out.consensus,
         scores,
-        seconds,
-        sampler: req.sampler,
-        seed: req.seed,
+        seconds: out.seconds,
+        config: req.config,
     })
 }
 
@@ -292,19 +247,4 @@ pub fn spawn(
         })
         .map(|_| ())
         .map_err(|e| anyhow!("cannot start the de-rendering thread: {e}"))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn mean_and_std_of_known_images() {
-        let a = Image::from_vec(2, 1, vec![1.0, 0.0]).unwrap();
-        let b = Image::from_vec(2, 1, vec![3.0, 0.0]).unwrap();
-        let (m, s) = mean_std(&[a, b]).unwrap();
-        assert_eq!(m.data, vec![2.0, 0.0]);
-        assert_eq!(s.data, vec![1.0, 0.0]);
-        assert!(mean_std(&[]).is_none());
-    }
 }

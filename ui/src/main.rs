@@ -37,6 +37,15 @@ struct Args {
 
 fn main() -> Result<()> {
     let args = Args::parse();
+    // The model's process-wide settings, the same as `tnd`'s (before any thread starts); a variable the user set is
+    // kept.
+    let kernels = tactile_derender::model::kernels::KernelSettings::default();
+    for (name, value) in kernels.environment() {
+        if std::env::var_os(name).is_none() {
+            std::env::set_var(name, value);
+        }
+    }
+    kernels.apply_allocator_policy();
     let shooting = args.screenshot.is_some();
     let mut options = eframe::NativeOptions {
         renderer: eframe::Renderer::Wgpu,

@@ -1,7 +1,7 @@
-//! Pose estimation of a de-rendering run (paper IV.C, V.D) on a worker thread, with the evaluation stage: the object
-//! prepared for registration, a K-start registration of the first sample with contact (every hypothesis with its
-//! cost), then the uncertainty analysis ([`tactile_derender::uncertainty::analysis::analyse`]): every sample and the
-//! threshold baseline registered from that start, errors against the true pose, KDE curves.
+//! Pose estimation of a de-rendering run (paper IV.C, V.D) on a worker thread: the core's use case
+//! [`tactile_derender::pipeline::estimate_pose`] (the same as `tnd pose`: a K-start registration of the first sample
+//! with contact, then every sample, the threshold baseline and the multi-sample estimate registered from that start,
+//! errors against the true pose, KDE curves), plus what the Pose tab draws (the object's outline, contact points).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Sender;
@@ -9,16 +9,13 @@ use std::sync::Arc;
 
 use anyhow::{anyhow, Context, Result};
 use tactile_derender::image::Image;
-use tactile_derender::metrics::evaluate::{EvalConfig, EvalContext, EvalError, Evaluator};
-use tactile_derender::objects::{ObjectSet, Symmetry};
-use tactile_derender::pose::{threshold_contact, InitStrategy};
-use tactile_derender::recon::{back_project, is_valid_depth};
+use tactile_derender::metrics::evaluate::EvalConfig;
+use tactile_derender::pipeline::{self, PoseInput};
+use tactile_derender::recon::back_project;
 use tactile_derender::sim::Simulator;
-use tactile_derender::uncertainty::analysis::{analyse_with_progress, Signature};
 
 use crate::derender::PoseContext;
 use crate::pose_view::{outline, PoseAnalysis};
-use crate::state::ObjectSource;
 use crate::worker::{JobKind, WorkerMsg};
 
 /// One requested pose analysis.
@@ -32,8 +29,8 @@ pub struct PoseRequest {
     pub seed: u64,
 }
 
-/// Register the samples and the baseline (see the module docs), reporting `progress(done, total)` after each
-/// registration; `cancel` stops it at the next one.
+/// Register the samples and the baseline ([`pipeline::estimate_pose`], as `tnd pose` does), reporting
+/// `progress(done, total)` after each registration; `cancel` stops it at the next one.
 pub fn run(
     req: &PoseRequest,
     cancel: &AtomicBool,
@@ -41,95 +38,43 @@ pub fn run(
 ) -> Result<PoseAnalysis> {
     let c = &req.context;
     let sim = Simulator::new(c.sim.clone()).context("sensor configuration")?;
-    let (name, objects, mesh, symmetry) = match &c.object {
-        ObjectSource::Library { set, name } => {
-            let objects = ObjectSet::open(set)?;
-            let mesh = objects.mesh(name)?;
-            let symmetry = objects.find(name).map(|e| e.symmetry).unwrap_or_default();
-            (name.clone(), objects, mesh, symmetry)
-        }
-        // A mesh file has no symmetry entry; the context's object set is not used for it.
-        source @ ObjectSource::File { .. } => {
-            let object = crate::worker::load_object(source)?;
-            (
-                source.display_name(),
-                ObjectSet::builtin(),
-                object.mesh,
-                Symmetry::default(),
-            )
-        }
-    };
-    let ctx = EvalContext {
-        intrinsics: *sim.intrinsics(),
-        membrane: sim.nominal_depth().clone(),
-        objects,
-    };
-    let evaluator = Evaluator::new(EvalConfig::default());
-    let object = evaluator.object_from_mesh(&name, &mesh, symmetry)?;
-    let with_contact: Vec<usize> = req
-        .samples
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.data.iter().any(|&d| is_valid_depth(d)))
-        .map(|(i, _)| i)
-        .collect();
-    let first = *with_contact
-        .first()
-        .ok_or_else(|| anyhow!("no sample has any contact; nothing to register"))?;
-    let strategy = InitStrategy::Random {
-        count: evaluator.config.inits,
-        radius_m: evaluator.config.init_radius_m,
-        seed: req.seed,
-    };
-    let hypotheses = evaluator
-        .register_depth(
-            &object,
-            &req.samples[first],
-            &ctx,
-            &c.t_world_camera,
-            &strategy,
-            req.seed,
-        )
-        .with_context(|| format!("registering sample {first}"))?
-        .unwrap_or_default();
-    // Step 1 of 1 + samples + baseline (+ the multi-sample estimate): the K-start search above; `analyse` reports
-    // the rest.
-    let total = 2 + req.samples.len() + usize::from(req.samples.len() > 1);
-    progress(1, total);
-    if cancel.load(Ordering::Relaxed) {
-        return Err(anyhow!("cancelled"));
-    }
-    let baseline = threshold_contact(&c.signature, &req.imprint, &evaluator.config.baseline);
-    let sig = Signature {
+    let object = c.object.spec().load()?;
+    let input = PoseInput {
         t_world_camera: c.t_world_camera,
         samples: &req.samples,
-        baseline: Some(&baseline),
+        imprint: &req.imprint,
+        signature: Some(&c.signature),
         truth: Some(c.truth),
-        init: hypotheses.first().map(|h| h.pose),
     };
-    let report =
-        analyse_with_progress(&evaluator, &object, &ctx, &sig, req.seed, &mut |done, _| {
-            progress(1 + done, total);
+    let estimate = pipeline::estimate_pose(
+        &object,
+        &sim,
+        &input,
+        &EvalConfig::default(),
+        req.seed,
+        &mut |done, total| {
+            progress(done, total);
             !cancel.load(Ordering::Relaxed)
-        })
-        .map_err(|e| match e {
-            EvalError::Cancelled => anyhow!("cancelled"),
-            e => anyhow!(e),
-        })?;
-    let contacts = back_project(&req.samples[first], &ctx.intrinsics, &c.t_world_camera)
-        .p_world
-        .iter()
-        .map(|p| [p.x, p.y])
-        .collect();
+        },
+    )?;
+    let contacts = back_project(
+        &req.samples[estimate.registered_sample],
+        sim.intrinsics(),
+        &c.t_world_camera,
+    )
+    .p_world
+    .iter()
+    .map(|p| [p.x, p.y])
+    .collect();
     Ok(PoseAnalysis {
-        object: name,
-        outline: outline(&mesh),
+        object: estimate.object,
+        outline: outline(&object.mesh),
         truth: Some(c.truth),
-        registered_sample: first,
-        hypotheses,
+        registered_sample: estimate.registered_sample,
+        hypotheses: estimate.hypotheses,
         contacts,
-        report,
-        sample_index: with_contact,
+        report: estimate.report,
+        sample_index: estimate.with_contact,
     })
 }
 

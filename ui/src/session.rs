@@ -56,7 +56,11 @@ pub fn validate(state: &State) -> Result<(), String> {
     let c = &state.calibration;
     tactile_derender::sim::calibration::inflation_values(c.lo, c.hi, c.steps)
         .map_err(|e| e.to_string())?;
-    state.derender.validate()?;
+    state
+        .derender
+        .config
+        .validate(None)
+        .map_err(|e| e.to_string())?;
     Ok(())
 }
 
@@ -106,7 +110,7 @@ mod tests {
         .unwrap();
         let s = read(&p).unwrap();
         assert_eq!(
-            s.derender.sampler,
+            s.derender.config.sampler,
             SamplerConfig {
                 kind: SamplerName::Ddim,
                 steps: 40,
@@ -114,7 +118,7 @@ mod tests {
                 spacing: TimestepSpacing::Leading
             }
         );
-        assert_eq!(s.derender.samples, 3);
+        assert_eq!(s.derender.config.samples, 3);
         // Written back with the shared names, and read the same.
         write(&p, &s).unwrap();
         let text = std::fs::read_to_string(&p).unwrap();

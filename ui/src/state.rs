@@ -68,6 +68,15 @@ pub enum ObjectSource {
 }
 
 impl ObjectSource {
+    /// The core's description of this object, which loads it as `tnd` does.
+    pub fn spec(&self) -> tactile_derender::pipeline::ObjectSpec {
+        use tactile_derender::pipeline::ObjectSpec;
+        match self {
+            Self::Library { set, name } => ObjectSpec::library(set, name),
+            Self::File { path, units } => ObjectSpec::file(path, *units),
+        }
+    }
+
     /// Short name for display.
     pub fn display_name(&self) -> String {
         match self {

@@ -11,8 +11,6 @@ use std::time::Instant;
 
 use anyhow::{anyhow, Context, Result};
 use tactile_derender::image::Image;
-use tactile_derender::mesh::{self, LoadOptions};
-use tactile_derender::objects::ObjectSet;
 use tactile_derender::sensor::Scene;
 use tactile_derender::sim::calibration::{self, MeasuredImprint, SweepPoint};
 use tactile_derender::sim::{PreparedObject, SimConfig, SimOutput, Simulator};
@@ -106,19 +104,9 @@ pub struct SimResult {
     pub t_world_camera: glam::DAffine3,
 }
 
-/// Load the object mesh named by `source` in its resting pose.
+/// Load the object mesh named by `source` in its resting pose (as `tnd` does: [`ObjectSource::spec`]).
 pub fn load_object(source: &ObjectSource) -> Result<PreparedObject> {
-    let mesh = match source {
-        ObjectSource::Library { set, name } => ObjectSet::open(set)?.mesh(name)?,
-        ObjectSource::File { path, units } => {
-            let options = LoadOptions {
-                units: *units,
-                fit_to_size: None,
-            };
-            mesh::load(path, &options)?.rest_on_table()
-        }
-    };
-    Ok(PreparedObject::new(mesh)?)
+    Ok(PreparedObject::new(source.spec().load()?.mesh)?)
 }
 
 /// The scene (object pose, sensor pose pressing the object) of `state` for a prepared simulator and object.

@@ -232,9 +232,9 @@ fn de_rendering_a_dataset_pair_with_a_tiny_model_matches_the_core_sampler() {
     h.get_by_label("Use checkpoint").click();
     h.run_ok();
     let mut d = h.state().state.derender.clone();
-    d.sampler.steps = 4;
-    d.samples = 3;
-    d.seed = 7;
+    d.config.sampler.steps = 4;
+    d.config.samples = 3;
+    d.config.seed = 7;
     h.state_mut()
         .apply(tnd_workbench::command::Command::SetDerender(d));
     h.run_ok();
@@ -308,8 +308,8 @@ fn a_long_run_can_be_cancelled_and_a_bad_checkpoint_shows_an_error() {
     let model_path = tiny_model(dir.path());
     let mut state = State::default();
     state.view.tab = Tab::Derender;
-    state.derender.sampler.kind = tnd_workbench::state::SamplerName::Ddpm;
-    state.derender.samples = 16;
+    state.derender.config.sampler.kind = tnd_workbench::state::SamplerName::Ddpm;
+    state.derender.config.samples = 16;
     state.model.path = Some(model_path);
     let mut h = harness(WorkbenchApp::with_state(state));
     wait_for(&mut h, "the simulation", |a| a.sim.is_some());
@@ -383,8 +383,8 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     type_into(&mut h, "checkpoint", &model_path.display().to_string());
     h.get_by_label("Use checkpoint").click();
     let mut d = h.state().state.derender.clone();
-    d.sampler.steps = 2;
-    d.samples = 4;
+    d.config.sampler.steps = 2;
+    d.config.samples = 4;
     h.state_mut()
         .apply(tnd_workbench::command::Command::SetDerender(d));
     h.get_by_label("Run de-rendering").click();
@@ -554,8 +554,8 @@ fn an_imported_measurement_is_de_rendered_without_scores() {
     let mut state = State::default();
     state.view.tab = Tab::Derender;
     state.model.path = Some(model_path.clone());
-    state.derender.sampler.steps = 2;
-    state.derender.samples = 2;
+    state.derender.config.sampler.steps = 2;
+    state.derender.config.samples = 2;
     let mut h = harness(WorkbenchApp::with_state(state));
     h.run_ok();
     type_into(&mut h, "measurement", &npy.display().to_string());

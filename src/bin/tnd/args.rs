@@ -2,10 +2,9 @@
 
 use std::path::PathBuf;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, Result};
 use clap::Args;
-use tactile_derender::mesh::{self, LoadOptions, Mesh, Units};
-use tactile_derender::objects::ObjectSet;
+use tactile_derender::mesh::Units;
 use tactile_derender::sensor::camera::parse_resolution;
 use tactile_derender::sim::SimConfig;
 
@@ -71,51 +70,13 @@ impl SensorArgs {
     }
 }
 
-/// Which object to use: a name from an object set, or a mesh file.
-#[derive(Args, Clone, Debug)]
-pub struct ObjectArgs {
-    /// Object name from the object set, or a path to a mesh file (OBJ, STL, PLY, glTF/GLB).
-    #[arg(long)]
-    pub object: String,
-    /// Object set: "builtin" or a directory with objects.json.
-    #[arg(long, default_value = "builtin")]
-    pub objects: String,
-    /// Units of a mesh file given by path (m, cm, mm or metres per unit).
-    #[arg(long, default_value = "m")]
-    pub units: String,
-    /// Scale a mesh file so that its largest extent is this many metres.
-    #[arg(long)]
-    pub fit_size: Option<f64>,
-}
-
-impl ObjectArgs {
-    /// The object's name and its mesh in the resting pose.
-    pub fn load(&self) -> Result<(String, Mesh)> {
-        let set = ObjectSet::open(&self.objects)?;
-        if set.find(&self.object).is_some() {
-            let mesh = set.mesh(&self.object)?;
-            return Ok((self.object.clone(), mesh));
-        }
-        let path = PathBuf::from(&self.object);
-        if path.extension().is_some() || path.exists() {
-            let options = LoadOptions {
-                units: self.units.parse::<Units>()?,
-                fit_to_size: self.fit_size,
-            };
-            let mesh = mesh::load(&path, &options)?.rest_on_table();
-            let name = path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| self.object.clone());
-            return Ok((name, mesh));
-        }
-        let names: Vec<&str> = set.entries().iter().map(|e| e.name.as_str()).collect();
-        Err(anyhow!(
-            "unknown object '{}': not in the {} set ({}) and not a mesh file",
-            self.object,
-            self.objects,
-            names.join(", ")
-        ))
-        .context("--object")
+/// A progress callback for the library's use cases ([`tactile_derender::pipeline::Progress`]) drawing `bar`: it sets
+/// the total it is told and never cancels.
+pub fn bar_progress(bar: &mut kdam::Bar) -> impl FnMut(usize, usize) -> bool + '_ {
+    use kdam::BarExt;
+    move |done, total| {
+        bar.total = total;
+        let _ = bar.update_to(done);
+        true
     }
 }

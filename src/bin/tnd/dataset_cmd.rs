@@ -28,6 +28,7 @@ pub enum DatasetCommand {
     Import(Box<ImportArgs>),
     /// Counts per split and object, depth/imprint ranges and a contact-area histogram.
     Stats {
+        /// Dataset directory (`tnd dataset gen` or `tnd dataset import`).
         dir: PathBuf,
         /// Print one JSON object instead of text.
         #[arg(long)]
@@ -38,6 +39,7 @@ pub enum DatasetCommand {
     },
     /// Write one pair as a PNG: imprint, signature, target and mask with colour bars in mm, and its metadata.
     Show {
+        /// Dataset directory (`tnd dataset gen` or `tnd dataset import`).
         dir: PathBuf,
         /// Index of the pair within its split.
         #[arg(long)]

@@ -2,9 +2,6 @@
 
 mod args;
 mod bench;
-mod bench_gemm;
-mod bench_pose;
-mod bench_unet;
 mod dataset_cmd;
 mod eval_cmd;
 mod model_cmd;
@@ -48,8 +45,14 @@ enum Command {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    tactile_derender::model::alloc::keep_freed_memory();
-    tactile_derender::model::alloc::prefer_inline_elementwise();
+    // The model's process-wide settings, the same as the workbench's; a variable the user set is kept.
+    let kernels = tactile_derender::model::kernels::KernelSettings::default();
+    for (name, value) in kernels.environment() {
+        if std::env::var_os(name).is_none() {
+            std::env::set_var(name, value);
+        }
+    }
+    kernels.apply_allocator_policy();
     let result = match cli.command {
         Command::Sim(a) => sim_cmd::run(*a),
         Command::Objects(a) => objects_cmd::run(a),
@@ -67,5 +70,36 @@ fn main() -> std::process::ExitCode {
             eprintln!("error: {}", tactile_derender::error::render_anyhow(&e));
             std::process::ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// Every subcommand says what it does and every flag what it means (clap's `--help`).
+    #[test]
+    fn every_command_and_flag_has_help_text() {
+        fn walk(cmd: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for a in cmd.get_arguments() {
+                let id = a.get_id().as_str();
+                if id == "help" || id == "version" {
+                    continue;
+                }
+                if a.get_help().is_none() && a.get_long_help().is_none() {
+                    missing.push(format!("{path}: --{id}"));
+                }
+            }
+            for s in cmd.get_subcommands() {
+                let sub = format!("{path} {}", s.get_name());
+                if s.get_name() != "help" && s.get_about().is_none() {
+                    missing.push(format!("{sub}: no description"));
+                }
+                walk(s, &sub, missing);
+            }
+        }
+        let mut missing = Vec::new();
+        walk(&super::Cli::command(), "tnd", &mut missing);
+        assert!(missing.is_empty(), "without help text: {missing:#?}");
     }
 }

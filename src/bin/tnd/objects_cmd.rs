@@ -25,10 +25,14 @@ pub enum ObjectsCommand {
         objects: String,
     },
     /// Write the built-in set to DIR (OBJ meshes in metres + objects.json).
-    Export { dir: PathBuf },
+    Export {
+        /// Directory to write the meshes and objects.json into (created if missing).
+        dir: PathBuf,
+    },
     /// Report what a mesh file holds: shells, holes, non-manifold edges, volume, extent, and a unit warning when the
     /// size is implausible for a pressed object (e.g. a millimetre file read as metres).
     Check {
+        /// The mesh file (OBJ, STL, PLY, glTF/GLB).
         mesh: PathBuf,
         /// Units of the file: m, cm, mm or metres per file unit.
         #[arg(long, default_value = "m")]
@@ -37,6 +41,7 @@ pub enum ObjectsCommand {
     /// Turn a folder of meshes (.obj, .stl, .ply, .gltf, .glb) into an object set: writes DIR/objects.json with each file's units (or
     /// a scale-to-fit), closedness report and a symmetry guess to check and edit.
     Import {
+        /// The folder of mesh files; objects.json is written into it.
         dir: PathBuf,
         /// Units of the files (default: metres, or the plausible unit when a file's size says otherwise).
         #[arg(long)]
@@ -55,6 +60,7 @@ pub enum ObjectsCommand {
     /// polytopes, blobs, rocks, extrusions with chamfered or filleted rims, lying profiles, unions of primitives,
     /// thin fins and blocks with small bumps, plus (by default) the built-in catalogue.
     Generate {
+        /// Directory to write the meshes and objects.json into (created if missing).
         dir: PathBuf,
         /// Number of procedural objects.
         #[arg(long, default_value_t = ProceduralConfig::default().count)]

@@ -1,9 +1,10 @@
 //! `tnd sample`: de-render one imprint — N samples of the in-contact depth X0 in one batched reverse-diffusion run,
-//! written as `.npy` (metres) with their per-pixel mean and standard deviation and a PNG grid.
+//! written as `.npy` (metres) with their per-pixel mean, standard deviation and contact probability and a PNG grid
+//! ([`tactile_derender::pipeline::derender`], the same use case as the workbench's De-render tab).
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
 use image::RgbImage;
 use kdam::BarExt;
@@ -11,7 +12,9 @@ use serde_json::json;
 use tactile_derender::image::Image;
 use tactile_derender::io::preview::{render_panel, save_png, side_by_side, PanelStyle};
 use tactile_derender::io::{npy, write_atomic};
-use tactile_derender::model::{DiffusionModel, SamplerConfig};
+use tactile_derender::metrics::evaluate::EvalConfig;
+use tactile_derender::model::DiffusionModel;
+use tactile_derender::pipeline::{self, DerenderConfig};
 
 #[derive(Args, Debug)]
 pub struct SampleArgs {
@@ -21,14 +24,8 @@ pub struct SampleArgs {
     /// Imprint Y as a 2-D .npy array in metres, at the model's resolution.
     #[arg(long)]
     pub imprint: PathBuf,
-    /// Number of samples.
-    #[arg(long, default_value_t = 50)]
-    pub n: usize,
     #[command(flatten)]
-    pub sampler: SamplerConfig,
-    /// Seed of the initial noise and of DDPM's (or DDIM η > 0's) per-step noise: the same seed gives the same samples.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    pub derender: DerenderConfig,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
@@ -37,21 +34,18 @@ pub struct SampleArgs {
 pub fn run(a: SampleArgs) -> Result<()> {
     let model = DiffusionModel::load(&a.model)?;
     let imprint = npy::read_metres_image(&a.imprint)?;
-    a.sampler.validate(None).map_err(anyhow::Error::msg)?;
-    let kind = a.sampler.sampler_kind();
     let mut bar = kdam::tqdm!(desc = "sampling", unit = " steps");
-    let samples = model.sample(&imprint, a.n, kind, a.seed, &mut |i, total| {
-        bar.total = total;
-        let _ = bar.update_to(i);
-        true
-    })?;
+    let out = pipeline::derender(
+        &model,
+        &imprint,
+        &a.derender,
+        EvalConfig::default().consensus_probability,
+        &mut super::args::bar_progress(&mut bar),
+    )?;
     let _ = bar.refresh();
     eprintln!();
-    if samples.is_empty() {
-        bail!("--n must be at least 1");
-    }
-    let (w, h) = (samples[0].width, samples[0].height);
-    let (mean, std) = mean_std(&samples);
+    let samples = &out.samples;
+    let (w, h) = (imprint.width, imprint.height);
     std::fs::create_dir_all(&a.out).with_context(|| a.out.display().to_string())?;
     let all: Vec<f32> = samples
         .iter()
@@ -61,39 +55,27 @@ pub fn run(a: SampleArgs) -> Result<()> {
         &a.out.join("samples.npy"),
         &npy::encode_f32(&[samples.len(), h, w], &all),
     )?;
-    npy::write_image(&a.out.join("mean.npy"), &mean)?;
-    npy::write_image(&a.out.join("std.npy"), &std)?;
-    let grid = grid_png(&imprint, &samples, &mean, &std);
+    npy::write_image(&a.out.join("mean.npy"), &out.mean)?;
+    npy::write_image(&a.out.join("std.npy"), &out.std)?;
+    npy::write_image(
+        &a.out.join("contact_probability.npy"),
+        &out.contact_probability,
+    )?;
+    let grid = grid_png(&imprint, samples, &out.mean, &out.std);
     let png = a.out.join("grid.png");
     save_png(&png, &grid).with_context(|| png.display().to_string())?;
+    let kind = a.derender.sampler.sampler_kind();
     println!(
         "{}",
-        json!({"samples": samples.len(), "sampler": format!("{kind:?}"), "seed": a.seed, "out": a.out,
-            "mean_std_m": std.data.iter().map(|&v| f64::from(v)).sum::<f64>() / std.data.len() as f64})
+        json!({"samples": samples.len(), "sampler": format!("{kind:?}"), "seed": a.derender.seed, "out": a.out,
+            "seconds": out.seconds,
+            "mean_std_m": out.std.data.iter().map(|&v| f64::from(v)).sum::<f64>() / out.std.data.len() as f64})
     );
     Ok(())
 }
 
 fn write(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(path, bytes).with_context(|| path.display().to_string())
-}
-
-/// Per-pixel mean and (population) standard deviation.
-fn mean_std(samples: &[Image]) -> (Image, Image) {
-    let (w, h, n) = (samples[0].width, samples[0].height, samples.len() as f64);
-    let mut mean = Image::filled(w, h, 0.0);
-    let mut std = Image::filled(w, h, 0.0);
-    for i in 0..w * h {
-        let m = samples.iter().map(|s| f64::from(s.data[i])).sum::<f64>() / n;
-        let v = samples
-            .iter()
-            .map(|s| (f64::from(s.data[i]) - m).powi(2))
-            .sum::<f64>()
-            / n;
-        mean.data[i] = m as f32;
-        std.data[i] = v.sqrt() as f32;
-    }
-    (mean, std)
 }
 
 /// Rows of up to 8 panels: imprint, mean, std, then the first samples (at most 16).

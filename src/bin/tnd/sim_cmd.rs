@@ -10,12 +10,13 @@ use tactile_derender::io::{npy, preview};
 use tactile_derender::sensor::{Scene, Se2};
 use tactile_derender::sim::{PreparedObject, SimOutput, Simulator};
 
-use crate::args::{ObjectArgs, SensorArgs};
+use crate::args::SensorArgs;
+use tactile_derender::pipeline::ObjectSpec;
 
 #[derive(Args, Debug)]
 pub struct SimArgs {
     #[command(flatten)]
-    pub object: ObjectArgs,
+    pub object: ObjectSpec,
     /// Object pose on the table relative to the sensor axis: X,Y,THETA (metres, metres, radians).
     #[arg(long, default_value = "0,0,0", allow_hyphen_values = true)]
     pub pose: String,
@@ -69,7 +70,11 @@ pub fn run(a: SimArgs) -> Result<()> {
         ));
     }
     let config = a.sensor.sim_config()?;
-    let (name, mesh) = a.object.load()?;
+    let loaded = a.object.load()?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {w}");
+    }
+    let (name, mesh) = (loaded.name, loaded.mesh);
     let sim = Simulator::new(config)?;
     let object = PreparedObject::new(mesh)?;
     let scene = Scene {

@@ -18,7 +18,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     let mut d = app.state.derender.clone();
     ui.horizontal(|ui| {
         ui.label("sampler");
-        let s = &mut d.sampler;
+        let s = &mut d.config.sampler;
         ui.radio_value(&mut s.kind, SamplerName::Ddpm, "DDPM (all steps)")
             .on_hover_text(
                 "ancestral DDPM over all the model's training steps (the paper's sampler)",
@@ -46,8 +46,8 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
                 );
         });
         ui.separator();
-        ui.add(egui::Slider::new(&mut d.samples, 1..=64).text("samples"));
-        ui.add(egui::DragValue::new(&mut d.seed).prefix("seed "));
+        ui.add(egui::Slider::new(&mut d.config.samples, 1..=64).text("samples"));
+        ui.add(egui::DragValue::new(&mut d.config.seed).prefix("seed "));
     });
     ui.horizontal(|ui| {
         ui.label("input");
@@ -169,7 +169,7 @@ fn results(app: &mut WorkbenchApp, ui: &mut egui::Ui) {
         ui.weak("No samples yet: choose the input and press 'Run de-rendering'.");
         return;
     };
-    let sampler = match r.sampler {
+    let sampler = match r.config.sampler.sampler_kind() {
         tactile_derender::model::SamplerKind::Ddpm => "DDPM-250".to_string(),
         tactile_derender::model::SamplerKind::Ddim {
             steps,
@@ -181,7 +181,7 @@ fn results(app: &mut WorkbenchApp, ui: &mut egui::Ui) {
         "{} · {} samples · {sampler} · seed {} · {:.2} s ({})",
         r.input.label,
         r.samples.len(),
-        r.seed,
+        r.config.seed,
         r.seconds,
         r.model.source().display()
     ));

@@ -8,9 +8,9 @@ use clap::Args;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
-use tactile_derender::model::sgemm::{matmul_nt, GemmBackend, Init, PackedA, SMALL_DIM};
+use tactile_derender::model::kernels::sgemm::{matmul_nt, GemmBackend, Init, PackedA, SMALL_DIM};
 
-use crate::bench::median_time;
+use super::median_time;
 
 #[derive(Args, Debug)]
 pub struct GemmBenchArgs {

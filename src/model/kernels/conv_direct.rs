@@ -16,9 +16,9 @@
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
 
-use super::conv::ConvGeom;
 use super::conv_tiled::SendPtr;
 use super::sgemm::{matmul_nt_offsets, GemmBackend, Init, PackedA};
+use crate::model::conv::ConvGeom;
 
 /// Whether [`conv2d_direct`] computes a convolution of this geometry: stride 1, odd kernel, padding
 /// `(kernel − 1) / 2` on every side (the output has the input's size).
@@ -166,9 +166,9 @@ impl CustomOp3 for DirectConv {
         s3: &CpuStorage,
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
-        let x = super::contiguous_f32(s1, l1, "conv: input")?;
-        let w = super::contiguous_f32(s2, l2, "conv: weight")?;
-        let bias = super::contiguous_f32(s3, l3, "conv: bias")?;
+        let x = crate::model::contiguous_f32(s1, l1, "conv: input")?;
+        let w = crate::model::contiguous_f32(s2, l2, "conv: weight")?;
+        let bias = crate::model::contiguous_f32(s3, l3, "conv: bias")?;
         let (g, c) = Grid::new(l1.shape().dims(), self.kernel)?;
         let co = l2.shape().dims()[0];
         let kk = c * g.k * g.k;
@@ -252,9 +252,9 @@ impl CustomOp3 for DirectConvBackward {
         s3: &CpuStorage,
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
-        let x = super::contiguous_f32(s1, l1, "conv: input")?;
-        let w = super::contiguous_f32(s2, l2, "conv: weight")?;
-        let dy = super::contiguous_f32(s3, l3, "conv: output gradient")?;
+        let x = crate::model::contiguous_f32(s1, l1, "conv: input")?;
+        let w = crate::model::contiguous_f32(s2, l2, "conv: weight")?;
+        let dy = crate::model::contiguous_f32(s3, l3, "conv: output gradient")?;
         let (g, c) = Grid::new(l1.shape().dims(), self.kernel)?;
         let co = l2.shape().dims()[0];
         let (hw, kk, taps) = (g.h * g.w, c * g.k * g.k, g.k * g.k);
@@ -408,4 +408,85 @@ pub(super) fn sum_f64(v: &[f32]) -> f64 {
         acc[l] += f64::from(x);
     }
     acc.iter().sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::kernels::sgemm::GemmBackend;
+    use candle_core::{Device, Var};
+
+    fn rand_t(shape: &[usize], seed: u64) -> Tensor {
+        // Deterministic pseudo-random values in [-0.5, 0.5) (LCG), independent of candle's RNG.
+        let mut s = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let v: Vec<f32> = (0..shape.iter().product::<usize>())
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((s >> 33) as f32 / (1u64 << 31) as f32) - 0.5
+            })
+            .collect();
+        Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
+    }
+
+    fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
+        (a - b)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .max(0)
+            .unwrap()
+            .to_scalar()
+            .unwrap()
+    }
+
+    /// The direct convolution on the portable GEMM loop (CPUs without AVX-512, and 1-row products) against candle's
+    /// `conv2d`, values and gradients; the default test above covers the AVX-512 kernels where the CPU has them.
+    #[test]
+    fn direct_conv_portable_gemm_matches_candle() {
+        for (i, &(b, ci, co, h, w, k)) in
+            [(2, 3, 9, 6, 5, 3), (1, 8, 16, 12, 9, 1), (2, 4, 3, 5, 5, 5)]
+                .iter()
+                .enumerate()
+        {
+            let x = Var::from_tensor(&rand_t(&[b, ci, h, w], 40 + i as u64)).unwrap();
+            let kw = Var::from_tensor(&rand_t(&[co, ci, k, k], 50 + i as u64)).unwrap();
+            let bias = Var::from_tensor(&rand_t(&[co], 60 + i as u64)).unwrap();
+            let r = rand_t(&[b, co, h, w], 70 + i as u64);
+            let grads = |y: &Tensor| {
+                let g = (y * &r).unwrap().sum_all().unwrap().backward().unwrap();
+                [&x, &kw, &bias].map(|v| g.get(v).unwrap().clone())
+            };
+            let op = DirectConv {
+                kernel: k,
+                backend: GemmBackend::GemmCrate,
+            };
+            let ours = x
+                .as_tensor()
+                .apply_op3(kw.as_tensor(), bias.as_tensor(), op)
+                .unwrap();
+            let reference = x
+                .as_tensor()
+                .conv2d(kw.as_tensor(), k / 2, 1, 1, 1)
+                .unwrap()
+                .broadcast_add(&bias.as_tensor().reshape((1, co, 1, 1)).unwrap())
+                .unwrap();
+            let (go, gr) = (grads(&ours), grads(&reference));
+            for (what, a, b) in [
+                ("forward", &reference, &ours),
+                ("grad x", &gr[0], &go[0]),
+                ("grad w", &gr[1], &go[1]),
+                ("grad b", &gr[2], &go[2]),
+            ] {
+                let scale = max_abs(a, &a.zeros_like().unwrap()).max(1.0);
+                let err = max_abs(a, b);
+                assert!(err < 1e-5 * scale, "{what} case {i}: {err} (scale {scale})");
+            }
+        }
+    }
 }

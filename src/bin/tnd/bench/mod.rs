@@ -1,6 +1,10 @@
 //! `tnd bench`: benchmarks printing one JSON object per line, shaped like the peer scripts' records
 //! (`../shared/peers/`) so that both can be merged and compared (run them back to back: these machines drift).
 
+mod gemm;
+mod pose;
+mod unet;
+
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -28,11 +32,11 @@ pub enum BenchCommand {
     /// Ray casting (rays/s) and full synthetic pairs (pairs/s).
     Sim(SimBenchArgs),
     /// SE(2) registration from K starts: wall time and pose errors (optionally the peer's saved problem).
-    Pose(super::bench_pose::PoseBenchArgs),
+    Pose(pose::PoseBenchArgs),
     /// U-Net forward and training step against `../shared/peers/unet_torch.py`.
-    Unet(crate::bench_unet::UnetBenchArgs),
+    Unet(unet::UnetBenchArgs),
     /// The tiled convolution's three GEMM patterns, our AVX-512 kernels against the `gemm` crate (GFLOP/s).
-    Gemm(crate::bench_gemm::GemmBenchArgs),
+    Gemm(gemm::GemmBenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -57,9 +61,9 @@ pub struct SimBenchArgs {
 pub fn run(a: BenchArgs) -> Result<()> {
     match a.command {
         BenchCommand::Sim(s) => bench_sim(&s),
-        BenchCommand::Pose(p) => super::bench_pose::run(&p),
-        BenchCommand::Unet(u) => crate::bench_unet::run(&u),
-        BenchCommand::Gemm(g) => crate::bench_gemm::run(&g),
+        BenchCommand::Pose(p) => pose::run(&p),
+        BenchCommand::Unet(u) => unet::run(&u),
+        BenchCommand::Gemm(g) => gemm::run(&g),
     }
 }
 

@@ -23,7 +23,7 @@ use tactile_derender::recon::{back_project, free_space_points, FreeSpaceConfig};
 use tactile_derender::sensor::{Scene, Se2};
 use tactile_derender::sim::{PreparedObject, SimConfig, Simulator};
 
-use super::bench::median_time;
+use super::median_time;
 
 #[derive(Args, Debug)]
 pub struct PoseBenchArgs {

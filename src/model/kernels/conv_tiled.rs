@@ -11,8 +11,8 @@
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
 
-use super::conv::ConvGeom;
 use super::sgemm::{matmul_nt, Init, PackedA};
+use crate::model::conv::ConvGeom;
 
 /// Forward op on `(x [B,Cin,H,W], w [Cout,Cin,k,k], bias [Cout])`.
 #[derive(Clone, Copy, Debug)]
@@ -191,9 +191,9 @@ impl CustomOp3 for TiledConv {
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let g = self.geom;
-        let x = super::contiguous_f32(s1, l1, "conv: input")?;
-        let w = super::contiguous_f32(s2, l2, "conv: weight")?;
-        let bias = super::contiguous_f32(s3, l3, "conv: bias")?;
+        let x = crate::model::contiguous_f32(s1, l1, "conv: input")?;
+        let w = crate::model::contiguous_f32(s2, l2, "conv: weight")?;
+        let bias = crate::model::contiguous_f32(s3, l3, "conv: bias")?;
         let co = l2.shape().dims()[0];
         let d = Dims::new(l1.shape().dims(), g)?;
         if w.len() != co * d.k || bias.len() != co {
@@ -264,9 +264,9 @@ impl CustomOp3 for TiledConvBackward {
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let g = self.geom;
-        let x = super::contiguous_f32(s1, l1, "conv: input")?;
-        let w = super::contiguous_f32(s2, l2, "conv: weight")?;
-        let dy = super::contiguous_f32(s3, l3, "conv: output gradient")?;
+        let x = crate::model::contiguous_f32(s1, l1, "conv: input")?;
+        let w = crate::model::contiguous_f32(s2, l2, "conv: weight")?;
+        let dy = crate::model::contiguous_f32(s3, l3, "conv: output gradient")?;
         let co = l2.shape().dims()[0];
         let d = Dims::new(l1.shape().dims(), g)?;
         let hw = d.ho * d.wo;

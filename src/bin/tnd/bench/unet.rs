@@ -14,12 +14,12 @@ use rand_distr::StandardNormal;
 use serde_json::{json, Value};
 use tactile_derender::model::adam::Adam;
 use tactile_derender::model::checkpoint::{build, named_vars};
-use tactile_derender::model::conv::{set_conv_backend, ConvBackend};
+use tactile_derender::model::conv::ConvBackend;
 use tactile_derender::model::init::init_params;
-use tactile_derender::model::parallel_batch;
+use tactile_derender::model::kernels::parallel_batch;
 use tactile_derender::model::{NoiseSchedule, UNet2DConfig};
 
-use crate::bench::median_time;
+use super::median_time;
 
 #[derive(Args, Debug)]
 pub struct UnetBenchArgs {
@@ -91,7 +91,7 @@ fn randn(rng: &mut ChaCha8Rng, shape: (usize, usize, usize, usize)) -> Result<Te
 }
 
 pub fn run(a: &UnetBenchArgs) -> Result<()> {
-    set_conv_backend(match a.conv.as_str() {
+    let backend = match a.conv.as_str() {
         "candle" => ConvBackend::Candle,
         "im2col" => ConvBackend::Im2colGemm,
         "tiled" => ConvBackend::Tiled,
@@ -101,9 +101,10 @@ pub fn run(a: &UnetBenchArgs) -> Result<()> {
                 "--conv must be direct, tiled, im2col or candle, not '{other}'"
             ))
         }
-    });
+    };
     let cfg = peer_config(a.config.as_deref())?;
-    let vars = build(&cfg, &Device::Cpu)?;
+    let mut vars = build(&cfg, &Device::Cpu)?;
+    vars.unet.set_conv_backend(backend);
     init_params(&vars.varmap, 0)?;
     let params: usize = named_vars(&vars.varmap)
         .values()

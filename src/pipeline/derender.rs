@@ -1,0 +1,196 @@
+//! **De-render** one imprint (paper IV.B sampling): N samples of the in-contact depth X0 in one batched
+//! reverse-diffusion run, with what every front end shows beside them — the per-pixel mean and standard deviation,
+//! the contact probability and the samples' consensus (what the multi-sample pose registers).
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use super::{PipelineError, Progress};
+use crate::image::Image;
+use crate::model::{DiffusionModel, ModelError, SamplerConfig};
+use crate::pose::from_depth::{consensus_depth, contact_probability};
+
+/// Samples drawn per imprint unless asked otherwise: enough for the contact probability and the multi-sample pose
+/// (the paper's uncertainty KDEs use 50), few enough to stay interactive on a laptop CPU.
+pub const DEFAULT_SAMPLES: usize = 16;
+
+/// The most samples one run may draw (they are sampled as one batch).
+pub const MAX_SAMPLES: usize = 256;
+
+fn default_samples() -> usize {
+    DEFAULT_SAMPLES
+}
+
+/// How to de-render: how many samples, which sampler, which seed.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
+#[serde(default)]
+pub struct DerenderConfig {
+    /// Samples of the in-contact depth drawn for the imprint (1..=256).
+    #[arg(long, alias = "n", default_value_t = default_samples())]
+    pub samples: usize,
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub sampler: SamplerConfig,
+    /// Seed of the initial noise (and of DDPM's or DDIM η > 0's per-step noise) and of the registration starts:
+    /// the same seed gives the same samples and poses.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+impl Default for DerenderConfig {
+    fn default() -> Self {
+        Self {
+            samples: DEFAULT_SAMPLES,
+            sampler: SamplerConfig::default(),
+            seed: 0,
+        }
+    }
+}
+
+impl DerenderConfig {
+    /// Check the numbers (sessions and command lines may carry anything); `train_steps` is the model's T when known.
+    pub fn validate(&self, train_steps: Option<usize>) -> Result<(), PipelineError> {
+        self.sampler
+            .validate(train_steps)
+            .map_err(PipelineError::Settings)?;
+        if !(1..=MAX_SAMPLES).contains(&self.samples) {
+            return Err(PipelineError::Settings(format!(
+                "number of samples must be 1..={MAX_SAMPLES}, got {}",
+                self.samples
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The result of one de-rendering run (images in metres unless said otherwise).
+#[derive(Clone, Debug)]
+pub struct Derendered {
+    /// X̂0 samples.
+    pub samples: Vec<Image>,
+    /// Per-pixel mean of the samples.
+    pub mean: Image,
+    /// Per-pixel (population) standard deviation of the samples.
+    pub std: Image,
+    /// Per-pixel fraction of the samples in contact, 0..1.
+    pub contact_probability: Image,
+    /// Pixels at least `consensus_probability` of the samples mark as contact, at their median depth.
+    pub consensus: Image,
+    /// Sampler wall time, seconds.
+    pub seconds: f64,
+}
+
+/// Draw `config.samples` samples of X0 for `imprint` (metres, the model's resolution) and summarise them;
+/// `consensus_probability` is the share of samples a consensus pixel needs
+/// ([`crate::metrics::evaluate::EvalConfig::consensus_probability`]).
+pub fn derender(
+    model: &DiffusionModel,
+    imprint: &Image,
+    config: &DerenderConfig,
+    consensus_probability: f64,
+    progress: Progress<'_>,
+) -> Result<Derendered, PipelineError> {
+    config.validate(Some(model.config().tactile_derender.num_train_timesteps))?;
+    let (w, h) = model.resolution();
+    if (imprint.width, imprint.height) != (w, h) {
+        return Err(PipelineError::Resolution {
+            model: model.source().to_path_buf(),
+            model_w: w,
+            model_h: h,
+            w: imprint.width,
+            h: imprint.height,
+        });
+    }
+    let t0 = Instant::now();
+    let samples = model
+        .sample(
+            imprint,
+            config.samples,
+            config.sampler.sampler_kind(),
+            config.seed,
+            progress,
+        )
+        .map_err(|e| match e {
+            ModelError::Cancelled => PipelineError::Cancelled,
+            e => e.into(),
+        })?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let (mean, std) = mean_std(&samples)
+        .ok_or_else(|| PipelineError::Settings("the sampler returned no samples".into()))?;
+    Ok(Derendered {
+        contact_probability: contact_probability(&samples)?,
+        consensus: consensus_depth(&samples, consensus_probability)?,
+        samples,
+        mean,
+        std,
+        seconds,
+    })
+}
+
+/// Per-pixel mean and population standard deviation of equally sized images (`None` for an empty list or images
+/// of different sizes).
+pub fn mean_std(samples: &[Image]) -> Option<(Image, Image)> {
+    let first = samples.first()?;
+    let (w, h) = (first.width, first.height);
+    if samples.iter().any(|s| (s.width, s.height) != (w, h)) {
+        return None;
+    }
+    let n = samples.len() as f64;
+    let mut mean = vec![0.0f64; w * h];
+    for s in samples {
+        for (m, &v) in mean.iter_mut().zip(&s.data) {
+            *m += f64::from(v) / n;
+        }
+    }
+    let mut var = vec![0.0f64; w * h];
+    for s in samples {
+        for ((q, &v), &m) in var.iter_mut().zip(&s.data).zip(&mean) {
+            let d = f64::from(v) - m;
+            *q += d * d / n;
+        }
+    }
+    let mean = Image::from_vec(w, h, mean.iter().map(|&v| v as f32).collect())?;
+    let std = Image::from_vec(w, h, var.iter().map(|&v| v.sqrt() as f32).collect())?;
+    Some((mean, std))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_and_std_of_known_images() {
+        let a = Image::from_vec(2, 1, vec![1.0, 0.0]).unwrap();
+        let b = Image::from_vec(2, 1, vec![3.0, 0.0]).unwrap();
+        let (m, s) = mean_std(&[a.clone(), b]).unwrap();
+        assert_eq!(m.data, vec![2.0, 0.0]);
+        assert_eq!(s.data, vec![1.0, 0.0]);
+        assert!(mean_std(&[]).is_none());
+        assert!(mean_std(&[a, Image::filled(1, 1, 0.0)]).is_none());
+    }
+
+    #[test]
+    fn settings_out_of_range_are_refused() {
+        let mut c = DerenderConfig::default();
+        assert!(c.validate(Some(250)).is_ok());
+        c.samples = 0;
+        assert!(c.validate(None).is_err());
+        c.samples = 4;
+        c.sampler.steps = 251;
+        assert!(c
+            .validate(Some(250))
+            .unwrap_err()
+            .to_string()
+            .contains("1..=250"));
+    }
+
+    #[test]
+    fn session_fields_stay_flat() {
+        let c: DerenderConfig = serde_json::from_str(
+            r#"{"samples": 3, "sampler": "ddim", "ddim_steps": 10, "seed": 7}"#,
+        )
+        .unwrap();
+        assert_eq!((c.samples, c.sampler.steps, c.seed), (3, 10, 7));
+    }
+}

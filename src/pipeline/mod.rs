@@ -1,0 +1,74 @@
+//! # Use cases: one pipeline, two front ends
+//!
+//! The steps a user runs, each as one function over one config struct, shared by the command line (`tnd`) and the
+//! workbench so that both do exactly the same work for the same settings (a test checks that their samples and poses
+//! are bit-identical):
+//!
+//! | use case | config | entry point |
+//! |---|---|---|
+//! | load the object a user names | [`ObjectSpec`] | [`ObjectSpec::load`] |
+//! | de-render: N samples of X0 for one imprint | [`DerenderConfig`] | [`derender()`] |
+//! | estimate the pose from the samples (one and many) | [`crate::metrics::evaluate::EvalConfig`] + seed | [`estimate_pose`] |
+//! | simulate a press | [`crate::sim::SimConfig`] | [`crate::sim::Simulator::simulate`] |
+//! | generate a dataset | [`crate::dataset::GenConfig`] | [`crate::dataset::gen::generate`] |
+//! | train | [`crate::model::train::TrainConfig`] | [`crate::model::train::train`] |
+//! | evaluate | [`crate::metrics::evaluate::EvalConfig`] | [`crate::metrics::evaluate::Evaluator::evaluate`] |
+//! | calibrate the inflation | a [`crate::sim::SimConfig`] and the inflations | [`crate::sim::calibration::sweep_inflation`] |
+//!
+//! Configs are serde (the workbench stores them in its session) and `clap::Args` (the CLI flattens them), with
+//! their defaults defined once. Long use cases take a [`Progress`] callback: it is told `(done, total)` after each
+//! step and returning `false` cancels the run ([`PipelineError::Cancelled`]).
+//!
+//! Layering: `pipeline` calls the stages (`mesh`, `objects`, `sim`, `model`, `pose`, `metrics`, `uncertainty`);
+//! no stage calls back up into it, and it never prints, draws or reads the environment.
+
+pub mod derender;
+pub mod object;
+pub mod pose;
+
+pub use derender::{derender, mean_std, DerenderConfig, Derendered};
+pub use object::{LoadedObject, ObjectSpec};
+pub use pose::{estimate_pose, PoseEstimate, PoseInput};
+
+use std::path::PathBuf;
+
+/// Progress of a long use case: called with `(done, total)` after each step; returning `false` cancels it.
+pub type Progress<'a> = &'a mut dyn FnMut(usize, usize) -> bool;
+
+/// Errors of the use cases: the stage's own error (kept as the source, said once by [`crate::error::render`]) or
+/// what the use case itself checks.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error(transparent)]
+    Mesh(#[from] crate::mesh::MeshError),
+    #[error(transparent)]
+    Object(#[from] crate::objects::ObjectError),
+    #[error(transparent)]
+    Sim(#[from] crate::sim::SimError),
+    #[error(transparent)]
+    Model(#[from] crate::model::ModelError),
+    #[error(transparent)]
+    Pose(#[from] crate::pose::PoseError),
+    #[error(transparent)]
+    Eval(#[from] crate::metrics::evaluate::EvalError),
+    #[error("unknown object '{name}': not in the {set} set ({known}) and not a mesh file")]
+    UnknownObject {
+        name: String,
+        set: String,
+        known: String,
+    },
+    #[error("{}: the model works at {model_w}x{model_h} pixels but the imprint is {w}x{h} (set the sensor resolution to {model_w}x{model_h} or use a model trained at this resolution)", model.display())]
+    Resolution {
+        model: PathBuf,
+        model_w: usize,
+        model_h: usize,
+        w: usize,
+        h: usize,
+    },
+    #[error("settings: {0}")]
+    Settings(String),
+    #[error("no sample has any contact; nothing to register")]
+    NoContact,
+    #[error("cancelled")]
+    Cancelled,
+}

@@ -1,0 +1,136 @@
+//! **Estimate the pose** of one signature from its de-rendered samples (paper IV.C registration, V.D uncertainty):
+//! a K-start registration of the first sample with contact (every hypothesis, best first), then the uncertainty
+//! analysis from that start ([`crate::uncertainty::analysis`]): every sample and the threshold baseline registered,
+//! the multi-sample estimate (the samples' consensus contact), errors against the true pose when it is known, KDEs.
+
+use glam::DAffine3;
+
+use super::{LoadedObject, PipelineError, Progress};
+use crate::image::Image;
+use crate::metrics::evaluate::{EvalConfig, EvalContext, EvalError, Evaluator};
+use crate::objects::ObjectSet;
+use crate::pose::{threshold_contact, Hypothesis, InitStrategy};
+use crate::recon::is_valid_depth;
+use crate::sensor::Se2;
+use crate::sim::Simulator;
+use crate::uncertainty::analysis::{analyse_with_progress, Signature};
+use crate::uncertainty::UncertaintyReport;
+
+/// What the sensor saw: the camera's pose, the generated samples and the imprint (metres).
+#[derive(Clone, Copy, Debug)]
+pub struct PoseInput<'a> {
+    /// `t_world_camera` of the sensor camera.
+    pub t_world_camera: DAffine3,
+    /// X̂0 samples of the generator.
+    pub samples: &'a [Image],
+    /// Y, the imprint (for the threshold baseline).
+    pub imprint: &'a Image,
+    /// S, the signature; without it there is no baseline.
+    pub signature: Option<&'a Image>,
+    /// The true pose `t_world_object`, when known (errors are then measured against it).
+    pub truth: Option<Se2>,
+}
+
+/// The pose of one signature, from one sample and from many.
+#[derive(Clone, Debug)]
+pub struct PoseEstimate {
+    /// The object's name.
+    pub object: String,
+    /// The K-start registration of sample `registered_sample`: every hypothesis, best first.
+    pub hypotheses: Vec<Hypothesis>,
+    /// The sample whose K-start registration gave the start of the others.
+    pub registered_sample: usize,
+    /// Indices of the samples with contact (the others cannot be registered).
+    pub with_contact: Vec<usize>,
+    /// Every sample's, the baseline's and the multi-sample estimate's pose and errors, with the KDEs.
+    pub report: UncertaintyReport,
+}
+
+impl PoseEstimate {
+    /// The single-sample estimate: the best hypothesis of the K-start registration.
+    pub fn best(&self) -> Option<Se2> {
+        self.hypotheses.first().map(|h| h.pose)
+    }
+}
+
+/// Register `input`'s samples to `object` seen by `sim`'s sensor (see the module docs). `progress` counts the
+/// K-start registration, every sample, the baseline and the multi-sample estimate.
+pub fn estimate_pose(
+    object: &LoadedObject,
+    sim: &Simulator,
+    input: &PoseInput<'_>,
+    config: &EvalConfig,
+    seed: u64,
+    progress: Progress<'_>,
+) -> Result<PoseEstimate, PipelineError> {
+    let ctx = EvalContext::of_simulator(sim, ObjectSet::builtin());
+    let evaluator = Evaluator::new(config.clone());
+    let model = evaluator.object_from_mesh(&object.name, &object.mesh, object.symmetry)?;
+    let with_contact: Vec<usize> = input
+        .samples
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.data.iter().any(|&d| is_valid_depth(d)))
+        .map(|(i, _)| i)
+        .collect();
+    let strategy = InitStrategy::Random {
+        count: config.inits,
+        radius_m: config.init_radius_m,
+        seed,
+    };
+    // The first sample with contact that registers gives the start; one that fails is skipped here (the analysis
+    // records it with the others).
+    let mut start = None;
+    let mut last_error = None;
+    for &i in &with_contact {
+        match evaluator.register_depth(
+            &model,
+            &input.samples[i],
+            &ctx,
+            &input.t_world_camera,
+            &strategy,
+            seed,
+        ) {
+            Ok(Some(h)) if !h.is_empty() => {
+                start = Some((i, h));
+                break;
+            }
+            Ok(_) => {}
+            Err(e) => last_error = Some(e),
+        }
+    }
+    let (registered_sample, hypotheses) = match (start, last_error) {
+        (Some(s), _) => s,
+        (None, Some(e)) => return Err(e.into()),
+        (None, None) => return Err(PipelineError::NoContact),
+    };
+    let multi = usize::from(input.samples.len() > 1);
+    let total = 2 + input.samples.len() + multi;
+    if !progress(1, total) {
+        return Err(PipelineError::Cancelled);
+    }
+    let baseline = input
+        .signature
+        .map(|s| threshold_contact(s, input.imprint, &config.baseline));
+    let sig = Signature {
+        t_world_camera: input.t_world_camera,
+        samples: input.samples,
+        baseline: baseline.as_ref(),
+        truth: input.truth,
+        init: hypotheses.first().map(|h| h.pose),
+    };
+    let report = analyse_with_progress(&evaluator, &model, &ctx, &sig, seed, &mut |done, _| {
+        progress(1 + done, total)
+    })
+    .map_err(|e| match e {
+        EvalError::Cancelled => PipelineError::Cancelled,
+        e => e.into(),
+    })?;
+    Ok(PoseEstimate {
+        object: object.name.clone(),
+        hypotheses,
+        registered_sample,
+        with_contact,
+        report,
+    })
+}
