@@ -1,5 +1,7 @@
-//! NumPy `.npy` files (format 1.0/2.0): float32 images are written little-endian, C order; reading accepts the
-//! common numeric dtypes and converts to `f32`, so users can hand us arrays from numpy without our code.
+//! NumPy `.npy` files (format 1.0/2.0/3.0): float32 images are written little-endian, C order; reading accepts what
+//! numpy writes every day — float16/32/64, bool, signed and unsigned 8- to 64-bit integers, either byte order, C or
+//! Fortran order — and converts to `f32` in C order, so users can hand us arrays from numpy without our code.
+//! Complex, string, object and structured dtypes are refused by name.
 
 use std::path::{Path, PathBuf};
 
@@ -17,7 +19,7 @@ pub enum NpyError {
     #[error("{path}: not a valid .npy file: {message}")]
     Format { path: PathBuf, message: String },
     #[error(
-        "{path}: unsupported dtype '{descr}' (use float32, float64, uint8, uint16, int16 or int32)"
+        "{path}: unsupported dtype '{descr}' (numeric arrays only: float16/32/64, bool, int8..int64, uint8..uint64)"
     )]
     Dtype { path: PathBuf, descr: String },
     #[error("{path}: expected a 2-D array (H, W) or (1, H, W), found shape {shape:?}")]
@@ -108,9 +110,9 @@ pub fn read_metres_image(path: &Path) -> Result<Image, NpyError> {
         path: path.to_path_buf(),
         message,
     };
-    if !matches!(a.descr.as_str(), "<f4" | "<f8") {
+    if !is_float(&a.descr) {
         return Err(units(format!(
-            "integer array ({}); images here are float metres — if it holds millimetres, save              np.asarray(a, np.float32) / 1000",
+            "integer array ({}); images here are float metres — if it holds millimetres, save np.asarray(a, np.float32) / 1000",
             a.descr
         )));
     }
@@ -121,7 +123,7 @@ pub fn read_metres_image(path: &Path) -> Result<Image, NpyError> {
         .fold(0.0f32, |m, v| m.max(v.abs()));
     if largest > PLAUSIBLE_METRES {
         return Err(units(format!(
-            "values up to {largest}: images here are metres, and no depth of a tactile sensor is that large —              millimetres? divide by 1000"
+            "values up to {largest}: images here are metres, and no depth of a tactile sensor is that large — millimetres? divide by 1000"
         )));
     }
     image_of(path, a)
@@ -199,11 +201,7 @@ pub fn decode(bytes: &[u8]) -> Result<NpyArray, NpyError> {
     let header = std::str::from_utf8(header).map_err(|_| fmt("header is not text"))?;
     let descr = dict_value(header, "descr").ok_or_else(|| fmt("header has no 'descr'"))?;
     let descr = descr.trim_matches(|c| c == '\'' || c == '"').to_string();
-    if dict_value(header, "fortran_order").is_some_and(|v| v.starts_with("True")) {
-        return Err(fmt(
-            "Fortran-order arrays are not supported; save with np.ascontiguousarray",
-        ));
-    }
+    let fortran = dict_value(header, "fortran_order").is_some_and(|v| v.starts_with("True"));
     let shape_s = dict_value(header, "shape").ok_or_else(|| fmt("header has no 'shape'"))?;
     let shape: Vec<usize> = shape_s
         .trim_matches(|c| c == '(' || c == ')')
@@ -222,22 +220,10 @@ pub fn decode(bytes: &[u8]) -> Result<NpyArray, NpyError> {
             ))
         })?;
     let body = &bytes[start + header_len..];
-    let (size, conv): (usize, fn(&[u8]) -> f32) = match descr.as_str() {
-        "<f4" => (4, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-        "<f8" => (8, |b| {
-            f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) as f32
-        }),
-        "|u1" | "<u1" => (1, |b| f32::from(b[0])),
-        "<u2" => (2, |b| f32::from(u16::from_le_bytes([b[0], b[1]]))),
-        "<i2" => (2, |b| f32::from(i16::from_le_bytes([b[0], b[1]]))),
-        "<i4" => (4, |b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f32),
-        _ => {
-            return Err(NpyError::Dtype {
-                path: PathBuf::new(),
-                descr,
-            })
-        }
-    };
+    let (size, conv) = converter(&descr).ok_or_else(|| NpyError::Dtype {
+        path: PathBuf::new(),
+        descr: descr.clone(),
+    })?;
     let needed = count.checked_mul(size);
     if needed != Some(body.len()) {
         return Err(fmt(&format!(
@@ -250,8 +236,102 @@ pub fn decode(bytes: &[u8]) -> Result<NpyArray, NpyError> {
             )
         )));
     }
-    let data = body.chunks_exact(size).map(conv).collect();
+    let data: Vec<f32> = body.chunks_exact(size).map(conv).collect();
+    let data = if fortran && shape.len() > 1 {
+        fortran_to_c(&shape, &data)
+    } else {
+        data
+    };
     Ok(NpyArray { shape, data, descr })
+}
+
+/// Whether a dtype holds floating-point values (metres may be stored in any of them).
+fn is_float(descr: &str) -> bool {
+    matches!(descr.get(1..), Some("f2" | "f4" | "f8"))
+}
+
+/// Element size and conversion to `f32` of a numpy dtype string (`<f4`, `>i8`, `|b1`, …); `None` if not numeric.
+fn converter(descr: &str) -> Option<(usize, fn(&[u8]) -> f32)> {
+    fn arr<const N: usize>(b: &[u8], big: bool) -> [u8; N] {
+        let mut a = [0u8; N];
+        a.copy_from_slice(&b[..N]);
+        if big {
+            a.reverse();
+        }
+        a
+    }
+    // `get`, not slicing: a malformed header may start the dtype with a multi-byte character.
+    let (order, kind) = (descr.get(..1)?, descr.get(1..)?);
+    let big = match order {
+        "<" | "|" | "=" => false,
+        ">" => true,
+        _ => return None,
+    };
+    Some(match (kind, big) {
+        ("b1", _) => (1, |b| f32::from(u8::from(b[0] != 0))),
+        ("u1", _) => (1, |b| f32::from(b[0])),
+        ("i1", _) => (1, |b| f32::from(b[0] as i8)),
+        ("f2", false) => (2, |b| f16_to_f32(u16::from_le_bytes(arr(b, false)))),
+        ("f2", true) => (2, |b| f16_to_f32(u16::from_le_bytes(arr(b, true)))),
+        ("u2", false) => (2, |b| f32::from(u16::from_le_bytes(arr(b, false)))),
+        ("u2", true) => (2, |b| f32::from(u16::from_le_bytes(arr(b, true)))),
+        ("i2", false) => (2, |b| f32::from(i16::from_le_bytes(arr(b, false)))),
+        ("i2", true) => (2, |b| f32::from(i16::from_le_bytes(arr(b, true)))),
+        ("f4", false) => (4, |b| f32::from_le_bytes(arr(b, false))),
+        ("f4", true) => (4, |b| f32::from_le_bytes(arr(b, true))),
+        ("u4", false) => (4, |b| u32::from_le_bytes(arr(b, false)) as f32),
+        ("u4", true) => (4, |b| u32::from_le_bytes(arr(b, true)) as f32),
+        ("i4", false) => (4, |b| i32::from_le_bytes(arr(b, false)) as f32),
+        ("i4", true) => (4, |b| i32::from_le_bytes(arr(b, true)) as f32),
+        ("f8", false) => (8, |b| f64::from_le_bytes(arr(b, false)) as f32),
+        ("f8", true) => (8, |b| f64::from_le_bytes(arr(b, true)) as f32),
+        ("u8", false) => (8, |b| u64::from_le_bytes(arr(b, false)) as f32),
+        ("u8", true) => (8, |b| u64::from_le_bytes(arr(b, true)) as f32),
+        ("i8", false) => (8, |b| i64::from_le_bytes(arr(b, false)) as f32),
+        ("i8", true) => (8, |b| i64::from_le_bytes(arr(b, true)) as f32),
+        _ => return None,
+    })
+}
+
+/// IEEE 754 half precision to single (exact: every half is a single).
+fn f16_to_f32(h: u16) -> f32 {
+    let sign = u32::from(h >> 15) << 31;
+    let exp = u32::from((h >> 10) & 0x1f);
+    let frac = u32::from(h & 0x3ff);
+    let bits = match (exp, frac) {
+        (0, 0) => sign,
+        (0, f) => {
+            // Subnormal: f · 2^-24.
+            let v = f as f32 * f32::from_bits(0x3380_0000);
+            return if sign != 0 { -v } else { v };
+        }
+        (0x1f, 0) => sign | 0x7f80_0000,
+        (0x1f, f) => sign | 0x7fc0_0000 | (f << 13),
+        (e, f) => sign | ((e + 127 - 15) << 23) | (f << 13),
+    };
+    f32::from_bits(bits)
+}
+
+/// Reorder a Fortran-order (first index fastest) array of `shape` to C order (last index fastest).
+fn fortran_to_c(shape: &[usize], data: &[f32]) -> Vec<f32> {
+    let mut f_stride = vec![1usize; shape.len()];
+    for k in 1..shape.len() {
+        f_stride[k] = f_stride[k - 1] * shape[k - 1];
+    }
+    let mut index = vec![0usize; shape.len()];
+    let mut out = Vec::with_capacity(data.len());
+    for _ in 0..data.len() {
+        let src: usize = index.iter().zip(&f_stride).map(|(i, s)| i * s).sum();
+        out.push(data[src]);
+        for k in (0..shape.len()).rev() {
+            index[k] += 1;
+            if index[k] < shape[k] {
+                break;
+            }
+            index[k] = 0;
+        }
+    }
+    out
 }
 
 /// The text after `'key':` in a numpy header dict, up to the next top-level comma.
@@ -311,6 +391,76 @@ mod tests {
         }
         let a = decode(&u2).unwrap();
         assert_eq!((a.shape, a.data), (vec![1, 2], vec![7.0, 65535.0]));
+    }
+
+    fn with_header(descr: &str, header_shape: &str, fortran: bool, body: &[u8]) -> Vec<u8> {
+        let dict = format!(
+            "{{'descr': '{descr}', 'fortran_order': {}, 'shape': {header_shape}, }}",
+            if fortran { "True" } else { "False" }
+        );
+        let mut h = dict.into_bytes();
+        while (10 + h.len() + 1) % 64 != 0 {
+            h.push(b' ');
+        }
+        h.push(b'\n');
+        let mut out = b"\x93NUMPY\x01\x00".to_vec();
+        out.extend_from_slice(&(h.len() as u16).to_le_bytes());
+        out.extend_from_slice(&h);
+        out.extend_from_slice(body);
+        out
+    }
+
+    #[test]
+    fn reads_what_numpy_writes_every_day() {
+        // np.asfortranarray([[1, 2, 3], [4, 5, 6]], '<f4'): memory holds the columns, 1 4 2 5 3 6.
+        let body: Vec<u8> = [1.0f32, 4.0, 2.0, 5.0, 3.0, 6.0]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let a = decode(&with_header("<f4", "(2, 3)", true, &body)).unwrap();
+        assert_eq!(a.data, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        // A 3-D Fortran array (2, 2, 2): element [i, j, k] sits at i + 2j + 4k.
+        let body: Vec<u8> = (0..8u8).collect();
+        let a = decode(&with_header("|u1", "(2, 2, 2)", true, &body)).unwrap();
+        assert_eq!(a.data, vec![0.0, 4.0, 2.0, 6.0, 1.0, 5.0, 3.0, 7.0]);
+        // float16 bit patterns (IEEE 754): 1, -2, 65504 (largest), 2^-24 (smallest subnormal), 1/3 rounded, -0.
+        let halves = [0x3c00u16, 0xc000, 0x7bff, 0x0001, 0x3555, 0x8000];
+        let body: Vec<u8> = halves.iter().flat_map(|h| h.to_le_bytes()).collect();
+        let a = decode(&with_header("<f2", "(6,)", false, &body)).unwrap();
+        let want = [1.0f32, -2.0, 65504.0, 2f32.powi(-24), 0.333_251_95, -0.0];
+        assert_eq!(a.data, want);
+        assert!(a.data[5].is_sign_negative());
+        let inf = decode(&with_header("<f2", "(1,)", false, &0x7c00u16.to_le_bytes())).unwrap();
+        assert_eq!(inf.data, vec![f32::INFINITY]);
+        // bool, int64 and big-endian float64.
+        let a = decode(&with_header("|b1", "(3,)", false, &[0, 1, 0])).unwrap();
+        assert_eq!(a.data, vec![0.0, 1.0, 0.0]);
+        let body: Vec<u8> = [-3i64, 1 << 40]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let a = decode(&with_header("<i8", "(2,)", false, &body)).unwrap();
+        assert_eq!(a.data, vec![-3.0, (1u64 << 40) as f32]);
+        let a = decode(&with_header(">f8", "(1,)", false, &0.25f64.to_be_bytes())).unwrap();
+        assert_eq!(a.data, vec![0.25]);
+        // Complex and strings are refused by name.
+        let err = decode(&with_header("<c8", "(1,)", false, &[0; 8])).unwrap_err();
+        assert!(err.to_string().contains("'<c8'"), "{err}");
+        assert!(decode(&with_header("<U4", "(1,)", false, &[0; 16])).is_err());
+    }
+
+    #[test]
+    fn metre_images_take_any_float_width() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("imprint.npy");
+        // 0.01 m in float16 is 0x211F (0.010002136…, numpy).
+        std::fs::write(
+            &p,
+            with_header("<f2", "(1, 1)", false, &0x211fu16.to_le_bytes()),
+        )
+        .unwrap();
+        let img = read_metres_image(&p).unwrap();
+        assert!((img.data[0] - 0.01).abs() < 1e-5, "{:?}", img.data);
     }
 
     #[test]
