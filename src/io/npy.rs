@@ -245,13 +245,16 @@ pub fn decode(bytes: &[u8]) -> Result<NpyArray, NpyError> {
     Ok(NpyArray { shape, data, descr })
 }
 
+/// Reads one element from its bytes.
+type ElementToF32 = fn(&[u8]) -> f32;
+
 /// Whether a dtype holds floating-point values (metres may be stored in any of them).
 fn is_float(descr: &str) -> bool {
     matches!(descr.get(1..), Some("f2" | "f4" | "f8"))
 }
 
 /// Element size and conversion to `f32` of a numpy dtype string (`<f4`, `>i8`, `|b1`, …); `None` if not numeric.
-fn converter(descr: &str) -> Option<(usize, fn(&[u8]) -> f32)> {
+fn converter(descr: &str) -> Option<(usize, ElementToF32)> {
     fn arr<const N: usize>(b: &[u8], big: bool) -> [u8; N] {
         let mut a = [0u8; N];
         a.copy_from_slice(&b[..N]);
