@@ -41,6 +41,22 @@ pub enum EvalError {
     Object(#[from] ObjectError),
     #[error(transparent)]
     Metrics(#[from] MetricsError),
+    #[error(transparent)]
+    Dataset(#[from] crate::dataset::DatasetError),
+    #[error(transparent)]
+    Mesh(#[from] crate::mesh::MeshError),
+    #[error("generator {}: {source}", model.display())]
+    Model {
+        model: std::path::PathBuf,
+        #[source]
+        source: crate::model::ModelError,
+    },
+    #[error("{}: sensor configuration: {source}", dir.display())]
+    Sensor {
+        dir: std::path::PathBuf,
+        #[source]
+        source: crate::sim::SimError,
+    },
     #[error("cancelled")]
     Cancelled,
 }

@@ -26,6 +26,9 @@ impl Generator for ModelGenerator {
     fn generate(&self, pair: &EvalPair, n: usize, seed: u64) -> Result<Vec<Image>, EvalError> {
         self.model
             .sample(&pair.imprint, n, self.sampler, seed, &mut |_, _| true)
-            .map_err(|e| EvalError::Generator(format!("{}: {e}", self.model.source().display())))
+            .map_err(|source| EvalError::Model {
+                model: self.model.source().to_path_buf(),
+                source,
+            })
     }
 }

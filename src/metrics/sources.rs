@@ -25,15 +25,12 @@ impl<'a> DatasetSource<'a> {
         split: SplitName,
         limit: Option<usize>,
     ) -> Result<Self, EvalError> {
-        let sim = Simulator::new(dataset.sim_config().clone()).map_err(|e| {
-            EvalError::Source(format!(
-                "{}: sensor configuration: {e}",
-                dataset.dir().display()
-            ))
-        })?;
-        let objects = dataset
-            .object_set()
-            .map_err(|e| EvalError::Source(e.to_string()))?;
+        let sim =
+            Simulator::new(dataset.sim_config().clone()).map_err(|source| EvalError::Sensor {
+                dir: dataset.dir().to_path_buf(),
+                source,
+            })?;
+        let objects = dataset.object_set()?;
         let n = dataset.len(split);
         Ok(Self {
             dataset,
@@ -64,10 +61,7 @@ impl PairSource for DatasetSource<'_> {
 
     fn pair(&self, index: usize) -> Result<EvalPair, EvalError> {
         let index = index + self.skip;
-        let p = self
-            .dataset
-            .pair(self.split, index)
-            .map_err(|e| EvalError::Source(e.to_string()))?;
+        let p = self.dataset.pair(self.split, index)?;
         if !p.meta.sensor.position.iter().all(|v| v.is_finite()) {
             return Err(EvalError::Source(format!(
                 "{}: pair {}/{index} has no sensor pose (imported data without press depth); pose metrics need it",
@@ -115,7 +109,10 @@ impl SimSource {
         objects: ObjectSet,
         specs: Vec<SimSpec>,
     ) -> Result<Self, EvalError> {
-        let sim = Simulator::new(config).map_err(|e| EvalError::Source(e.to_string()))?;
+        let sim = Simulator::new(config).map_err(|source| EvalError::Sensor {
+            dir: "simulated pairs".into(),
+            source,
+        })?;
         let ctx = EvalContext::of_simulator(&sim, objects);
         Ok(Self { sim, specs, ctx })
     }
@@ -132,7 +129,7 @@ impl PairSource for SimSource {
             .get(index)
             .ok_or_else(|| EvalError::Source(format!("no simulated pair {index}")))?;
         let mesh = self.ctx.objects.mesh(&spec.object)?;
-        let object = PreparedObject::new(mesh).map_err(|e| EvalError::Source(e.to_string()))?;
+        let object = PreparedObject::new(mesh)?;
         let sensor = self.sim.pressing_pose(&object, 0.0, 0.0, 0.0, spec.press);
         let out = self.sim.simulate(
             &object,

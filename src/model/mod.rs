@@ -90,6 +90,10 @@ pub enum ModelError {
     },
     #[error("training data: {0}")]
     Data(String),
+    #[error("training data: {0}")]
+    Dataset(#[from] crate::dataset::DatasetError),
+    #[error("cannot encode JSON: {0}")]
+    Json(#[from] serde_json::Error),
     #[error("tensor computation failed: {0}")]
     Candle(#[from] candle_core::Error),
 }

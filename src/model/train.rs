@@ -484,7 +484,7 @@ fn save_run(run_dir: &Path, run: &Run, tc: &TrainConfig) -> Result<(), ModelErro
             tensors.insert(format!("ema.{name}"), t.clone());
         }
     }
-    let train_json = serde_json::to_string(tc).map_err(|e| ModelError::Data(e.to_string()))?;
+    let train_json = serde_json::to_string(tc)?;
     let mut meta = HashMap::from([
         ("config".to_string(), run.cfg.to_json()?),
         ("train".to_string(), train_json.clone()),
@@ -536,8 +536,7 @@ fn append_log(
         loss,
         val_loss,
         samples_per_s: sps,
-    })
-    .map_err(|e| ModelError::Data(e.to_string()))?;
+    })?;
     let mut f = std::fs::OpenOptions::new()
         .create(true)
         .append(true)

@@ -48,10 +48,6 @@ fn convert(b: crate::dataset::Batch) -> TrainBatch {
     }
 }
 
-fn data_err(e: impl std::fmt::Display) -> ModelError {
-    ModelError::Data(e.to_string())
-}
-
 impl TrainingData for DatasetTraining<'_> {
     fn len(&self) -> usize {
         self.dataset.len(SplitName::Train)
@@ -69,7 +65,7 @@ impl TrainingData for DatasetTraining<'_> {
             // A new epoch, or a resume in the middle of one: skip to `index`.
             let mut it = self.dataset.batches(SplitName::Train, batch, seed, epoch);
             for _ in 0..index {
-                it.next().transpose().map_err(data_err)?;
+                it.next().transpose().map_err(ModelError::Dataset)?;
             }
             self.cursor = Some((epoch, index, it));
         }
@@ -79,7 +75,7 @@ impl TrainingData for DatasetTraining<'_> {
         let b = it
             .next()
             .transpose()
-            .map_err(data_err)?
+            .map_err(ModelError::Dataset)?
             .ok_or_else(|| ModelError::Data(format!("epoch {epoch} has no batch {index}")))?;
         *i += 1;
         Ok(convert(b))
@@ -95,7 +91,7 @@ impl TrainingData for DatasetTraining<'_> {
                 .next()
                 .transpose()
                 .map(|b| b.map(convert))
-                .map_err(data_err);
+                .map_err(ModelError::Dataset);
         }
         let split = if self.dataset.len(SplitName::UnseenPoses) > 0 {
             SplitName::UnseenPoses
@@ -107,6 +103,6 @@ impl TrainingData for DatasetTraining<'_> {
             .next()
             .transpose()
             .map(|b| b.map(convert))
-            .map_err(data_err)
+            .map_err(ModelError::Dataset)
     }
 }

@@ -25,7 +25,7 @@ pub use sdf_register::{RobustLoss, SdfRegistration, SdfRegistrationConfig};
 #[derive(Debug, thiserror::Error)]
 pub enum PoseError {
     #[error("object mesh: {0}")]
-    Mesh(String),
+    TriMesh(#[from] parry3d::shape::TriMeshBuilderError),
     #[error("registration config: {0}")]
     Config(String),
     #[error("no contact points to register (the contact region is empty); nothing to estimate a pose from")]

@@ -59,8 +59,7 @@ impl ExactSdf {
             welded.vertices().to_vec(),
             welded.triangles().to_vec(),
             flags,
-        )
-        .map_err(|e| PoseError::Mesh(e.to_string()))?;
+        )?;
         let (lo, hi) = mesh.aabb();
         Ok(Self {
             trimesh,
