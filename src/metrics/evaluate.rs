@@ -49,7 +49,7 @@ pub enum EvalError {
     Model {
         model: std::path::PathBuf,
         #[source]
-        source: crate::model::ModelError,
+        source: Box<crate::model::ModelError>,
     },
     #[error("{}: sensor configuration: {source}", dir.display())]
     Sensor {

@@ -28,7 +28,7 @@ impl Generator for ModelGenerator {
             .sample(&pair.imprint, n, self.sampler, seed, &mut |_, _| true)
             .map_err(|source| EvalError::Model {
                 model: self.model.source().to_path_buf(),
-                source,
+                source: Box::new(source),
             })
     }
 }

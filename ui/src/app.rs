@@ -115,7 +115,7 @@ pub struct WorkbenchApp {
     pub calibration: CalibrationView,
     pub(crate) measured: Option<Measured>,
     /// Dataset inspector and de-rendering runs (live side).
-    pub analysis: crate::analysis::AnalysisViews,
+    pub analysis: crate::analysis_runs::AnalysisViews,
     /// Errors shown in the window until dismissed.
     pub errors: Vec<String>,
     /// The last informational message.

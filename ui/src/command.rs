@@ -76,6 +76,8 @@ pub enum Command {
     CancelPose,
     /// Write the pose numbers (`samples.csv`, `kde.csv`) and the KDE plot (`uncertainty.png`) to the export folder.
     ExportPose,
+    /// Highlight one sample in the Pose tab's plots (`None`: none), as the pointer hovers it.
+    HighlightSample(Option<usize>),
 }
 
 impl WorkbenchApp {
@@ -185,17 +187,43 @@ impl WorkbenchApp {
                 }
             }
             Command::DismissErrors => self.errors.clear(),
-            cmd @ (Command::OpenDataset(_)
-            | Command::SetDataset(_)
-            | Command::SendPairToDerender
-            | Command::PlacePairScene
-            | Command::SetDerender(_)
-            | Command::SetModel(_)
-            | Command::RunDerender
-            | Command::CancelDerender
-            | Command::RunPose
-            | Command::CancelPose
-            | Command::ExportPose) => self.apply_analysis(cmd),
+            Command::OpenDataset(path) => self.open_dataset(path),
+            Command::SetDataset(d) => self.set_dataset(d),
+            Command::SendPairToDerender => {
+                let r = self.send_pair_to_derender();
+                self.report("send to de-render", r);
+            }
+            Command::PlacePairScene => {
+                let r = self.place_pair_scene();
+                self.report("place the scene", r);
+            }
+            Command::SetDerender(d) => self.set_derender(d),
+            Command::SetModel(m) => self.set_model(m),
+            Command::RunDerender => {
+                let r = self.run_derender();
+                self.report("de-render", r);
+            }
+            Command::CancelDerender => self.cancel_derender(),
+            Command::RunPose => {
+                let r = self.run_pose();
+                self.report("pose", r);
+            }
+            Command::CancelPose => self.cancel_pose(),
+            Command::ExportPose => {
+                let r = self.export_pose();
+                self.report("export", r);
+            }
+            Command::HighlightSample(k) => self.analysis.pose.highlight = k,
+        }
+    }
+
+    /// Show `result`'s error, if any, as one line prefixed with `what`.
+    fn report(&mut self, what: &str, result: Result<()>) {
+        if let Err(e) = result {
+            self.error(format!(
+                "{what}: {}",
+                tactile_derender::error::render_anyhow(&e)
+            ));
         }
     }
 

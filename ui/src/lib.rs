@@ -4,8 +4,8 @@
 //! function, heavy work on [`worker`] threads reporting through one message enum, one file per panel under
 //! [`panels`], and a [`view3d`] drawn by a wgpu paint callback or, without wgpu, on the CPU.
 
-pub mod analysis;
-pub mod analysis_state;
+pub mod analysis_runs;
+pub mod analysis_settings;
 pub mod app;
 pub mod colormap;
 pub mod command;

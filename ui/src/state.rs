@@ -11,7 +11,7 @@ use tactile_derender::mesh::Units;
 use tactile_derender::sensor::Se2;
 use tactile_derender::sim::SimConfig;
 
-pub use crate::analysis_state::{DatasetSettings, DerenderInput, DerenderSettings};
+pub use crate::analysis_settings::{DatasetSettings, DerenderInput, DerenderSettings};
 pub use tactile_derender::model::{SamplerConfig, SamplerName};
 
 /// Version of the session format written by this build.

@@ -3,7 +3,7 @@
 //! dataset pair, or an `.npy` measurement); run in the background with progress and Cancel; show the samples, their
 //! per-pixel mean and standard deviation, and L1 / PSNR / SSIM per sample when the ground truth is known.
 
-use crate::analysis::RunImage;
+use crate::analysis_runs::RunImage;
 use crate::app::WorkbenchApp;
 use crate::command::Command;
 use crate::derender;

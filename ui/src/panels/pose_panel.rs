@@ -19,7 +19,7 @@ const HIGHLIGHT_COLOUR: Color32 = Color32::from_rgb(80, 170, 255);
 const MULTI_COLOUR: Color32 = Color32::from_rgb(190, 110, 240);
 const KDE_COLOUR: Color32 = Color32::from_rgb(200, 200, 210);
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let pose = &app.analysis.pose;
     let has_samples = app.analysis.derender.result.is_some();
     ui.horizontal(|ui| {
@@ -91,7 +91,9 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             kde_plot(ui, r, true, &mut highlight);
         });
     });
-    app.analysis.pose.highlight = highlight;
+    if highlight != pose.highlight {
+        cmds.push(Command::HighlightSample(highlight));
+    }
 }
 
 fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, height: f32) {

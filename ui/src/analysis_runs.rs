@@ -1,6 +1,7 @@
-//! The analysis tabs' live side (dataset inspector, de-rendering runs; paper V.A, IV.B): the open dataset browser,
-//! the running or finished run with its textures and the cached model, and how their [`Command`]s and worker
-//! messages change them. Nothing here is saved; the settings are in [`crate::state::State`].
+//! The analysis tabs' runs (dataset inspector, de-rendering and pose runs; paper V.A, IV.B, IV.C): the open dataset
+//! browser, the running or finished runs with their textures and the cached model, the methods the one command
+//! dispatcher ([`crate::command`]) calls to start, cancel and export them, and how worker messages update them.
+//! Nothing here is saved; the settings are in [`crate::analysis_settings`].
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
@@ -15,7 +16,6 @@ use tactile_derender::model::DiffusionModel;
 
 use crate::app::WorkbenchApp;
 use crate::colormap::to_color_image;
-use crate::command::Command;
 use crate::dataset_view::{DatasetBrowser, DatasetMsg};
 use crate::derender::{self, InputSource, PoseContext, RunInput, RunRequest, RunResult};
 use crate::measured::PairScene;
@@ -453,7 +453,7 @@ impl WorkbenchApp {
         Ok(())
     }
 
-    fn export_pose(&mut self) -> Result<()> {
+    pub(crate) fn export_pose(&mut self) -> Result<()> {
         let r = self
             .analysis
             .pose
@@ -474,65 +474,40 @@ impl WorkbenchApp {
         raise_cancel(&mut self.analysis.derender.cancel);
     }
 
-    /// Apply an analysis command (called from [`WorkbenchApp::apply`]).
-    pub(crate) fn apply_analysis(&mut self, cmd: Command) {
-        let result = match cmd {
-            Command::OpenDataset(path) => {
-                self.open_dataset(path);
-                Ok(())
-            }
-            Command::SetDataset(d) => {
-                let split_changed = d.split != self.state.dataset.split;
-                let selected = d.selected;
-                self.state.dataset = d;
-                match selected {
-                    Some(i) if split_changed || self.analysis.dataset.is_some() => {
-                        self.select_pair(i)
-                    }
-                    _ => {}
-                }
-                Ok(())
-            }
-            Command::SendPairToDerender => self
-                .send_pair_to_derender()
-                .map_err(|e| e.context("send to de-render")),
-            Command::PlacePairScene => self
-                .place_pair_scene()
-                .map_err(|e| e.context("place the scene")),
-            Command::SetDerender(d) => {
-                if d.input != self.state.derender.input {
-                    self.analysis.derender.pending_input = None;
-                }
-                self.state.derender = d;
-                Ok(())
-            }
-            Command::SetModel(m) => {
-                self.state.model = m;
-                if let Some(p) = &self.state.model.path {
-                    self.inputs.model_path = p.display().to_string();
-                }
-                Ok(())
-            }
-            Command::RunDerender => self.run_derender().map_err(|e| e.context("de-render")),
-            Command::CancelDerender => {
-                self.cancel_derender();
-                Ok(())
-            }
-            Command::RunPose => self.run_pose().map_err(|e| e.context("pose")),
-            Command::CancelPose => {
-                let view = &mut self.analysis.pose;
-                raise_cancel(&mut view.cancel);
-                // The thread stops at its next registration; its answer (an error "cancelled") is then stale.
-                view.generation += 1;
-                view.running = false;
-                view.progress = None;
-                Ok(())
-            }
-            Command::ExportPose => self.export_pose().map_err(|e| e.context("export")),
-            _ => Ok(()),
-        };
-        if let Err(e) = result {
-            self.error(tactile_derender::error::render_anyhow(&e));
+    /// Replace the dataset inspector's settings; a new selection (or split) loads its pair.
+    pub(crate) fn set_dataset(&mut self, d: crate::state::DatasetSettings) {
+        let split_changed = d.split != self.state.dataset.split;
+        let selected = d.selected;
+        self.state.dataset = d;
+        match selected {
+            Some(i) if split_changed || self.analysis.dataset.is_some() => self.select_pair(i),
+            _ => {}
         }
+    }
+
+    /// Replace the de-rendering settings; a new input forgets the pending one.
+    pub(crate) fn set_derender(&mut self, d: crate::state::DerenderSettings) {
+        if d.input != self.state.derender.input {
+            self.analysis.derender.pending_input = None;
+        }
+        self.state.derender = d;
+    }
+
+    /// Choose the model checkpoint.
+    pub(crate) fn set_model(&mut self, m: crate::state::ModelSettings) {
+        self.state.model = m;
+        if let Some(p) = &self.state.model.path {
+            self.inputs.model_path = p.display().to_string();
+        }
+    }
+
+    /// Forget the running pose analysis: the thread stops at its next registration, and its answer (an error
+    /// "cancelled") is then stale.
+    pub(crate) fn cancel_pose(&mut self) {
+        let view = &mut self.analysis.pose;
+        raise_cancel(&mut view.cancel);
+        view.generation += 1;
+        view.running = false;
+        view.progress = None;
     }
 }
