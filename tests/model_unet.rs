@@ -509,3 +509,44 @@ fn half_batches_match_the_whole_batch() {
         }
     });
 }
+
+/// A model written as a diffusers folder reads back bit-identically (weights, config, outputs), and the folder holds
+/// what `from_pretrained` looks for (diffusers itself opens it in CI: tests/python/diffusers_export_check.py).
+#[test]
+fn diffusers_folder_export_round_trips() {
+    use tactile_derender::model::diffusers_folder;
+    let dir = tempfile::tempdir().unwrap();
+    let model =
+        DiffusionModel::load(Path::new("tests/fixtures/unet_small/unet_ref.safetensors")).unwrap();
+    let folder = dir.path().join("exported");
+    let files = diffusers_folder::export(&model, &folder).unwrap();
+    assert!(files.iter().all(|f| f.is_file()), "{files:?}");
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(folder.join("config.json")).unwrap())
+            .unwrap();
+    assert_eq!(config["_class_name"], "UNet2DModel");
+    assert_eq!(config["in_channels"], 2);
+    let sched: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(folder.join("scheduler_config.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(sched["_class_name"], "DDPMScheduler");
+    assert_eq!(sched["beta_schedule"], "squaredcos_cap_v2");
+    assert_eq!(sched["num_train_timesteps"], 250);
+    let again = DiffusionModel::load(&folder).unwrap();
+    assert_eq!(again.config(), model.config());
+    let x = rand_t(&[2, 2, 8, 8], 21);
+    let t = [4.0, 230.0];
+    let d = max_abs(
+        &model.unet().forward(&x, &t).unwrap(),
+        &again.unet().forward(&x, &t).unwrap(),
+    );
+    assert_eq!(d, 0.0);
+    // A folder missing its weights names the file.
+    std::fs::remove_file(folder.join("diffusion_pytorch_model.safetensors")).unwrap();
+    let err = match DiffusionModel::load(&folder) {
+        Ok(_) => panic!("a folder without weights loaded"),
+        Err(e) => e.to_string(),
+    };
+    assert!(err.contains("diffusion_pytorch_model.safetensors"), "{err}");
+}

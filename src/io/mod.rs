@@ -1,7 +1,9 @@
-//! File formats and safe writing: atomic writes, `.npy` arrays and PNG previews with a JET colour map.
+//! File formats and safe writing: atomic writes, `.npy` arrays, PLY point clouds and meshes, and PNG previews with a
+//! JET colour map.
 
 pub mod atomic;
 pub mod npy;
+pub mod ply;
 pub mod preview;
 
 pub use atomic::write_atomic;

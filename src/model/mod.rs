@@ -14,6 +14,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod conv;
 pub mod diagnose;
+pub mod diffusers_folder;
 pub mod diffusion;
 pub mod embeddings;
 pub mod group_norm;

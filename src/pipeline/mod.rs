@@ -9,6 +9,7 @@
 //! | load the object a user names | [`ObjectSpec`] | [`ObjectSpec::load`] |
 //! | de-render: N samples of X0 for one imprint | [`DerenderConfig`] | [`derender()`] |
 //! | estimate the pose from the samples (one and many) | [`crate::metrics::evaluate::EvalConfig`] + seed | [`estimate_pose`] |
+//! | export its geometry for Open3D / trimesh (PLY) | [`crate::io::ply::PlyEncoding`] | [`write_pose_geometry`] |
 //! | simulate a press | [`crate::sim::SimConfig`] | [`crate::sim::Simulator::simulate`] |
 //! | generate a dataset | [`crate::dataset::GenConfig`] | [`crate::dataset::gen::generate`] |
 //! | train | [`crate::model::train::TrainConfig`] | [`crate::model::train::train`] |
@@ -28,7 +29,7 @@ pub mod pose;
 
 pub use derender::{derender, mean_std, DerenderConfig, Derendered};
 pub use object::{LoadedObject, ObjectSpec};
-pub use pose::{estimate_pose, PoseEstimate, PoseInput};
+pub use pose::{estimate_pose, write_pose_geometry, PoseEstimate, PoseInput};
 
 use std::path::PathBuf;
 
@@ -67,6 +68,12 @@ pub enum PipelineError {
     },
     #[error("settings: {0}")]
     Settings(String),
+    #[error("{}: cannot write: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("no sample has any contact; nothing to register")]
     NoContact,
     #[error("cancelled")]

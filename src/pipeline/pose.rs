@@ -134,3 +134,115 @@ pub fn estimate_pose(
         report,
     })
 }
+
+/// One file written by [`write_pose_geometry`].
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct GeometryFile {
+    pub path: std::path::PathBuf,
+    /// Points (or mesh vertices) in it.
+    pub vertices: usize,
+}
+
+/// Write the geometry of `estimate` as PLY files in `dir`, world frame, metres: the registered sample's
+/// back-projected contact (`contact_points.ply`) and its free-space evidence (`free_space_points.ply`), the samples'
+/// consensus contact (`consensus_points.ply`, with two or more samples), and the object at the single-sample
+/// estimate (`object_estimate.ply`), at the multi-sample estimate (`object_multi_sample.ply`) and at the true pose
+/// (`object_truth.ply`) where those exist.
+#[allow(clippy::too_many_arguments)]
+pub fn write_pose_geometry(
+    dir: &std::path::Path,
+    object: &LoadedObject,
+    sim: &Simulator,
+    input: &PoseInput<'_>,
+    estimate: &PoseEstimate,
+    config: &EvalConfig,
+    seed: u64,
+    encoding: crate::io::ply::PlyEncoding,
+) -> Result<Vec<GeometryFile>, PipelineError> {
+    use crate::io::ply::{write_mesh, write_points};
+    use crate::recon::{back_project, free_space_points};
+    std::fs::create_dir_all(dir).map_err(|source| PipelineError::Write {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut files = Vec::new();
+    let mut done = |name: &str, vertices: usize, r: std::io::Result<()>| {
+        let path = dir.join(name);
+        r.map_err(|source| PipelineError::Write {
+            path: path.clone(),
+            source,
+        })?;
+        files.push(GeometryFile { path, vertices });
+        Ok::<(), PipelineError>(())
+    };
+    let intrinsics = sim.intrinsics();
+    let t_world_camera = &input.t_world_camera;
+    let frame = "world frame, metres (tactile-derender)";
+    if let Some(sample) = input.samples.get(estimate.registered_sample) {
+        let contact = back_project(sample, intrinsics, t_world_camera).p_world;
+        let name = "contact_points.ply";
+        let comment = format!("contact of sample {}, {frame}", estimate.registered_sample);
+        done(
+            name,
+            contact.len(),
+            write_points(&dir.join(name), &contact, &comment, encoding),
+        )?;
+        let free = free_space_points(
+            sample,
+            sim.nominal_depth(),
+            intrinsics,
+            t_world_camera,
+            &config.free_space,
+            seed,
+        );
+        let name = "free_space_points.ply";
+        let comment = format!("free space beside the contact, {frame}");
+        done(
+            name,
+            free.len(),
+            write_points(&dir.join(name), &free, &comment, encoding),
+        )?;
+    }
+    if input.samples.len() > 1 {
+        let consensus =
+            crate::pose::from_depth::consensus_depth(input.samples, config.consensus_probability)?;
+        let points = back_project(&consensus, intrinsics, t_world_camera).p_world;
+        let name = "consensus_points.ply";
+        let comment = format!("the samples' consensus contact, {frame}");
+        done(
+            name,
+            points.len(),
+            write_points(&dir.join(name), &points, &comment, encoding),
+        )?;
+    }
+    let poses = [
+        (
+            "object_estimate.ply",
+            "single-sample estimate",
+            estimate.best(),
+        ),
+        (
+            "object_multi_sample.ply",
+            "multi-sample estimate",
+            estimate.report.multi_sample.map(|m| m.pose),
+        ),
+        ("object_truth.ply", "true pose", input.truth),
+    ];
+    for (name, what, pose) in poses {
+        if let Some(p) = pose {
+            let comment = format!(
+                "{} at the {what} x={} y={} theta={}, {frame}",
+                object.name, p.x, p.y, p.theta
+            );
+            let r = write_mesh(
+                &dir.join(name),
+                &object.mesh,
+                &p.to_affine(),
+                &comment,
+                encoding,
+            );
+            done(name, object.mesh.vertices().len(), r)?;
+        }
+    }
+    Ok(files)
+}

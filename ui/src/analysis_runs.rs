@@ -462,8 +462,40 @@ impl WorkbenchApp {
             .ok_or_else(|| anyhow!("register the samples first"))?;
         let dir = self.state.view.export_dir.join("pose");
         r.report.write(&dir)?;
+        let req = r
+            .inputs
+            .as_ref()
+            .ok_or_else(|| anyhow!("this analysis holds no inputs to export"))?;
+        let c = &req.context;
+        let sim = tactile_derender::sim::Simulator::new(c.sim.clone())?;
+        let object = c.object.spec().load()?;
+        let estimate = tactile_derender::pipeline::PoseEstimate {
+            object: r.object.clone(),
+            hypotheses: r.hypotheses.clone(),
+            registered_sample: r.registered_sample,
+            with_contact: r.sample_index.clone(),
+            report: r.report.clone(),
+        };
+        let input = tactile_derender::pipeline::PoseInput {
+            t_world_camera: c.t_world_camera,
+            samples: &req.samples,
+            imprint: &req.imprint,
+            signature: Some(&c.signature),
+            truth: Some(c.truth),
+        };
+        let files = tactile_derender::pipeline::write_pose_geometry(
+            &dir,
+            &object,
+            &sim,
+            &input,
+            &estimate,
+            &tactile_derender::metrics::evaluate::EvalConfig::default(),
+            req.seed,
+            tactile_derender::io::ply::PlyEncoding::Binary,
+        )?;
         self.notice = Some(format!(
-            "wrote samples.csv, kde.csv and uncertainty.png to {}",
+            "wrote samples.csv, kde.csv, uncertainty.png and {} PLY files to {}",
+            files.len(),
             dir.display()
         ));
         Ok(())

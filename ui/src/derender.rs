@@ -38,7 +38,7 @@ pub fn default_model_path() -> PathBuf {
 }
 
 /// What pose estimation needs to know about an input (simulated scenes and dataset pairs).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct PoseContext {
     /// The pressed object.
     pub object: crate::state::ObjectSource,

@@ -19,6 +19,7 @@ use crate::pose_view::{outline, PoseAnalysis};
 use crate::worker::{JobKind, WorkerMsg};
 
 /// One requested pose analysis.
+#[derive(Clone, Debug, PartialEq)]
 pub struct PoseRequest {
     pub generation: u64,
     pub context: PoseContext,
@@ -75,6 +76,7 @@ pub fn run(
         contacts,
         report: estimate.report,
         sample_index: estimate.with_contact,
+        inputs: Some(Box::new(req.clone())),
     })
 }
 

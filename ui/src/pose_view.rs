@@ -88,6 +88,8 @@ pub struct PoseAnalysis {
     pub report: UncertaintyReport,
     /// The sample index of each entry of `report.samples` (samples without contact are not registered).
     pub sample_index: Vec<usize>,
+    /// What the analysis registered, for exporting its geometry.
+    pub inputs: Option<Box<crate::pose_job::PoseRequest>>,
 }
 
 impl PoseAnalysis {

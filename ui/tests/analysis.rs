@@ -477,9 +477,18 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     h.state_mut()
         .apply(tnd_workbench::command::Command::SetView(v));
     h.run_ok();
-    h.get_by_label("Export CSV + PNG").click();
+    h.get_by_label("Export CSV + PNG + PLY").click();
     h.run_ok();
-    for f in ["samples.csv", "kde.csv", "uncertainty.png"] {
+    for f in [
+        "samples.csv",
+        "kde.csv",
+        "uncertainty.png",
+        "contact_points.ply",
+        "free_space_points.ply",
+        "consensus_points.ply",
+        "object_estimate.ply",
+        "object_truth.ply",
+    ] {
         assert!(
             dir.path().join("out/pose").join(f).is_file(),
             "no {f}: {:?}",

@@ -1,6 +1,7 @@
 //! `tnd model verify`: run a reference input through a checkpoint and compare with the reference output (the peer
 //! script's `*_io.safetensors` layout: `input`, `timesteps`, `output`), to check an imported diffusers checkpoint.
 //! `tnd model diagnose`: the one-step x0 quality of a checkpoint per diffusion timestep on dataset pairs.
+//! `tnd model export --diffusers DIR` / `tnd model import --diffusers DIR`: diffusers folders out and in.
 
 use std::path::PathBuf;
 
@@ -9,8 +10,9 @@ use candle_core::DType;
 use clap::{Args, Subcommand};
 use serde_json::json;
 use tactile_derender::dataset::{Dataset, SplitName};
-use tactile_derender::model::checkpoint::read_tensors;
+use tactile_derender::model::checkpoint::{read_tensors, save_model};
 use tactile_derender::model::diagnose::x0_quality;
+use tactile_derender::model::diffusers_folder;
 use tactile_derender::model::DiffusionModel;
 
 #[derive(Args, Debug)]
@@ -26,6 +28,33 @@ pub enum ModelCommand {
     /// One JSON line per timestep: how well the model recovers X0 from one noised copy of the truth (ε and x0
     /// errors, background marked as contact, contact missed) on the first pairs of a dataset split.
     Diagnose(DiagnoseArgs),
+    /// Write a checkpoint as a diffusers folder: `UNet2DModel.from_pretrained(DIR)` and
+    /// `DDIMScheduler.from_pretrained(DIR)` open it (config.json, diffusion_pytorch_model.safetensors,
+    /// scheduler_config.json, README.md).
+    Export(ExportArgs),
+    /// Turn a diffusers folder (`save_pretrained`, or one written by `tnd model export`) into one .safetensors file
+    /// with the config inside (every `--model` option also reads the folder directly).
+    Import(ImportArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    /// Checkpoint to export (default: the bundled model).
+    #[arg(long, default_value = "default")]
+    pub model: PathBuf,
+    /// The diffusers folder to write (created if missing).
+    #[arg(long)]
+    pub diffusers: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct ImportArgs {
+    /// The diffusers folder to read.
+    #[arg(long)]
+    pub diffusers: PathBuf,
+    /// The .safetensors file to write.
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -71,6 +100,26 @@ pub fn run(a: ModelArgs) -> Result<()> {
     match a.command {
         ModelCommand::Verify(v) => verify(&v),
         ModelCommand::Diagnose(d) => diagnose(&d),
+        ModelCommand::Export(e) => {
+            let model = DiffusionModel::load(&e.model)?;
+            let files = diffusers_folder::export(&model, &e.diffusers)?;
+            println!(
+                "{}",
+                json!({"model": e.model, "diffusers": e.diffusers, "files": files})
+            );
+            Ok(())
+        }
+        ModelCommand::Import(i) => {
+            let model = DiffusionModel::load(&i.diffusers)?;
+            save_model(
+                &i.out,
+                &model.vars().varmap,
+                model.config(),
+                Default::default(),
+            )?;
+            println!("{}", json!({"diffusers": i.diffusers, "out": i.out}));
+            Ok(())
+        }
     }
 }
 

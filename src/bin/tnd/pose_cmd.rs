@@ -1,8 +1,9 @@
 //! `tnd pose`: one tactile signature end to end, through the same use cases as the workbench's De-render and Pose
 //! tabs ([`tactile_derender::pipeline`]) — N samples of the in-contact depth, the pose from a K-start registration
 //! of the first, every sample registered from that fixed start, the multi-sample estimate (the samples' consensus
-//! contact), the threshold baseline, and the uncertainty outputs (samples.csv, kde.csv, uncertainty.png,
-//! contact_probability.npy, pose.json).
+//! contact), the threshold baseline, the uncertainty outputs (samples.csv, kde.csv, uncertainty.png,
+//! contact_probability.npy, pose.json) and the geometry as PLY (contact, free-space and consensus points, the object
+//! at each estimate; world frame, metres).
 
 use std::path::{Path, PathBuf};
 
@@ -11,6 +12,7 @@ use clap::Args;
 use serde_json::json;
 use tactile_derender::image::Image;
 use tactile_derender::io::npy;
+use tactile_derender::io::ply::PlyEncoding;
 use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::{self, DerenderConfig, ObjectSpec, PoseInput};
@@ -48,6 +50,9 @@ pub struct PoseArgs {
     pub press: f64,
     #[command(flatten)]
     pub derender: DerenderConfig,
+    /// Encoding of the PLY files (contact, free-space and consensus points, the object at each estimate).
+    #[arg(long, value_enum, default_value_t = PlyEncoding::Binary)]
+    pub ply: PlyEncoding,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
@@ -136,11 +141,21 @@ pub fn run(a: PoseArgs) -> Result<()> {
         let p = contact_probability(&samples)?;
         npy::write_image(&a.out.join("contact_probability.npy"), &p)?;
     }
+    let geometry = pipeline::write_pose_geometry(
+        &a.out,
+        &object,
+        &sim,
+        &input,
+        &estimate,
+        &eval,
+        a.derender.seed,
+        a.ply,
+    )?;
     let summary = json!({"object": object.name, "generator": generator, "samples": report.samples.len(),
         "seed": a.derender.seed, "estimate": estimate.best(),
         "estimate_multi_sample": report.multi_sample.map(|m| m.pose),
         "truth": truth, "baseline": report.baseline, "multi_sample": report.multi_sample,
-        "failed": report.failed,
+        "failed": report.failed, "geometry": geometry,
         "position_err_mm": report.samples.iter().map(|s| s.position_mm).collect::<Vec<_>>(),
         "out": a.out});
     let path = a.out.join("pose.json");

@@ -50,8 +50,12 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
         }
         if pose.result.is_some()
             && ui
-                .button("Export CSV + PNG")
-                .on_hover_text("samples.csv, kde.csv and uncertainty.png in <export folder>/pose")
+                .button("Export CSV + PNG + PLY")
+                .on_hover_text(
+                    "samples.csv, kde.csv, uncertainty.png and the geometry as PLY (contact, free-space and \
+                     consensus points; the object at each estimate and the true pose; world frame, metres) in \
+                     <export folder>/pose",
+                )
                 .clicked()
         {
             cmds.push(Command::ExportPose);
