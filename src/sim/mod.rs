@@ -110,10 +110,17 @@ impl Simulator {
         let elastomer_mesh = config.elastomer.build()?;
         let caster = RayCaster::new(&elastomer_mesh)?;
         let nominal = render::render_far_depth(&caster, &intrinsics, &t_sensor_camera);
+        // The parametric membrane's contact test answers from its half-ellipsoid wherever that is certain.
+        let e = &config.elastomer;
+        let dome = e.mesh_file.is_none().then(|| {
+            let axes = glam::DVec3::new(e.footprint_x / 2.0, e.footprint_y / 2.0, e.inflation);
+            contact::DomeBounds::new(&elastomer_mesh, axes)
+        });
         let elastomer_sdf = contact::ElastomerSdf::new(
             SignedDistance::new(&elastomer_mesh)?,
             elastomer_mesh.aabb(),
-        );
+        )
+        .with_dome(dome.flatten());
         let apex_height = config.elastomer.apex_height(&elastomer_mesh);
         let spacing = intrinsics.pixel_size_in(&config.camera.native);
         Ok(Self {

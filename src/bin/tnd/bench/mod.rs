@@ -15,10 +15,12 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde_json::json;
+use tactile_derender::image::Image;
 use tactile_derender::io::npy;
-use tactile_derender::mesh::{self, LoadOptions, Mesh, RayCaster, Units};
+use tactile_derender::mesh::{self, LoadOptions, Mesh, RayCaster, SignedDistance, Units};
 use tactile_derender::objects::ObjectSet;
 use tactile_derender::sensor::{Intrinsics, Scene, Se2};
+use tactile_derender::sim::contact::{self, ElastomerSdf};
 use tactile_derender::sim::{render, PreparedObject, SimConfig, Simulator};
 
 #[derive(Args, Debug)]
@@ -228,6 +230,34 @@ fn bench_pairs(pairs: usize) -> Result<()> {
         json!({"bench": "pairs", "width": w, "height": h, "pairs": pairs, "wall_s": wall_s,
         "pairs_per_s": pairs as f64 / wall_s, "mean_contact_pixels": contact as f64 / pairs.max(1) as f64,
         "threads": rayon::current_num_threads()}),
+    );
+    // The contact step alone on the same depth images: the simulator's membrane test (certain answers from the
+    // half-ellipsoid, the exact signed distance near its surface) against the exact signed distance everywhere.
+    let depths: Vec<_> = jobs
+        .par_iter()
+        .map(|(o, scene, _)| sim.render_depth(&objects[*o], scene))
+        .collect();
+    let mesh = sim.elastomer_mesh();
+    let exact = ElastomerSdf::new(SignedDistance::new(mesh)?, mesh.aabb());
+    let t_sensor_camera = sim.t_sensor_camera();
+    let time = |f: &(dyn Fn(&Image) -> Image + Sync)| {
+        let mut masks = Vec::new();
+        let s = median_time(0, 3, || {
+            masks = depths.par_iter().map(f).collect::<Vec<_>>();
+        });
+        (s, masks)
+    };
+    let (fast_s, fast) = time(&|d| sim.contact(d).0);
+    let (exact_s, slow) =
+        time(&|d| contact::contact(d, sim.intrinsics(), &t_sensor_camera, &exact).0);
+    let differing: usize = fast
+        .iter()
+        .zip(&slow)
+        .map(|(a, b)| a.data.iter().zip(&b.data).filter(|(x, y)| x != y).count())
+        .sum();
+    emit(
+        json!({"bench": "contact", "pairs": pairs, "membrane_test_s": fast_s, "exact_sdf_s": exact_s,
+        "ratio": fast_s / exact_s, "differing_mask_pixels": differing}),
     );
     Ok(())
 }
