@@ -135,6 +135,8 @@ pub struct WorkbenchApp {
     auto_run: bool,
     /// A pose analysis to start once the run's samples are there (`--run-pose`).
     auto_pose: bool,
+    /// Undo and redo of scene, sensor and elastomer edits.
+    pub history: crate::history::History,
 }
 
 impl Default for WorkbenchApp {
@@ -172,6 +174,7 @@ impl WorkbenchApp {
             frames: 0,
             auto_run: false,
             auto_pose: false,
+            history: Default::default(),
         };
         app.replace_state(state);
         app
@@ -382,6 +385,10 @@ impl WorkbenchApp {
                 }));
             }
         }
+        commands.extend(crate::shortcuts::pressed(
+            &ctx,
+            self.session_path.as_deref(),
+        ));
         panels::show_all(self, ui, &mut commands);
         for cmd in commands {
             self.apply(cmd);

@@ -78,11 +78,31 @@ pub enum Command {
     ExportPose,
     /// Highlight one sample in the Pose tab's plots (`None`: none), as the pointer hovers it.
     HighlightSample(Option<usize>),
+    /// Undo the last scene, sensor or elastomer edit.
+    Undo,
+    /// Redo the last undone edit.
+    Redo,
+    /// Open a file dropped on the window as what it is (mesh, session, imprint, model, dataset).
+    OpenDropped(PathBuf),
 }
 
 impl WorkbenchApp {
-    /// Apply one command. Errors are shown in the window; nothing here panics.
+    /// Apply one command. Errors are shown in the window; nothing here panics. Scene, sensor and elastomer edits
+    /// are recorded for undo.
     pub fn apply(&mut self, cmd: Command) {
+        match crate::history::edit_kind(&cmd) {
+            Some(kind) => {
+                let before = crate::history::Snapshot::of(&self.state);
+                self.apply_now(cmd);
+                if crate::history::Snapshot::of(&self.state) != before {
+                    self.history.record(kind, before);
+                }
+            }
+            None => self.apply_now(cmd),
+        }
+    }
+
+    fn apply_now(&mut self, cmd: Command) {
         match cmd {
             Command::SetScene(scene) => {
                 if scene != self.state.scene {
@@ -214,6 +234,27 @@ impl WorkbenchApp {
                 self.report("export", r);
             }
             Command::HighlightSample(k) => self.analysis.pose.highlight = k,
+            Command::Undo => {
+                let now = crate::history::Snapshot::of(&self.state);
+                match self.history.undo(now) {
+                    Some(s) => self.restore(s, "undone"),
+                    None => self.notice = Some("nothing to undo".into()),
+                }
+            }
+            Command::Redo => {
+                let now = crate::history::Snapshot::of(&self.state);
+                match self.history.redo(now) {
+                    Some(s) => self.restore(s, "redone"),
+                    None => self.notice = Some("nothing to redo".into()),
+                }
+            }
+            Command::OpenDropped(path) => {
+                let de_render = self.state.view.tab == crate::state::Tab::Derender;
+                match crate::shortcuts::purpose_of(&path, de_render) {
+                    Some(purpose) => self.dialog_answer(purpose, Some(path)),
+                    None => self.error(crate::shortcuts::unknown(&path)),
+                }
+            }
         }
     }
 
@@ -227,8 +268,28 @@ impl WorkbenchApp {
         }
     }
 
+    /// Put an undo/redo snapshot back and re-simulate.
+    fn restore(&mut self, s: crate::history::Snapshot, what: &str) {
+        s.restore(&mut self.state);
+        if let ObjectSource::File { path, units } = &self.state.scene.object {
+            self.inputs.object_path = path.display().to_string();
+            self.inputs.object_units = *units;
+        }
+        self.inputs.elastomer_path = self
+            .state
+            .sim
+            .elastomer
+            .mesh_file
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_default();
+        self.notice = Some(format!("{what}: scene, sensor and elastomer"));
+        self.request_simulation();
+    }
+
     /// Replace the whole state (new or opened session) and recompute what depends on it.
     pub(crate) fn replace_state(&mut self, state: State) {
+        self.history.clear();
         self.state = state;
         self.calibration = Default::default();
         self.measured = None;

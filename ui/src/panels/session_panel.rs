@@ -32,6 +32,30 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         {
             cmds.push(Command::Browse(DialogPurpose::SaveSessionAs));
         }
+        if ui
+            .add_enabled(app.history.can_undo(), egui::Button::new("Undo"))
+            .on_hover_text("undo the last scene, sensor or elastomer edit (Ctrl+Z)")
+            .clicked()
+        {
+            cmds.push(Command::Undo);
+        }
+        if ui
+            .add_enabled(app.history.can_redo(), egui::Button::new("Redo"))
+            .on_hover_text("redo (Ctrl+Shift+Z or Ctrl+Y)")
+            .clicked()
+        {
+            cmds.push(Command::Redo);
+        }
+        ui.menu_button("Help", |ui| {
+            ui.strong("Keyboard shortcuts (Cmd on macOS)");
+            egui::Grid::new("shortcuts").striped(true).show(ui, |ui| {
+                for (keys, what) in crate::shortcuts::SHORTCUTS {
+                    ui.monospace(keys);
+                    ui.label(what);
+                    ui.end_row();
+                }
+            });
+        });
         ui.separator();
         let label = ui.label("Session file");
         ui.add(
