@@ -1,7 +1,7 @@
 //! Desktop habits: keyboard shortcuts (Ctrl on Linux and Windows, Cmd on macOS) and files dropped on the window, both
 //! turned into [`Command`]s. The Help menu lists [`SHORTCUTS`].
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use egui::{Key, KeyboardShortcut, Modifiers};
 
@@ -84,7 +84,7 @@ pub fn purpose_of(path: &Path, de_render_tab: bool) -> Option<DialogPurpose> {
 }
 
 /// The message for a dropped path the workbench cannot open.
-pub fn unknown(path: &PathBuf) -> String {
+pub fn unknown(path: &Path) -> String {
     format!(
         "{}: cannot open a dropped file of this kind (meshes .obj .stl .ply .gltf .glb, sessions .json, imprints .npy, \
          models .safetensors or folders, dataset folders)",
