@@ -445,10 +445,24 @@ mod tests {
             .unwrap()
     }
 
-    /// The direct convolution on the portable GEMM loop (CPUs without AVX-512, and 1-row products) against candle's
-    /// `conv2d`, values and gradients; the default test above covers the AVX-512 kernels where the CPU has them.
+    /// The direct convolution on the portable GEMM loop (CPUs without AVX-512, and 1-row products) and on our
+    /// AVX-512 kernels (listed as ignored on a CPU without them) against candle's `conv2d`, values and gradients.
     #[test]
     fn direct_conv_portable_gemm_matches_candle() {
+        direct_conv_matches_candle(GemmBackend::GemmCrate);
+    }
+
+    #[test]
+    #[cfg_attr(
+        not(tnd_host_avx512),
+        ignore = "this CPU has no AVX-512F: our AVX-512 kernels cannot run here"
+    )]
+    fn direct_conv_avx512_matches_candle() {
+        assert!(GemmBackend::Avx512.is_available());
+        direct_conv_matches_candle(GemmBackend::Avx512);
+    }
+
+    fn direct_conv_matches_candle(backend: GemmBackend) {
         for (i, &(b, ci, co, h, w, k)) in
             [(2, 3, 9, 6, 5, 3), (1, 8, 16, 12, 9, 1), (2, 4, 3, 5, 5, 5)]
                 .iter()
@@ -462,10 +476,7 @@ mod tests {
                 let g = (y * &r).unwrap().sum_all().unwrap().backward().unwrap();
                 [&x, &kw, &bias].map(|v| g.get(v).unwrap().clone())
             };
-            let op = DirectConv {
-                kernel: k,
-                backend: GemmBackend::GemmCrate,
-            };
+            let op = DirectConv { kernel: k, backend };
             let ours = x
                 .as_tensor()
                 .apply_op3(kw.as_tensor(), bias.as_tensor(), op)
