@@ -69,14 +69,3 @@ impl SensorArgs {
         Ok(cfg)
     }
 }
-
-/// A progress callback for the library's use cases ([`tactile_derender::pipeline::Progress`]) drawing `bar`: it sets
-/// the total it is told and never cancels.
-pub fn bar_progress(bar: &mut kdam::Bar) -> impl FnMut(usize, usize) -> bool + '_ {
-    use kdam::BarExt;
-    move |done, total| {
-        bar.total = total;
-        let _ = bar.update_to(done);
-        true
-    }
-}

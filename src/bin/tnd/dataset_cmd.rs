@@ -131,14 +131,7 @@ pub fn run(a: DatasetArgs) -> Result<()> {
 }
 
 fn bar(total: usize, desc: &str) -> Result<Mutex<kdam::Bar>> {
-    let b = kdam::Bar::builder()
-        .total(total)
-        .desc(desc)
-        .unit(" pairs")
-        .mininterval(0.2)
-        .build()
-        .map_err(|e| anyhow!(e))?;
-    Ok(Mutex::new(b))
+    Ok(Mutex::new(super::progress::bar(desc, " pairs", total)))
 }
 
 fn tick(b: &Mutex<kdam::Bar>, n: usize) {
@@ -149,9 +142,8 @@ fn tick(b: &Mutex<kdam::Bar>, n: usize) {
 
 fn finish(b: &Mutex<kdam::Bar>) {
     if let Ok(mut b) = b.lock() {
-        let _ = b.refresh();
+        super::progress::finish(&mut b);
     }
-    eprintln!();
 }
 
 fn gen(a: GenArgs) -> Result<()> {

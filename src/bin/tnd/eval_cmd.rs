@@ -103,21 +103,20 @@ pub fn run(a: EvalArgs) -> Result<()> {
             eprintln!("{}: split {split} has no pairs; skipped", a.data.display());
             continue;
         }
-        let bar = Mutex::new(
-            kdam::Bar::builder()
-                .total(source.len())
-                .desc(format!("eval {split}"))
-                .unit(" pairs")
-                .build()
-                .map_err(|e| anyhow!(e))?,
-        );
+        let bar = Mutex::new(super::progress::bar(
+            &format!("eval {split}"),
+            " pairs",
+            source.len(),
+        ));
         let report = evaluator.evaluate(&source, gen.as_ref(), a.seed, &mut |done, _| {
             if let Ok(mut b) = bar.lock() {
                 let _ = b.update_to(done);
             }
             true
         })?;
-        eprintln!();
+        if let Ok(mut b) = bar.lock() {
+            super::progress::finish(&mut b);
+        }
         let table = markdown_table(split.as_str(), &report);
         let breakdown = breakdown_tables(&report);
         if a.json {

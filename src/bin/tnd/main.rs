@@ -7,6 +7,7 @@ mod eval_cmd;
 mod model_cmd;
 mod objects_cmd;
 mod pose_cmd;
+mod progress;
 mod sample_cmd;
 mod sim_cmd;
 mod train_cmd;
@@ -17,6 +18,9 @@ use clap::{Parser, Subcommand};
 #[derive(Parser)]
 #[command(name = "tnd", version, about)]
 struct Cli {
+    /// No progress bars (they are also off when stderr is not a terminal); results still print on stdout.
+    #[arg(long, short, global = true)]
+    quiet: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -45,6 +49,7 @@ enum Command {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    progress::set_quiet(cli.quiet);
     // The model's process-wide settings, the same as the workbench's; a variable the user set is kept.
     let kernels = tactile_derender::model::kernels::KernelSettings::default();
     for (name, value) in kernels.environment() {

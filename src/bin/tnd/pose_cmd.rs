@@ -21,6 +21,7 @@ use tactile_derender::sensor::Se2;
 use tactile_derender::sim::{PreparedObject, Simulator};
 
 use super::args::SensorArgs;
+use super::progress;
 
 #[derive(Args, Debug)]
 pub struct PoseArgs {
@@ -107,15 +108,15 @@ pub fn run(a: PoseArgs) -> Result<()> {
         )
     } else {
         let model = DiffusionModel::load(Path::new(&a.model))?;
-        let mut bar = kdam::tqdm!(desc = "sampling", unit = " steps");
+        let mut bar = progress::bar("sampling", " steps", 0);
         let out = pipeline::derender(
             &model,
             &imprint,
             &a.derender,
             eval.consensus_probability,
-            &mut super::args::bar_progress(&mut bar),
+            &mut progress::callback(&mut bar),
         )?;
-        eprintln!();
+        progress::finish(&mut bar);
         (format!("model {}", model.source().display()), out.samples)
     };
     let input = PoseInput {
@@ -125,16 +126,16 @@ pub fn run(a: PoseArgs) -> Result<()> {
         signature: signature.as_ref(),
         truth,
     };
-    let mut bar = kdam::tqdm!(desc = "registering", unit = " fits");
+    let mut bar = progress::bar("registering", " fits", 0);
     let estimate = pipeline::estimate_pose(
         &object,
         &sim,
         &input,
         &eval,
         a.derender.seed,
-        &mut super::args::bar_progress(&mut bar),
+        &mut progress::callback(&mut bar),
     )?;
-    eprintln!();
+    progress::finish(&mut bar);
     let report = &estimate.report;
     report.write(&a.out)?;
     if samples.len() > 1 {

@@ -7,7 +7,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::Args;
 use image::RgbImage;
-use kdam::BarExt;
 use serde_json::json;
 use tactile_derender::image::Image;
 use tactile_derender::io::preview::{render_panel, save_png, side_by_side, PanelStyle};
@@ -34,16 +33,15 @@ pub struct SampleArgs {
 pub fn run(a: SampleArgs) -> Result<()> {
     let model = DiffusionModel::load(&a.model)?;
     let imprint = npy::read_metres_image(&a.imprint)?;
-    let mut bar = kdam::tqdm!(desc = "sampling", unit = " steps");
+    let mut bar = super::progress::bar("sampling", " steps", 0);
     let out = pipeline::derender(
         &model,
         &imprint,
         &a.derender,
         EvalConfig::default().consensus_probability,
-        &mut super::args::bar_progress(&mut bar),
+        &mut super::progress::callback(&mut bar),
     )?;
-    let _ = bar.refresh();
-    eprintln!();
+    super::progress::finish(&mut bar);
     let samples = &out.samples;
     let (w, h) = (imprint.width, imprint.height);
     std::fs::create_dir_all(&a.out).with_context(|| a.out.display().to_string())?;

@@ -127,7 +127,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
     if let Some(v) = &val_dataset {
         data = data.with_validation(v);
     }
-    let mut bar = kdam::tqdm!(desc = "training", unit = " steps");
+    let mut bar = super::progress::bar("training", " steps", 0);
     let summary = train(&a.out, &tc, &cfg, a.init.as_deref(), &mut data, &mut |p| {
         bar.total = p.total as usize;
         bar.set_postfix(format!(
@@ -138,7 +138,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
         true
     })
     .with_context(|| format!("training in {}", a.out.display()))?;
-    eprintln!();
+    super::progress::finish(&mut bar);
     println!(
         "{}",
         json!({"steps": summary.steps, "resumed_from": summary.resumed_from, "last_loss": summary.last_loss,
