@@ -2,6 +2,7 @@
 //! JET colour map.
 
 pub mod atomic;
+pub mod figure;
 pub mod npy;
 pub mod ply;
 pub mod preview;

@@ -10,6 +10,7 @@
 //! | de-render: N samples of X0 for one imprint | [`DerenderConfig`] | [`derender()`] |
 //! | estimate the pose from the samples (one and many) | [`crate::metrics::evaluate::EvalConfig`] + seed | [`estimate_pose`] |
 //! | export its geometry for Open3D / trimesh (PLY) | [`crate::io::ply::PlyEncoding`] | [`write_pose_geometry`] |
+//! | draw its figures (KDE, SE(2) fits; SVG + PNG) | [`crate::io::figure::FigureConfig`] | [`write_fit_figure`], [`crate::uncertainty::UncertaintyReport::write_with`] |
 //! | simulate a press | [`crate::sim::SimConfig`] | [`crate::sim::Simulator::simulate`] |
 //! | generate a dataset | [`crate::dataset::GenConfig`] | [`crate::dataset::gen::generate`] |
 //! | train | [`crate::model::train::TrainConfig`] | [`crate::model::train::train`] |
@@ -29,7 +30,7 @@ pub mod pose;
 
 pub use derender::{derender, mean_std, DerenderConfig, Derendered};
 pub use object::{LoadedObject, ObjectSpec};
-pub use pose::{estimate_pose, write_pose_geometry, PoseEstimate, PoseInput};
+pub use pose::{estimate_pose, write_fit_figure, write_pose_geometry, PoseEstimate, PoseInput};
 
 use std::path::PathBuf;
 
@@ -74,6 +75,10 @@ pub enum PipelineError {
         #[source]
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Figure(#[from] crate::io::figure::FigureError),
+    #[error(transparent)]
+    Uncertainty(#[from] crate::uncertainty::UncertaintyError),
     #[error("no sample has any contact; nothing to register")]
     NoContact,
     #[error("cancelled")]

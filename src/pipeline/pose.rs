@@ -246,3 +246,38 @@ pub fn write_pose_geometry(
     }
     Ok(files)
 }
+
+/// Write the SE(2) fit figure of `estimate` (`fit.svg`, `fit.png`: the object's top-view outline at the true pose and
+/// at each estimate, with the registered sample's contact points) into `dir` at `figure`'s size; the KDE figure comes
+/// with the report ([`UncertaintyReport::write_with`]).
+pub fn write_fit_figure(
+    dir: &std::path::Path,
+    object: &LoadedObject,
+    sim: &Simulator,
+    input: &PoseInput<'_>,
+    estimate: &PoseEstimate,
+    figure: &crate::io::figure::FigureConfig,
+) -> Result<[std::path::PathBuf; 2], PipelineError> {
+    let outline = crate::pose::outline::outline(&object.mesh);
+    let contacts: Vec<[f64; 2]> = input
+        .samples
+        .get(estimate.registered_sample)
+        .map(|s| {
+            crate::recon::back_project(s, sim.intrinsics(), &input.t_world_camera)
+                .p_world
+                .iter()
+                .map(|p| [p.x, p.y])
+                .collect()
+        })
+        .unwrap_or_default();
+    let fit = crate::pose::figure::FitFigure {
+        object: &object.name,
+        outline: &outline,
+        contacts: &contacts,
+        truth: input.truth,
+        single: estimate.best(),
+        multi: estimate.report.multi_sample.map(|m| m.pose),
+        baseline: estimate.report.baseline.map(|b| b.pose),
+    };
+    Ok(crate::io::figure::write_figure(dir, "fit", figure, &fit)?)
+}

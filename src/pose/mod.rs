@@ -7,7 +7,9 @@
 //! about the table normal, metres and radians.
 
 pub mod baseline;
+pub mod figure;
 pub mod from_depth;
+pub mod outline;
 pub mod register;
 pub mod sdf;
 pub mod sdf_grid;

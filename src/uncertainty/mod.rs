@@ -1,7 +1,7 @@
 //! **Uncertainty** of the pose estimate (paper V.D, last paragraph): for one tactile signature, N samples of the
 //! in-contact depth from the model (default 50), each registered from one fixed initialisation; the distribution of
 //! their position and θ errors as Gaussian KDEs ([`kde`], Scott's rule), with the baseline's errors as points;
-//! exported as CSV and a PNG plot ([`plot`]).
+//! exported as CSV and a figure in SVG and PNG ([`figure`]).
 //!
 //! Errors are taken against a reference pose: the true pose when it is known (evaluation), otherwise the estimate
 //! of the first sample's K-start registration (then they measure the spread of the estimates). The position error is
@@ -9,8 +9,8 @@
 //! (−P/2, P/2] with P the symmetry period, in degrees, and absent for continuous symmetry.
 
 pub mod analysis;
+pub mod figure;
 pub mod kde;
-pub mod plot;
 
 pub use kde::{GaussianKde, KdeError};
 
@@ -19,6 +19,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::io::figure::{write_figure, FigureConfig};
 use crate::metrics::pose::position_error_m;
 use crate::objects::Symmetry;
 use crate::sensor::Se2;
@@ -32,6 +33,8 @@ pub enum UncertaintyError {
         #[source]
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Figure(#[from] crate::io::figure::FigureError),
 }
 
 /// One registered estimate and its errors.
@@ -178,8 +181,14 @@ impl UncertaintyReport {
         s
     }
 
-    /// Write `samples.csv`, `kde.csv` and `uncertainty.png` into `dir` (atomically).
+    /// Write `samples.csv`, `kde.csv` and the KDE figure (`uncertainty.svg`, `uncertainty.png`) into `dir`
+    /// (atomically), the figure at the default size.
     pub fn write(&self, dir: &Path) -> Result<(), UncertaintyError> {
+        self.write_with(dir, &FigureConfig::default())
+    }
+
+    /// [`Self::write`] with the figure at `figure`'s size.
+    pub fn write_with(&self, dir: &Path, figure: &FigureConfig) -> Result<(), UncertaintyError> {
         let err = |path: &Path| {
             let path = path.to_path_buf();
             move |source| UncertaintyError::Write { path, source }
@@ -189,24 +198,12 @@ impl UncertaintyReport {
         crate::io::write_atomic(&p, self.samples_csv().as_bytes()).map_err(err(&p))?;
         let p = dir.join("kde.csv");
         crate::io::write_atomic(&p, self.kde_csv().as_bytes()).map_err(err(&p))?;
-        let pos: Vec<f64> = self.samples.iter().map(|s| s.position_mm).collect();
-        let theta: Vec<f64> = self.samples.iter().filter_map(|s| s.theta_deg).collect();
-        let mut panels = vec![plot::Panel {
-            title: "position error [mm]",
-            curve: &self.position_kde,
-            samples: &pos,
-            baseline: self.baseline.map(|b| b.position_mm),
-        }];
-        if !theta.is_empty() {
-            panels.push(plot::Panel {
-                title: "theta error [deg]",
-                curve: &self.theta_kde,
-                samples: &theta,
-                baseline: self.baseline.and_then(|b| b.theta_deg),
-            });
-        }
-        let p = dir.join("uncertainty.png");
-        crate::io::preview::save_png(&p, &plot::plot(&panels)).map_err(err(&p))?;
+        write_figure(
+            dir,
+            "uncertainty",
+            figure,
+            &figure::KdeFigure { report: self },
+        )?;
         Ok(())
     }
 }
@@ -275,6 +272,16 @@ mod tests {
         assert_eq!(csv.lines().count(), 22);
         assert!(csv.lines().last().unwrap().starts_with("baseline,0,0.002"));
         let png = image::open(dir.path().join("uncertainty.png")).unwrap();
-        assert_eq!((png.width(), png.height()), (640, 240));
+        assert_eq!((png.width(), png.height()), (2400, 1000));
+        let svg = std::fs::read_to_string(dir.path().join("uncertainty.svg")).unwrap();
+        for text in [
+            "position error",
+            "[mm]",
+            "density",
+            "threshold baseline",
+            "KDE of 20 samples",
+        ] {
+            assert!(svg.contains(text), "no '{text}' in the SVG");
+        }
     }
 }

@@ -493,8 +493,16 @@ impl WorkbenchApp {
             req.seed,
             tactile_derender::io::ply::PlyEncoding::Binary,
         )?;
+        tactile_derender::pipeline::write_fit_figure(
+            &dir,
+            &object,
+            &sim,
+            &input,
+            &estimate,
+            &Default::default(),
+        )?;
         self.notice = Some(format!(
-            "wrote samples.csv, kde.csv, uncertainty.png and {} PLY files to {}",
+            "wrote samples.csv, kde.csv, the uncertainty and fit figures (SVG, PNG) and {} PLY files to {}",
             files.len(),
             dir.display()
         ));

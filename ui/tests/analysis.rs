@@ -477,12 +477,15 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     h.state_mut()
         .apply(tnd_workbench::command::Command::SetView(v));
     h.run_ok();
-    h.get_by_label("Export CSV + PNG + PLY").click();
+    h.get_by_label("Export CSV, figures, PLY").click();
     h.run_ok();
     for f in [
         "samples.csv",
         "kde.csv",
         "uncertainty.png",
+        "uncertainty.svg",
+        "fit.svg",
+        "fit.png",
         "contact_points.ply",
         "free_space_points.ply",
         "consensus_points.ply",

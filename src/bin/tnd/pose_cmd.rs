@@ -1,8 +1,8 @@
 //! `tnd pose`: one tactile signature end to end, through the same use cases as the workbench's De-render and Pose
 //! tabs ([`tactile_derender::pipeline`]) — N samples of the in-contact depth, the pose from a K-start registration
 //! of the first, every sample registered from that fixed start, the multi-sample estimate (the samples' consensus
-//! contact), the threshold baseline, the uncertainty outputs (samples.csv, kde.csv, uncertainty.png,
-//! contact_probability.npy, pose.json) and the geometry as PLY (contact, free-space and consensus points, the object
+//! contact), the threshold baseline, the uncertainty outputs (samples.csv, kde.csv, contact_probability.npy,
+//! pose.json), the figures (uncertainty and fit, SVG + PNG) and the geometry as PLY (contact, free-space and consensus points, the object
 //! at each estimate; world frame, metres).
 
 use std::path::{Path, PathBuf};
@@ -11,6 +11,7 @@ use anyhow::{anyhow, bail, Result};
 use clap::Args;
 use serde_json::json;
 use tactile_derender::image::Image;
+use tactile_derender::io::figure::FigureConfig;
 use tactile_derender::io::npy;
 use tactile_derender::io::ply::PlyEncoding;
 use tactile_derender::metrics::evaluate::EvalConfig;
@@ -54,9 +55,23 @@ pub struct PoseArgs {
     /// Encoding of the PLY files (contact, free-space and consensus points, the object at each estimate).
     #[arg(long, value_enum, default_value_t = PlyEncoding::Binary)]
     pub ply: PlyEncoding,
+    /// Size of the figures (uncertainty and fit, SVG + PNG), pixels WxH.
+    #[arg(long, default_value = "2400x1000", value_parser = parse_size)]
+    pub figure_size: FigureConfig,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
+}
+
+fn parse_size(s: &str) -> Result<FigureConfig, String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
+        .ok_or_else(|| format!("'{s}' must look like 2400x1000 (pixels)"))?;
+    Ok(FigureConfig {
+        width_px: w,
+        height_px: h,
+    })
 }
 
 fn read(path: &Path, want: (usize, usize)) -> Result<Image> {
@@ -137,7 +152,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
     )?;
     progress::finish(&mut bar);
     let report = &estimate.report;
-    report.write(&a.out)?;
+    report.write_with(&a.out, &a.figure_size)?;
+    pipeline::write_fit_figure(&a.out, &object, &sim, &input, &estimate, &a.figure_size)?;
     if samples.len() > 1 {
         let p = contact_probability(&samples)?;
         npy::write_image(&a.out.join("contact_probability.npy"), &p)?;

@@ -50,9 +50,10 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
         }
         if pose.result.is_some()
             && ui
-                .button("Export CSV + PNG + PLY")
+                .button("Export CSV, figures, PLY")
                 .on_hover_text(
-                    "samples.csv, kde.csv, uncertainty.png and the geometry as PLY (contact, free-space and \
+                    "samples.csv, kde.csv, the uncertainty and SE(2) fit figures (SVG and 2400 x 1000 PNG) and \
+                     the geometry as PLY (contact, free-space and \
                      consensus points; the object at each estimate and the true pose; world frame, metres) in \
                      <export folder>/pose",
                 )

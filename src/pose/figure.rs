@@ -1,0 +1,181 @@
+//! The SE(2) fit figure (paper Fig. "SE(2) fits"): a top view in millimetres, world frame, of the object's outline at
+//! the true pose, at the single-sample and multi-sample estimates and at the threshold baseline's, with the
+//! back-projected contact points the estimate was fitted to. SVG and PNG through [`crate::io::figure`].
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::outline::{placed_mm, Outline};
+use crate::io::figure::{err, font, Draw};
+use crate::sensor::Se2;
+
+/// What the fit figure shows.
+pub struct FitFigure<'a> {
+    /// Object name, for the title.
+    pub object: &'a str,
+    /// Top-view outline in the object frame, metres ([`super::outline::outline`]).
+    pub outline: &'a [Outline],
+    /// Contact points `(x, y)`, world frame, metres.
+    pub contacts: &'a [[f64; 2]],
+    pub truth: Option<Se2>,
+    pub single: Option<Se2>,
+    pub multi: Option<Se2>,
+    pub baseline: Option<Se2>,
+}
+
+impl Draw for FitFigure<'_> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        s: f64,
+    ) -> Result<(), String> {
+        let poses = [
+            (self.truth, RGBColor(120, 120, 120), "true pose"),
+            (self.baseline, RED, "threshold baseline"),
+            (self.single, BLUE, "single-sample estimate"),
+            (self.multi, RGBColor(0, 150, 60), "multi-sample estimate"),
+        ];
+        let placed: Vec<_> = poses
+            .iter()
+            .filter_map(|(p, c, l)| p.map(|p| (placed_mm(self.outline, &p), *c, *l)))
+            .collect();
+        let contacts: Vec<(f64, f64)> = self
+            .contacts
+            .iter()
+            .map(|[x, y]| (x * 1e3, y * 1e3))
+            .collect();
+        let all = placed
+            .iter()
+            .flat_map(|(loops, _, _)| loops.iter().flatten().map(|p| (p[0], p[1])))
+            .chain(contacts.iter().copied());
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for (x, y) in all {
+            (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+        }
+        if x0 > x1 {
+            (x0, x1, y0, y1) = (-10.0, 10.0, -10.0, 10.0);
+        }
+        // Equal scales on both axes: widen the narrower range to the plot's aspect.
+        let (w, h) = root.dim_in_pixel();
+        let aspect = f64::from(w.max(1)) / f64::from(h.max(1));
+        let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+        let half_h = ((y1 - y0) / 2.0).max((x1 - x0) / 2.0 / aspect) * 1.1 + 1.0;
+        let half_w = half_h * aspect;
+        let stroke = (2.0 * s).round().max(1.0) as u32;
+        let mut chart = ChartBuilder::on(root)
+            .caption(format!("SE(2) fits: {}", self.object), font(18.0, s))
+            .margin((12.0 * s) as i32)
+            .x_label_area_size((46.0 * s) as i32)
+            .y_label_area_size((60.0 * s) as i32)
+            .build_cartesian_2d(cx - half_w..cx + half_w, cy - half_h..cy + half_h)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("x, world frame [mm]")
+            .y_desc("y [mm]")
+            .label_style(font(13.0, s))
+            .axis_desc_style(font(15.0, s))
+            .light_line_style(RGBColor(235, 235, 235))
+            .bold_line_style(RGBColor(210, 210, 210))
+            .draw()
+            .map_err(err)?;
+        let dot = (2.0 * s).max(1.0) as i32;
+        chart
+            .draw_series(
+                contacts
+                    .iter()
+                    .map(|&p| Circle::new(p, dot, RGBColor(30, 30, 30).filled())),
+            )
+            .map_err(err)?
+            .label(format!("contact points ({})", contacts.len()))
+            .legend(move |(x, y)| Circle::new((x + 10, y), dot + 1, RGBColor(30, 30, 30).filled()));
+        for (loops, colour, label) in placed {
+            let mut first = true;
+            for l in loops {
+                let series = chart
+                    .draw_series(LineSeries::new(
+                        l.into_iter().map(|p| (p[0], p[1])),
+                        colour.stroke_width(stroke),
+                    ))
+                    .map_err(err)?;
+                if first {
+                    series.label(label).legend(move |(x, y)| {
+                        PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(stroke))
+                    });
+                    first = false;
+                }
+            }
+        }
+        chart
+            .configure_series_labels()
+            .label_font(font(13.0, s))
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(160, 160, 160))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(err)?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::figure::{write_figure, FigureConfig, FigureError};
+
+    #[test]
+    fn the_fit_figure_is_written_as_svg_and_png_at_the_chosen_size() {
+        let dir = tempfile::tempdir().unwrap();
+        let outline = vec![vec![
+            [-0.01, -0.005],
+            [0.01, -0.005],
+            [0.01, 0.005],
+            [-0.01, 0.005],
+            [-0.01, -0.005],
+        ]];
+        let fig = FitFigure {
+            object: "box",
+            outline: &outline,
+            contacts: &[[0.0, 0.0], [0.004, 0.001]],
+            truth: Some(Se2::new(0.001, 0.0, 0.2)),
+            single: Some(Se2::new(0.0012, 0.0001, 0.21)),
+            multi: None,
+            baseline: Some(Se2::new(0.002, 0.0, 0.3)),
+        };
+        let size = FigureConfig {
+            width_px: 900,
+            height_px: 600,
+        };
+        let [svg, png] = write_figure(dir.path(), "fit", &size, &fig).unwrap();
+        let text = std::fs::read_to_string(svg).unwrap();
+        for want in [
+            "SE(2) fits: box",
+            "x, world frame [mm]",
+            "contact points (2)",
+            "threshold baseline",
+        ] {
+            assert!(text.contains(want), "no '{want}' in the SVG");
+        }
+        assert!(
+            !text.contains("multi-sample"),
+            "no multi-sample estimate was given"
+        );
+        let img = image::open(png).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (900, 600));
+        // Text was rasterised with the bundled font: the title row holds dark pixels.
+        let dark = (0..900)
+            .filter(|&x| (0..40).any(|y| img.get_pixel(x, y).0[0] < 100))
+            .count();
+        assert!(dark > 20, "{dark}");
+        let err = write_figure(
+            dir.path(),
+            "tiny",
+            &FigureConfig {
+                width_px: 10,
+                height_px: 10,
+            },
+            &fig,
+        );
+        assert!(matches!(err, Err(FigureError::Size(10, 10))));
+    }
+}

@@ -1,0 +1,167 @@
+//! The uncertainty figure (paper V.D, Fig. "uncertainty"): one panel per pose-error variable (position in mm, θ in
+//! degrees) with the KDE of the samples' errors, the samples as a rug, and the threshold baseline's and the
+//! multi-sample estimate's errors as vertical lines; axes, units and a legend. SVG and PNG through
+//! [`crate::io::figure`].
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::UncertaintyReport;
+use crate::io::figure::{err, font, Draw};
+
+/// The KDE figure of one report.
+pub struct KdeFigure<'a> {
+    pub report: &'a UncertaintyReport,
+}
+
+struct Panel<'a> {
+    title: &'a str,
+    axis: &'a str,
+    curve: &'a [(f64, f64)],
+    samples: Vec<f64>,
+    baseline: Option<f64>,
+    multi: Option<f64>,
+}
+
+impl Draw for KdeFigure<'_> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        scale: f64,
+    ) -> Result<(), String> {
+        let r = self.report;
+        let truth = if r.reference_is_truth {
+            "true pose"
+        } else {
+            "estimate"
+        };
+        let mut panels = vec![Panel {
+            title: "position error",
+            axis: "position error against the reference [mm]",
+            curve: &r.position_kde,
+            samples: r.samples.iter().map(|s| s.position_mm).collect(),
+            baseline: r.baseline.map(|b| b.position_mm),
+            multi: r.multi_sample.map(|m| m.position_mm),
+        }];
+        let theta: Vec<f64> = r.samples.iter().filter_map(|s| s.theta_deg).collect();
+        if !theta.is_empty() {
+            panels.push(Panel {
+                title: "θ error",
+                axis: "θ error against the reference [deg]",
+                curve: &r.theta_kde,
+                samples: theta,
+                baseline: r.baseline.and_then(|b| b.theta_deg),
+                multi: r.multi_sample.and_then(|m| m.theta_deg),
+            });
+        }
+        let areas = root.split_evenly((1, panels.len()));
+        for (area, p) in areas.iter().zip(&panels) {
+            panel(area, p, truth, scale)?;
+        }
+        Ok(())
+    }
+}
+
+fn panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    p: &Panel<'_>,
+    reference: &str,
+    s: f64,
+) -> Result<(), String> {
+    let xs = p
+        .curve
+        .iter()
+        .map(|c| c.0)
+        .chain(p.samples.iter().copied())
+        .chain(p.baseline)
+        .chain(p.multi)
+        .filter(|v| v.is_finite());
+    let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    let (lo, hi) = if lo.is_finite() && hi > lo {
+        let pad = 0.05 * (hi - lo);
+        (lo - pad, hi + pad)
+    } else if lo.is_finite() {
+        (lo - 0.5, lo + 0.5)
+    } else {
+        (0.0, 1.0)
+    };
+    let top = p.curve.iter().map(|c| c.1).fold(0.0, f64::max);
+    let top = if top > 0.0 { top * 1.15 } else { 1.0 };
+    let stroke = (2.0 * s).round().max(1.0) as u32;
+    let mut chart = ChartBuilder::on(area)
+        .caption(
+            format!("{} (reference: {reference})", p.title),
+            font(18.0, s),
+        )
+        .margin((12.0 * s) as i32)
+        .x_label_area_size((46.0 * s) as i32)
+        .y_label_area_size((64.0 * s) as i32)
+        .build_cartesian_2d(lo..hi, 0.0..top)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(p.axis)
+        .y_desc("density")
+        .label_style(font(13.0, s))
+        .axis_desc_style(font(15.0, s))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(210, 210, 210))
+        .draw()
+        .map_err(err)?;
+    if !p.curve.is_empty() {
+        chart
+            .draw_series(LineSeries::new(
+                p.curve.iter().copied(),
+                BLUE.stroke_width(stroke),
+            ))
+            .map_err(err)?
+            .label(format!("KDE of {} samples", p.samples.len()))
+            .legend(move |(x, y)| {
+                PathElement::new([(x, y), (x + 20, y)], BLUE.stroke_width(stroke))
+            });
+    }
+    let rug = top * 0.05;
+    chart
+        .draw_series(p.samples.iter().map(|&v| {
+            PathElement::new(
+                [(v, 0.0), (v, rug)],
+                RGBColor(90, 90, 90).stroke_width(stroke),
+            )
+        }))
+        .map_err(err)?
+        .label("samples")
+        .legend(move |(x, y)| {
+            PathElement::new(
+                [(x + 10, y - 6), (x + 10, y + 6)],
+                RGBColor(90, 90, 90).stroke_width(stroke),
+            )
+        });
+    for (value, colour, label) in [
+        (p.baseline, RED, "threshold baseline"),
+        (p.multi, RGBColor(0, 150, 60), "multi-sample estimate"),
+    ] {
+        if let Some(v) = value {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    [(v, 0.0), (v, top)],
+                    colour.stroke_width(stroke),
+                )))
+                .map_err(err)?
+                .label(label)
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(stroke))
+                });
+        }
+    }
+    chart
+        .configure_series_labels()
+        .label_font(font(13.0, s))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(err)?;
+    Ok(())
+}
