@@ -30,7 +30,7 @@ pub enum DatasetCommand {
     Stats {
         /// Dataset directory (`tnd dataset gen` or `tnd dataset import`).
         dir: PathBuf,
-        /// Print one JSON object instead of text.
+        /// JSON only: leave out the readable summary (on stderr) beside the JSON object (on stdout).
         #[arg(long)]
         json: bool,
         /// Also verify every shard's checksum, dtype and shape (always done for the pairs read).
@@ -223,8 +223,9 @@ fn stats(dir: PathBuf, as_json: bool, verify: bool) -> Result<()> {
     let s = dataset::stats::compute(&ds, &|n| tick(&pb, n));
     finish(&pb);
     let s = s?;
+    // Like every command: the result as JSON on stdout; the readable summary beside it on stderr.
+    println!("{}", serde_json::to_string(&s)?);
     if as_json {
-        println!("{}", serde_json::to_string(&s)?);
         return Ok(());
     }
     let mm = |r: Option<[f32; 2]>| {
@@ -232,38 +233,38 @@ fn stats(dir: PathBuf, as_json: bool, verify: bool) -> Result<()> {
             format!("{:.2} .. {:.2} mm", a * 1e3, b * 1e3)
         })
     };
-    println!(
+    eprintln!(
         "{}: {:?} dataset, {}x{}",
         dir.display(),
         ds.manifest().kind,
         ds.resolution().0,
         ds.resolution().1
     );
-    println!(
+    eprintln!(
         "pairs: train {}, unseen_poses {}, unseen_objects {} (total {})",
         s.counts.train, s.counts.unseen_poses, s.counts.unseen_objects, total
     );
-    println!(
+    eprintln!(
         "{:<28} {:>7} {:>13} {:>15}",
         "object", "train", "unseen_poses", "unseen_objects"
     );
     for (name, c) in &s.per_object {
-        println!(
+        eprintln!(
             "{name:<28} {:>7} {:>13} {:>15}",
             c.train, c.unseen_poses, c.unseen_objects
         );
     }
-    println!("target X0 (contact pixels): {}", mm(s.target_range_m));
-    println!("signature S:                {}", mm(s.signature_range_m));
-    println!("imprint Y:                  {}", mm(s.imprint_range_m));
+    eprintln!("target X0 (contact pixels): {}", mm(s.target_range_m));
+    eprintln!("signature S:                {}", mm(s.signature_range_m));
+    eprintln!("imprint Y:                  {}", mm(s.imprint_range_m));
     if let Some([a, b]) = s.press_range_m {
-        println!(
+        eprintln!(
             "press:                      {:.2} .. {:.2} mm",
             a * 1e3,
             b * 1e3
         );
     }
-    println!(
+    eprintln!(
         "contact area: mean {:.1} px ({:.2} % of the image); histogram over 0..{:.2} % of the image:",
         s.contact_pixels_mean,
         s.contact_fraction_mean * 100.0,
@@ -273,7 +274,7 @@ fn stats(dir: PathBuf, as_json: bool, verify: bool) -> Result<()> {
     for (i, &c) in s.area_hist.iter().enumerate() {
         let lo = s.area_hist_max_fraction * 100.0 * i as f64 / s.area_hist.len() as f64;
         let hi = s.area_hist_max_fraction * 100.0 * (i + 1) as f64 / s.area_hist.len() as f64;
-        println!("  {lo:6.2}-{hi:6.2} % {c:>7} {}", "#".repeat(c * 50 / peak));
+        eprintln!("  {lo:6.2}-{hi:6.2} % {c:>7} {}", "#".repeat(c * 50 / peak));
     }
     Ok(())
 }

@@ -50,7 +50,7 @@ pub struct EvalArgs {
     /// Seed of the sampler and the registration starts.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Print one JSON object per split (otherwise a markdown table).
+    /// JSON only: leave out the markdown tables (on stderr) beside the JSON objects (one per split, on stdout).
     #[arg(long)]
     pub json: bool,
     /// Also write report.md and uncertainty plots (KDE over --samples samples) for --report-pairs pairs per split.
@@ -119,18 +119,18 @@ pub fn run(a: EvalArgs) -> Result<()> {
         }
         let table = markdown_table(split.as_str(), &report);
         let breakdown = breakdown_tables(&report);
-        if a.json {
-            println!(
-                "{}",
-                json!({"split": split.as_str(), "generator": report.generator, "pairs": report.pairs,
-                       "model": report.model, "model_multi": report.model_multi,
-                       "baseline": report.baseline, "breakdown": report.breakdown,
-                       "failed": report.failed})
-            );
-        } else {
-            println!("{table}");
+        // Like every command: the result as JSON on stdout; the readable table beside it on stderr.
+        println!(
+            "{}",
+            json!({"split": split.as_str(), "generator": report.generator, "pairs": report.pairs,
+                   "model": report.model, "model_multi": report.model_multi,
+                   "baseline": report.baseline, "breakdown": report.breakdown,
+                   "failed": report.failed})
+        );
+        if !a.json {
+            eprintln!("{table}");
             if a.breakdown {
-                println!("{breakdown}");
+                eprintln!("{breakdown}");
             }
         }
         markdown.push_str(&table);
