@@ -81,7 +81,14 @@ fn sample_writes_deterministic_outputs() {
         o
     };
     let (a, b) = (run("a"), run("b"));
-    for f in ["samples.npy", "mean.npy", "std.npy", "grid.png"] {
+    for f in [
+        "samples.npy",
+        "mean.npy",
+        "std.npy",
+        "contact_probability.npy",
+        "grid.png",
+        "grid.svg",
+    ] {
         assert!(a.join(f).is_file(), "{f}");
     }
     let sa = std::fs::read(a.join("samples.npy")).unwrap();

@@ -132,3 +132,150 @@ pub fn write_figure(
     }
     Ok([svg_path, png_path])
 }
+
+/// A grid of depth images with a title and a colour bar each (metres shown in mm; JET colour map as the previews),
+/// e.g. an imprint with the mean, spread and samples of its de-rendering.
+pub struct ImageGrid<'a> {
+    pub title: String,
+    /// The images with their titles, ranges and units ([`super::preview::PanelStyle`]; `scale` is ignored).
+    pub panels: Vec<(&'a crate::image::Image, super::preview::PanelStyle)>,
+    /// Panels per row.
+    pub columns: usize,
+}
+
+impl Draw for ImageGrid<'_> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        s: f64,
+    ) -> Result<(), String> {
+        let area = root.titled(&self.title, font(20.0, s)).map_err(err)?;
+        let columns = self.columns.clamp(1, self.panels.len().max(1));
+        let rows = self.panels.len().div_ceil(columns).max(1);
+        let cells = area.split_evenly((rows, columns));
+        for (cell, (image, style)) in cells.iter().zip(&self.panels) {
+            grid_panel(cell, image, style, s)?;
+        }
+        Ok(())
+    }
+}
+
+fn grid_panel<DB: DrawingBackend>(
+    cell: &DrawingArea<DB, Shift>,
+    image: &crate::image::Image,
+    style: &super::preview::PanelStyle,
+    s: f64,
+) -> Result<(), String> {
+    let inner = cell
+        .margin(
+            (6.0 * s) as i32,
+            (6.0 * s) as i32,
+            (6.0 * s) as i32,
+            (6.0 * s) as i32,
+        )
+        .titled(&style.title, font(13.0, s))
+        .map_err(err)?;
+    let (w, _) = inner.dim_in_pixel();
+    let bar_w = ((70.0 * s) as u32).min(w / 3);
+    let (picture, bar) = inner.split_horizontally(w - bar_w);
+    let range = super::preview::display_range(image, style);
+    // The image, nearest-neighbour upscaled to the largest size that keeps its aspect.
+    let (pw, ph) = picture.dim_in_pixel();
+    let k =
+        (f64::from(pw) / image.width.max(1) as f64).min(f64::from(ph) / image.height.max(1) as f64);
+    let (sw, sh) = (
+        ((image.width as f64 * k) as u32).max(1),
+        ((image.height as f64 * k) as u32).max(1),
+    );
+    let colours = super::preview::colorize(image, range, style.zero_is_missing);
+    let scaled = image::imageops::resize(&colours, sw, sh, image::imageops::FilterType::Nearest);
+    let element =
+        BitMapElement::<(i32, i32)>::with_owned_buffer((0, 0), (sw, sh), scaled.into_raw())
+            .ok_or("image buffer size")?;
+    picture.draw(&element).map_err(err)?;
+    let bar = bar.shrink((0, 0), (bar_w, sh));
+    // The colour bar with its axis.
+    let (lo, hi) = if style.millimetres {
+        (f64::from(range.0) * 1e3, f64::from(range.1) * 1e3)
+    } else {
+        (f64::from(range.0), f64::from(range.1))
+    };
+    let hi = if hi > lo { hi } else { lo + 1.0 };
+    let mut chart = ChartBuilder::on(&bar)
+        .margin_right((4.0 * s) as i32)
+        .y_label_area_size((44.0 * s) as i32)
+        .build_cartesian_2d(0.0..1.0, lo..hi)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .disable_x_axis()
+        .disable_y_mesh()
+        .y_desc(if style.millimetres { "mm" } else { "" })
+        .y_labels(5)
+        .label_style(font(11.0, s))
+        .axis_desc_style(font(12.0, s))
+        .draw()
+        .map_err(err)?;
+    let steps = 64;
+    chart
+        .draw_series((0..steps).map(|i| {
+            let t = i as f64 / steps as f64;
+            let [r, g, b] = super::preview::jet((t + 0.5 / steps as f64) as f32);
+            Rectangle::new(
+                [
+                    (0.0, lo + (hi - lo) * t),
+                    (1.0, lo + (hi - lo) * (t + 1.0 / steps as f64)),
+                ],
+                RGBColor(r, g, b).filled(),
+            )
+        }))
+        .map_err(err)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use crate::io::preview::PanelStyle;
+
+    #[test]
+    fn image_grids_embed_each_image_once_with_titles_and_colour_bars() {
+        let dir = tempfile::tempdir().unwrap();
+        let ramp =
+            Image::from_vec(8, 4, (0..32).map(|i| 0.07 + i as f32 * 1e-3).collect()).unwrap();
+        let holes = Image::from_vec(
+            8,
+            4,
+            (0..32)
+                .map(|i| if i % 3 == 0 { 0.0 } else { 0.08 })
+                .collect(),
+        )
+        .unwrap();
+        let style = |title: &str| PanelStyle {
+            title: title.into(),
+            zero_is_missing: true,
+            ..PanelStyle::default()
+        };
+        let grid = ImageGrid {
+            title: "two images".into(),
+            panels: vec![(&ramp, style("ramp")), (&holes, style("with holes"))],
+            columns: 2,
+        };
+        let size = FigureConfig {
+            width_px: 1000,
+            height_px: 400,
+        };
+        let [svg, png] = write_figure(dir.path(), "grid", &size, &grid).unwrap();
+        let text = std::fs::read_to_string(svg).unwrap();
+        for want in ["two images", "ramp", "with holes", "mm"] {
+            assert!(text.contains(want), "no '{want}' in the SVG");
+        }
+        // One embedded PNG per image, not a rectangle per pixel.
+        assert_eq!(text.matches("<image").count(), 2);
+        assert!(text.len() < 200_000, "{} bytes", text.len());
+        let img = image::open(png).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (1000, 400));
+    }
+}

@@ -69,31 +69,44 @@ pub enum Loss {
 }
 
 /// Settings of one training run; everything but `steps`/`epochs`, `checkpoint_every_s` and `log_every` must stay the
-/// same across resumes.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// same across resumes. The one definition behind `tnd train`'s flags (flattened) and its defaults.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(default)]
 pub struct TrainConfig {
-    /// Total optimiser steps (takes precedence over `epochs`).
+    /// Total optimiser steps (takes precedence over epochs).
+    #[arg(long, conflicts_with = "epochs")]
     pub steps: Option<u64>,
-    /// Total epochs (`len / batch` steps each) when `steps` is not given.
+    /// Total epochs over the train split (len / batch steps each; 1 when --steps is not given).
+    #[arg(long)]
     pub epochs: Option<u64>,
-    /// Pairs per step.
+    /// Pairs per optimiser step.
+    #[arg(long, default_value_t = TrainConfig::default().batch)]
     pub batch: usize,
     /// Adam learning rate (the paper: 1e-4).
+    #[arg(long, default_value_t = TrainConfig::default().lr)]
     pub lr: f64,
+    /// Loss on the network's prediction: l2 (the paper's) or l1.
+    #[arg(long, value_enum, default_value_t = TrainConfig::default().loss)]
     pub loss: Loss,
-    /// Seed of initialisation, data order, timesteps and noise.
+    /// Seed of initialisation, batch order, timesteps and noise (a run is reproducible from it and the data).
+    #[arg(long, default_value_t = TrainConfig::default().seed)]
     pub seed: u64,
-    /// Decay of the exponential moving average of the weights (e.g. 0.999); `None` = no EMA.
+    /// EMA decay of the weights (e.g. 0.999; the saved model then holds the EMA weights); none by default.
+    #[arg(long)]
     pub ema: Option<f64>,
-    /// Wall-clock seconds between checkpoints, seconds.
+    /// Wall-clock seconds between checkpoints.
+    #[arg(long = "checkpoint-every", default_value_t = TrainConfig::default().checkpoint_every_s)]
     pub checkpoint_every_s: f64,
-    /// Also checkpoint every this many steps (0 = only by time).
+    /// Also checkpoint every this many steps (0: only by time).
+    #[arg(long, default_value_t = TrainConfig::default().checkpoint_every_steps)]
     pub checkpoint_every_steps: u64,
     /// Steps between log lines (and validation losses).
+    #[arg(long, default_value_t = TrainConfig::default().log_every)]
     pub log_every: u64,
-    /// Override the network's prediction target for a new run (from scratch or `--init`); `None` keeps the model
-    /// config's (a fine-tune of an ε model with `VPrediction` re-targets its output layer).
+    /// What the network predicts for a new run (from scratch or --init): eps (the noise, the paper's objective) or
+    /// v (the velocity √ᾱ·ε − √(1−ᾱ)·x0). Default: the model config's (--config, --init), eps for the built-in one;
+    /// a fine-tune of an eps model with v re-targets its output layer.
+    #[arg(long, value_enum)]
     pub prediction: Option<PredictionType>,
 }
 

@@ -69,3 +69,15 @@ impl SensorArgs {
         Ok(cfg)
     }
 }
+
+/// `--figure-size WxH` (pixels).
+pub fn parse_figure_size(s: &str) -> Result<tactile_derender::io::figure::FigureConfig, String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
+        .ok_or_else(|| format!("'{s}' must look like 2400x1000 (pixels)"))?;
+    Ok(tactile_derender::io::figure::FigureConfig {
+        width_px: w,
+        height_px: h,
+    })
+}

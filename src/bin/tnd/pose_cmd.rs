@@ -56,22 +56,11 @@ pub struct PoseArgs {
     #[arg(long, value_enum, default_value_t = PlyEncoding::Binary)]
     pub ply: PlyEncoding,
     /// Size of the figures (uncertainty and fit, SVG + PNG), pixels WxH.
-    #[arg(long, default_value = "2400x1000", value_parser = parse_size)]
+    #[arg(long, default_value = "2400x1000", value_parser = super::args::parse_figure_size)]
     pub figure_size: FigureConfig,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
-}
-
-fn parse_size(s: &str) -> Result<FigureConfig, String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
-        .ok_or_else(|| format!("'{s}' must look like 2400x1000 (pixels)"))?;
-    Ok(FigureConfig {
-        width_px: w,
-        height_px: h,
-    })
 }
 
 fn read(path: &Path, want: (usize, usize)) -> Result<Image> {

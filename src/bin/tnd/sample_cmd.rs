@@ -1,15 +1,16 @@
 //! `tnd sample`: de-render one imprint — N samples of the in-contact depth X0 in one batched reverse-diffusion run,
-//! written as `.npy` (metres) with their per-pixel mean, standard deviation and contact probability and a PNG grid
+//! written as `.npy` (metres) with their per-pixel mean, standard deviation and contact probability and a figure
+//! (grid.svg, grid.png)
 //! ([`tactile_derender::pipeline::derender`], the same use case as the workbench's De-render tab).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::Args;
-use image::RgbImage;
 use serde_json::json;
 use tactile_derender::image::Image;
-use tactile_derender::io::preview::{render_panel, save_png, side_by_side, PanelStyle};
+use tactile_derender::io::figure::{write_figure, FigureConfig, ImageGrid};
+use tactile_derender::io::preview::PanelStyle;
 use tactile_derender::io::{npy, write_atomic};
 use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::DiffusionModel;
@@ -25,6 +26,9 @@ pub struct SampleArgs {
     pub imprint: PathBuf,
     #[command(flatten)]
     pub derender: DerenderConfig,
+    /// Size of the grid figure (grid.svg, grid.png), pixels WxH.
+    #[arg(long, default_value = "2400x3000", value_parser = super::args::parse_figure_size)]
+    pub figure_size: FigureConfig,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
@@ -59,9 +63,8 @@ pub fn run(a: SampleArgs) -> Result<()> {
         &a.out.join("contact_probability.npy"),
         &out.contact_probability,
     )?;
-    let grid = grid_png(&imprint, samples, &out.mean, &out.std);
-    let png = a.out.join("grid.png");
-    save_png(&png, &grid).with_context(|| png.display().to_string())?;
+    let figure = grid(&imprint, &out, a.derender.seed);
+    write_figure(&a.out, "grid", &a.figure_size, &figure)?;
     let kind = a.derender.sampler.sampler_kind();
     println!(
         "{}",
@@ -76,42 +79,51 @@ fn write(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(path, bytes).with_context(|| path.display().to_string())
 }
 
-/// Rows of up to 8 panels: imprint, mean, std, then the first samples (at most 16).
-fn grid_png(imprint: &Image, samples: &[Image], mean: &Image, std: &Image) -> RgbImage {
-    let style = |title: &str, zero_missing: bool| PanelStyle {
-        title: title.into(),
+/// The figure of a run: imprint, mean, std and contact probability, then the first samples (at most 16), four per
+/// row, each with its colour bar (mm, or 0..1 for the probability).
+fn grid<'a>(imprint: &'a Image, out: &'a pipeline::Derendered, seed: u64) -> ImageGrid<'a> {
+    let style = |title: String, zero_missing: bool| PanelStyle {
+        title,
         zero_is_missing: zero_missing,
         ..PanelStyle::default()
     };
-    let range = mean.range_where(|v| v > 0.003).filter(|(lo, hi)| hi > lo);
+    // The in-contact depths of the samples (pixels deeper than the model's no-contact cut).
+    let range = out
+        .samples
+        .first()
+        .and_then(|s| s.range_where(|v| v > 0.05))
+        .filter(|(lo, hi)| hi > lo);
     let mut panels = vec![
-        render_panel(imprint, &style("imprint Y", false)),
-        render_panel(
-            mean,
-            &PanelStyle {
+        (imprint, style("imprint Y".into(), false)),
+        (
+            &out.mean,
+            PanelStyle {
                 range_m: range,
-                ..style("mean X0", true)
+                ..style("mean X0".into(), true)
             },
         ),
-        render_panel(std, &style("std", false)),
+        (&out.std, style("std".into(), false)),
+        (
+            &out.contact_probability,
+            PanelStyle {
+                range_m: Some((0.0, 1.0)),
+                millimetres: false,
+                ..style("contact probability".into(), false)
+            },
+        ),
     ];
-    for (i, s) in samples.iter().take(16).enumerate() {
-        panels.push(render_panel(
+    for (i, s) in out.samples.iter().take(16).enumerate() {
+        panels.push((
             s,
-            &PanelStyle {
+            PanelStyle {
                 range_m: range,
-                ..style(&format!("sample {i}"), true)
+                ..style(format!("sample {i}"), true)
             },
         ));
     }
-    let rows: Vec<RgbImage> = panels.chunks(8).map(|c| side_by_side(c, &[])).collect();
-    let width = rows.iter().map(|r| r.width()).max().unwrap_or(1);
-    let height = rows.iter().map(|r| r.height()).sum::<u32>().max(1);
-    let mut out = RgbImage::from_pixel(width, height, image::Rgb([255, 255, 255]));
-    let mut y0 = 0;
-    for r in &rows {
-        image::imageops::overlay(&mut out, r, 0, i64::from(y0));
-        y0 += r.height();
+    ImageGrid {
+        title: format!("{} samples of X0, seed {seed}", out.samples.len()),
+        panels,
+        columns: 4,
     }
-    out
 }

@@ -8,9 +8,9 @@ use clap::Args;
 use kdam::BarExt;
 use serde_json::json;
 use tactile_derender::dataset::Dataset;
-use tactile_derender::model::train::{train, Loss, TrainConfig};
+use tactile_derender::model::train::{train, TrainConfig};
 use tactile_derender::model::train_data::DatasetTraining;
-use tactile_derender::model::{PredictionType, UNet2DConfig};
+use tactile_derender::model::UNet2DConfig;
 
 #[derive(Args, Debug)]
 pub struct TrainArgs {
@@ -26,42 +26,13 @@ pub struct TrainArgs {
     /// Architecture for training from scratch: a UNet2DModel config JSON object or file (default: the shipped one).
     #[arg(long)]
     pub config: Option<String>,
-    /// Total optimiser steps.
-    #[arg(long, conflicts_with = "epochs")]
-    pub steps: Option<u64>,
-    /// Total epochs over the train split (default 1 when --steps is not given).
-    #[arg(long)]
-    pub epochs: Option<u64>,
-    /// Pairs per optimiser step.
-    #[arg(long, default_value_t = 16)]
-    pub batch: usize,
-    /// Adam learning rate.
-    #[arg(long, default_value_t = 1e-4)]
-    pub lr: f64,
-    /// Loss on the network's prediction: l2 (the paper's) or l1.
-    #[arg(long, value_enum, default_value = "l2")]
-    pub loss: Loss,
-    /// Seed of the batch order, timesteps and noise (a run is reproducible from it and the data).
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub train: TrainConfig,
     /// A separate validation dataset (e.g. `tnd dataset gen` with another seed and object set): the logged
     /// validation loss uses a fixed draw of its pairs instead of the training dataset's unseen_poses test split, so
     /// that stopping and tuning never look at test pairs.
     #[arg(long)]
     pub val_data: Option<PathBuf>,
-    /// EMA decay of the weights (e.g. 0.999); the saved model then holds the EMA weights.
-    #[arg(long)]
-    pub ema: Option<f64>,
-    /// Seconds between checkpoints.
-    #[arg(long, default_value_t = 300.0)]
-    pub checkpoint_every: f64,
-    /// Steps between log lines.
-    #[arg(long, default_value_t = 50)]
-    pub log_every: u64,
-    /// What the network predicts: eps (the noise, the paper's objective) or v (the velocity √ᾱ·ε − √(1−ᾱ)·x0).
-    /// Default: the model config's (--config, --init), eps for the built-in one.
-    #[arg(long, value_enum)]
-    pub prediction: Option<PredictionType>,
 }
 
 fn model_config(a: &TrainArgs, resolution: (usize, usize)) -> Result<UNet2DConfig> {
@@ -91,20 +62,8 @@ fn model_config(a: &TrainArgs, resolution: (usize, usize)) -> Result<UNet2DConfi
 pub fn run(a: TrainArgs) -> Result<()> {
     let dataset = Dataset::open(&a.data)?;
     let cfg = model_config(&a, dataset.resolution())?;
-    let tc = TrainConfig {
-        steps: a.steps,
-        epochs: a.epochs,
-        batch: a.batch,
-        lr: a.lr,
-        loss: a.loss,
-        seed: a.seed,
-        ema: a.ema,
-        checkpoint_every_s: a.checkpoint_every,
-        checkpoint_every_steps: 0,
-        log_every: a.log_every,
-        prediction: a.prediction,
-    };
-    if let Some(d) = a.ema {
+    let tc = a.train.clone();
+    if let Some(d) = tc.ema {
         if !(0.0..1.0).contains(&d) {
             return Err(anyhow!("--ema must be in [0, 1), found {d}"));
         }
