@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -77,6 +78,45 @@ pub fn err<E: std::fmt::Display>(e: E) -> String {
 /// A font of `size` (at scale 1) in the figures' typeface.
 pub fn font(size: f64, scale: f64) -> FontDesc<'static> {
     (FONT, size * scale).into_font()
+}
+
+/// The figures' axes over metric ranges: labels with units, a light grid.
+pub fn draw_axes<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    x_desc: &str,
+    y_desc: &str,
+    scale: f64,
+) -> Result<(), String> {
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style(font(13.0, scale))
+        .axis_desc_style(font(15.0, scale))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(210, 210, 210))
+        .draw()
+        .map_err(err)
+}
+
+/// The figures' legend: upper right, over a light background.
+pub fn draw_legend<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    scale: f64,
+) -> Result<(), String> {
+    chart
+        .configure_series_labels()
+        .label_font(font(13.0, scale))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(err)
+}
+
+/// A legend entry's swatch: a short line in `colour`.
+pub fn swatch(colour: RGBColor, stroke: u32) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(stroke))
 }
 
 /// Draw `figure` onto `<stem>.svg` and `<stem>.png` in `dir` at `config`'s size; returns both paths.

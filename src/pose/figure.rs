@@ -6,7 +6,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::outline::{placed_mm, Outline};
-use crate::io::figure::{err, font, Draw};
+use crate::io::figure::{draw_axes, draw_legend, err, font, swatch, Draw};
 use crate::sensor::Se2;
 
 /// What the fit figure shows.
@@ -69,16 +69,7 @@ impl Draw for FitFigure<'_> {
             .y_label_area_size((60.0 * s) as i32)
             .build_cartesian_2d(cx - half_w..cx + half_w, cy - half_h..cy + half_h)
             .map_err(err)?;
-        chart
-            .configure_mesh()
-            .x_desc("x, world frame [mm]")
-            .y_desc("y [mm]")
-            .label_style(font(13.0, s))
-            .axis_desc_style(font(15.0, s))
-            .light_line_style(RGBColor(235, 235, 235))
-            .bold_line_style(RGBColor(210, 210, 210))
-            .draw()
-            .map_err(err)?;
+        draw_axes(&mut chart, "x, world frame [mm]", "y [mm]", s)?;
         let dot = (2.0 * s).max(1.0) as i32;
         chart
             .draw_series(
@@ -99,21 +90,12 @@ impl Draw for FitFigure<'_> {
                     ))
                     .map_err(err)?;
                 if first {
-                    series.label(label).legend(move |(x, y)| {
-                        PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(stroke))
-                    });
+                    series.label(label).legend(swatch(colour, stroke));
                     first = false;
                 }
             }
         }
-        chart
-            .configure_series_labels()
-            .label_font(font(13.0, s))
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(err)?;
+        draw_legend(&mut chart, s)?;
         Ok(())
     }
 }

@@ -7,7 +7,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::UncertaintyReport;
-use crate::io::figure::{err, font, Draw};
+use crate::io::figure::{draw_axes, draw_legend, err, font, swatch, Draw};
 
 /// The KDE figure of one report.
 pub struct KdeFigure<'a> {
@@ -100,16 +100,7 @@ fn panel<DB: DrawingBackend>(
         .y_label_area_size((64.0 * s) as i32)
         .build_cartesian_2d(lo..hi, 0.0..top)
         .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc(p.axis)
-        .y_desc("density")
-        .label_style(font(13.0, s))
-        .axis_desc_style(font(15.0, s))
-        .light_line_style(RGBColor(235, 235, 235))
-        .bold_line_style(RGBColor(210, 210, 210))
-        .draw()
-        .map_err(err)?;
+    draw_axes(&mut chart, p.axis, "density", s)?;
     if !p.curve.is_empty() {
         chart
             .draw_series(LineSeries::new(
@@ -118,9 +109,7 @@ fn panel<DB: DrawingBackend>(
             ))
             .map_err(err)?
             .label(format!("KDE of {} samples", p.samples.len()))
-            .legend(move |(x, y)| {
-                PathElement::new([(x, y), (x + 20, y)], BLUE.stroke_width(stroke))
-            });
+            .legend(swatch(BLUE, stroke));
     }
     let rug = top * 0.05;
     chart
@@ -150,18 +139,9 @@ fn panel<DB: DrawingBackend>(
                 )))
                 .map_err(err)?
                 .label(label)
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(stroke))
-                });
+                .legend(swatch(colour, stroke));
         }
     }
-    chart
-        .configure_series_labels()
-        .label_font(font(13.0, s))
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(160, 160, 160))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(err)?;
+    draw_legend(&mut chart, s)?;
     Ok(())
 }
