@@ -8,12 +8,13 @@ use tactile_derender::mesh::Units;
 use tactile_derender::sensor::camera::parse_resolution;
 use tactile_derender::sim::SimConfig;
 
-/// Sensor, elastomer and signature options (defaults: the Soft Bubble of the paper).
+/// Sensor, elastomer and signature options: overrides of the library's [`SimConfig`], whose defaults (the Soft
+/// Bubble of the paper) apply to every option left out.
 #[derive(Args, Clone, Debug)]
 pub struct SensorArgs {
-    /// Rendered (model) resolution WxH, multiples of 8.
-    #[arg(long, default_value = "64x64")]
-    pub resolution: String,
+    /// Rendered (model) resolution WxH, multiples of 8 (default 64x64).
+    #[arg(long)]
+    pub resolution: Option<String>,
     /// Elastomer inflation height, metres.
     #[arg(long)]
     pub inflation: Option<f64>,
@@ -41,7 +42,9 @@ impl SensorArgs {
     /// The simulator configuration these options describe.
     pub fn sim_config(&self) -> Result<SimConfig> {
         let mut cfg = SimConfig::default();
-        cfg.camera.resolution = parse_resolution(&self.resolution).map_err(|e| anyhow!(e))?;
+        if let Some(r) = &self.resolution {
+            cfg.camera.resolution = parse_resolution(r).map_err(|e| anyhow!(e))?;
+        }
         if let Some(h) = self.inflation {
             cfg.elastomer.inflation = h;
         }
