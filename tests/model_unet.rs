@@ -302,6 +302,7 @@ fn fused_group_norm_silu_matches_candle_nn() {
                 bias: b.as_tensor().clone(),
                 groups,
                 eps: 1e-5,
+                portable: false,
             };
             let theirs = candle_nn::GroupNorm::new(
                 w.as_tensor().clone(),
@@ -345,6 +346,7 @@ fn group_norm_with_time_shift_matches_broadcast_add() {
         bias: b.as_tensor().clone(),
         groups: 4,
         eps: 1e-5,
+        portable: false,
     };
     let theirs =
         candle_nn::GroupNorm::new(w.as_tensor().clone(), b.as_tensor().clone(), 8, 4, 1e-5)
@@ -549,4 +551,49 @@ fn diffusers_folder_export_round_trips() {
         Err(e) => e.to_string(),
     };
     assert!(err.contains("diffusion_pytorch_model.safetensors"), "{err}");
+}
+
+/// candle's own tensor ops (what a GPU runs: `Kernels::Portable`) give the fast CPU kernels' output within 1e-5
+/// relative, forward and gradients, on both reference configurations (attention, odd padding, every block type).
+#[test]
+fn portable_candle_ops_match_the_fast_kernels() {
+    use tactile_derender::model::kernels::Kernels;
+    for fixture in ["unet_small", "unet_variant"] {
+        let path = format!("tests/fixtures/{fixture}/unet_ref.safetensors");
+        let fast = DiffusionModel::load(Path::new(&path)).unwrap();
+        let mut portable = fast.unet().clone();
+        portable.set_kernels(Kernels::Portable);
+        let cfg = fast.config();
+        let x = rand_t(&[3, cfg.in_channels, cfg.sample_size, cfg.sample_size], 31);
+        let t = [0.0, 117.0, 249.0];
+        let a = fast.unet().forward_t(&x, &t, false).unwrap();
+        let b = portable.forward_t(&x, &t, false).unwrap();
+        let scale = max_abs(&a, &a.zeros_like().unwrap()).max(1e-3);
+        let err = max_abs(&a, &b);
+        assert!(
+            err <= 1e-5 * scale,
+            "{fixture} forward: {err} (scale {scale})"
+        );
+        // Gradients of a loss through both (the parameters are shared: the clone holds the same Vars).
+        let target = rand_t(&[3, cfg.out_channels, cfg.sample_size, cfg.sample_size], 32);
+        let loss = |y: Tensor| (y - &target).unwrap().sqr().unwrap().mean_all().unwrap();
+        let ga = loss(fast.unet().forward_t(&x, &t, true).unwrap())
+            .backward()
+            .unwrap();
+        let gb = loss(portable.forward_t(&x, &t, true).unwrap())
+            .backward()
+            .unwrap();
+        let vars = fast.vars().varmap.all_vars();
+        assert!(!vars.is_empty());
+        for v in &vars {
+            let (ga, gb) = (ga.get(v).unwrap(), gb.get(v).unwrap());
+            let scale = max_abs(ga, &ga.zeros_like().unwrap()).max(1e-4);
+            let err = max_abs(ga, gb);
+            assert!(
+                err <= 1e-5 * scale.max(1.0),
+                "{fixture} grad {:?}: {err} (scale {scale})",
+                v.dims()
+            );
+        }
+    }
 }

@@ -20,6 +20,8 @@ pub struct Attention {
     pub to_out: Linear,
     pub heads: usize,
     pub rescale_output_factor: f64,
+    /// Use candle's softmax instead of the fused CPU op (always on devices other than the CPU).
+    pub portable: bool,
 }
 
 impl Attention {
@@ -41,6 +43,7 @@ impl Attention {
             to_out: linear(channels, channels, vb.pp("to_out").pp("0"))?,
             heads: channels / d.max(1),
             rescale_output_factor,
+            portable: false,
         })
     }
 }
@@ -62,7 +65,16 @@ impl Module for Attention {
         let q = split(self.to_q.forward(&tokens)?)?;
         let k = split(self.to_k.forward(&tokens)?)?;
         let v = split(self.to_v.forward(&tokens)?)?;
-        let attn = scaled_softmax(&q.matmul(&k.t()?)?, 1.0 / (d as f32).sqrt())?;
+        let scores = q.matmul(&k.t()?)?;
+        let scale = 1.0 / (d as f32).sqrt();
+        let attn = if self.portable || !x.device().is_cpu() {
+            candle_nn::ops::softmax(
+                &scores.affine(f64::from(scale), 0.0)?,
+                candle_core::D::Minus1,
+            )?
+        } else {
+            scaled_softmax(&scores, scale)?
+        };
         let o = attn.matmul(&v)?.transpose(1, 2)?.reshape((b, n, c))?; // [B, N, C]
         let o = self
             .to_out

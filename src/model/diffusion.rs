@@ -29,10 +29,24 @@ impl DiffusionModel {
     /// Load a checkpoint (our `.safetensors`, a diffusers directory, or weights + config JSON; see
     /// [`super::checkpoint`]).
     pub fn load(path: &Path) -> Result<Self, ModelError> {
+        Self::load_on(path, &Device::Cpu)
+    }
+
+    /// [`Self::load`] onto `device` ([`super::device::open_device`]); devices other than the CPU run candle's own
+    /// tensor ops ([`super::kernels::Kernels::Portable`]).
+    pub fn load_on(path: &Path, device: &Device) -> Result<Self, ModelError> {
         let (file, config) = locate(path)?;
-        let vars = build(&config, &Device::Cpu)?;
+        let mut vars = build(&config, device)?;
         assign(&vars.varmap, &file, "")?;
+        if !device.is_cpu() {
+            vars.unet.set_kernels(super::kernels::Kernels::Portable);
+        }
         Ok(Self::from_vars(vars, config, path))
+    }
+
+    /// The device the model's parameters live on.
+    pub fn device(&self) -> &Device {
+        self.vars.unet.conv_in.weight.device()
     }
 
     /// Wrap already-built parameters (e.g. a model being trained).
@@ -107,7 +121,7 @@ impl DiffusionModel {
             .collect();
         let c_out = self.config.out_channels;
         let c_cond = self.config.in_channels - c_out;
-        let device = Device::Cpu;
+        let device = self.device().clone();
         let cond =
             Tensor::from_vec(cond, (1, 1, h, w), &device)?.broadcast_as((n, c_cond, h, w))?;
         let sampler = sampler::make(kind, self.schedule.clone(), norm.prediction_type)?;

@@ -14,6 +14,8 @@ pub struct GroupNorm {
     pub bias: Tensor,
     pub groups: usize,
     pub eps: f64,
+    /// Use candle's own tensor ops instead of the fused CPU op (always on devices other than the CPU).
+    pub portable: bool,
 }
 
 /// Build from `vb` (keys `weight`, `bias`), like `candle_nn::group_norm`.
@@ -26,6 +28,7 @@ pub fn group_norm(groups: usize, channels: usize, eps: f64, vb: VarBuilder) -> R
         bias: vb.get_with_hints(channels, "bias", candle_nn::Init::Const(0.0))?,
         groups,
         eps,
+        portable: false,
     })
 }
 
@@ -51,10 +54,45 @@ impl GroupNorm {
                 x.dims()
             );
         }
+        if self.portable || !x.device().is_cpu() {
+            let shape: Vec<usize> = [b, c]
+                .into_iter()
+                .chain(std::iter::repeat_n(1, x.rank() - 2))
+                .collect();
+            return self.candle_ops(&x.broadcast_add(&shift.reshape(shape)?)?, true);
+        }
         self.apply_op(x, shift.contiguous()?, true, true)
     }
 
+    /// The same computation with candle's differentiable tensor ops (any device).
+    fn candle_ops(&self, x: &Tensor, silu: bool) -> Result<Tensor> {
+        let dims = x.dims().to_vec();
+        let (b, c) = (x.dim(0)?, x.dim(1)?);
+        let xg = x.reshape((b, self.groups, ()))?;
+        let mean = xg.mean_keepdim(2)?;
+        let centred = xg.broadcast_sub(&mean)?;
+        let var = centred.sqr()?.mean_keepdim(2)?;
+        let normed = centred
+            .broadcast_div(&(var + self.eps)?.sqrt()?)?
+            .reshape(dims.as_slice())?;
+        let shape: Vec<usize> = [1, c]
+            .into_iter()
+            .chain(std::iter::repeat_n(1, dims.len() - 2))
+            .collect();
+        let y = normed
+            .broadcast_mul(&self.weight.reshape(shape.as_slice())?)?
+            .broadcast_add(&self.bias.reshape(shape.as_slice())?)?;
+        if silu {
+            y.silu()
+        } else {
+            Ok(y)
+        }
+    }
+
     fn apply(&self, x: &Tensor, silu: bool) -> Result<Tensor> {
+        if self.portable || !x.device().is_cpu() {
+            return self.candle_ops(x, silu);
+        }
         let zeros = Tensor::zeros((x.dim(0)?, x.dim(1)?), x.dtype(), x.device())?;
         self.apply_op(x, zeros, silu, false)
     }

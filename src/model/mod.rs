@@ -13,6 +13,7 @@ pub mod attention;
 pub mod checkpoint;
 pub mod config;
 pub mod conv;
+pub mod device;
 pub mod diagnose;
 pub mod diffusers_folder;
 pub mod diffusion;
@@ -84,6 +85,8 @@ pub enum ModelError {
     Input(String),
     #[error("cancelled")]
     Cancelled,
+    #[error("{message}")]
+    Device { spec: String, message: String },
     #[error("{}: {error}", path.display())]
     Io {
         path: PathBuf,

@@ -35,6 +35,11 @@ pub struct ResnetCfg {
 }
 
 impl ResnetBlock2D {
+    /// Every GroupNorm of the block.
+    pub(crate) fn norms_mut(&mut self) -> [&mut super::group_norm::GroupNorm; 2] {
+        [&mut self.norm1, &mut self.norm2]
+    }
+
     /// Every convolution of the block.
     pub(crate) fn convs_mut(&mut self) -> impl Iterator<Item = &mut Conv2d> {
         [&mut self.conv1, &mut self.conv2]
@@ -125,12 +130,15 @@ impl Module for Downsample2D {
 #[derive(Clone, Debug)]
 pub struct Upsample2D {
     pub conv: Conv2d,
+    /// Use candle's nearest-neighbour up-sampling instead of the CPU op (always on devices other than the CPU).
+    pub portable: bool,
 }
 
 impl Upsample2D {
     pub fn new(vb: VarBuilder, channels: usize) -> Result<Self> {
         Ok(Self {
             conv: Conv2d::new(vb.pp("conv"), channels, channels, 3, 1, 1, true)?,
+            portable: false,
         })
     }
 }
@@ -201,6 +209,12 @@ impl CustomOp1 for SumPoolX2 {
 
 impl Module for Upsample2D {
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        self.conv.forward(&upsample_nearest_x2(x)?)
+        let up = if self.portable || !x.device().is_cpu() {
+            let (_, _, h, w) = x.dims4()?;
+            x.upsample_nearest2d(2 * h, 2 * w)?
+        } else {
+            upsample_nearest_x2(x)?
+        };
+        self.conv.forward(&up)
     }
 }

@@ -9,6 +9,7 @@ use super::config::UNet2DConfig;
 use super::conv::Conv2d;
 use super::embeddings::{timestep_embedding, TimestepEmbedding};
 use super::group_norm::{group_norm, GroupNorm};
+use super::kernels::Kernels;
 use super::resnet::ResnetCfg;
 use super::unet_blocks::{AttnCfg, DownBlock2D, UNetMidBlock2D, UpBlock2D};
 
@@ -26,6 +27,41 @@ pub struct UNet2DModel {
 }
 
 impl UNet2DModel {
+    /// Run the network on our fused CPU kernels ([`Kernels::Fast`], the default) or on candle's own tensor ops
+    /// ([`Kernels::Portable`]: what every device other than the CPU runs; on the CPU, to check one against the other).
+    pub fn set_kernels(&mut self, kernels: Kernels) {
+        let portable = kernels == Kernels::Portable;
+        self.set_conv_backend(if portable {
+            super::conv::ConvBackend::Candle
+        } else {
+            super::conv::ConvBackend::default()
+        });
+        let mut norms = vec![&mut self.conv_norm_out];
+        let mut attentions = Vec::new();
+        for b in &mut self.down_blocks {
+            norms.extend(b.resnets.iter_mut().flat_map(|r| r.norms_mut()));
+            attentions.extend(b.attentions.iter_mut());
+        }
+        if let Some(m) = &mut self.mid_block {
+            norms.extend(m.resnets.iter_mut().flat_map(|r| r.norms_mut()));
+            attentions.extend(m.attentions.iter_mut());
+        }
+        for b in &mut self.up_blocks {
+            norms.extend(b.resnets.iter_mut().flat_map(|r| r.norms_mut()));
+            attentions.extend(b.attentions.iter_mut());
+            if let Some(u) = &mut b.upsamplers {
+                u.portable = portable;
+            }
+        }
+        for a in attentions {
+            a.portable = portable;
+            a.group_norm.portable = portable;
+        }
+        for n in norms {
+            n.portable = portable;
+        }
+    }
+
     /// Run every convolution with `backend` (benchmarks compare them; the default is the fastest).
     pub fn set_conv_backend(&mut self, backend: super::conv::ConvBackend) {
         let mut convs: Vec<&mut Conv2d> = vec![&mut self.conv_in, &mut self.conv_out];

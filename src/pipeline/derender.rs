@@ -23,7 +23,7 @@ fn default_samples() -> usize {
 }
 
 /// How to de-render: how many samples, which sampler, which seed.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(default)]
 pub struct DerenderConfig {
     /// Samples of the in-contact depth drawn for the imprint (1..=256).
@@ -36,6 +36,13 @@ pub struct DerenderConfig {
     /// the same seed gives the same samples and poses.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Device that runs the model: cpu, cuda, cuda:N or metal (GPU builds: `--features cuda` or `metal`).
+    #[arg(long, default_value_t = default_device())]
+    pub device: String,
+}
+
+fn default_device() -> String {
+    "cpu".into()
 }
 
 impl Default for DerenderConfig {
@@ -44,6 +51,7 @@ impl Default for DerenderConfig {
             samples: DEFAULT_SAMPLES,
             sampler: SamplerConfig::default(),
             seed: 0,
+            device: default_device(),
         }
     }
 }
@@ -54,6 +62,7 @@ impl DerenderConfig {
         self.sampler
             .validate(train_steps)
             .map_err(PipelineError::Settings)?;
+        crate::model::device::check_device_name(&self.device).map_err(PipelineError::Settings)?;
         if !(1..=MAX_SAMPLES).contains(&self.samples) {
             return Err(PipelineError::Settings(format!(
                 "number of samples must be 1..={MAX_SAMPLES}, got {}",

@@ -387,14 +387,20 @@ impl WorkbenchApp {
         let cached = view
             .model
             .as_ref()
-            .filter(|(p, _)| *p == model_path)
+            .filter(|(p, m)| {
+                *p == model_path
+                    && tactile_derender::model::device::open_device(
+                        &self.state.derender.config.device,
+                    )
+                    .is_ok_and(|d| d.same_device(m.device()))
+            })
             .map(|(_, m)| m.clone());
         let req = RunRequest {
             generation: view.generation,
             model_path,
             cached,
             input,
-            config: self.state.derender.config,
+            config: self.state.derender.config.clone(),
         };
         let cancel = Arc::new(AtomicBool::new(false));
         view.cancel = Some(cancel.clone());

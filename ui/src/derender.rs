@@ -177,7 +177,10 @@ pub fn run(
     let input = req.input.resolve()?;
     let model = match req.cached {
         Some(m) => m,
-        None => Arc::new(DiffusionModel::load(&req.model_path)?),
+        None => Arc::new(DiffusionModel::load_on(
+            &req.model_path,
+            &tactile_derender::model::device::open_device(&req.config.device)?,
+        )?),
     };
     let out = pipeline::derender(
         &model,

@@ -61,7 +61,7 @@ fn workbench_jobs_and_cli_commands_give_bit_identical_samples_and_poses() {
     d.samples = 3;
     d.sampler.steps = 4;
     d.seed = 5;
-    let config = *d;
+    let config = d.clone();
     let scene = state.scene.clone();
     assert_eq!(
         (scene.sensor_x, scene.sensor_y, scene.sensor_yaw),

@@ -111,7 +111,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
             vec![target; a.derender.samples.max(1)],
         )
     } else {
-        let model = DiffusionModel::load(Path::new(&a.model))?;
+        let device = tactile_derender::model::device::open_device(&a.derender.device)?;
+        let model = DiffusionModel::load_on(Path::new(&a.model), &device)?;
         let mut bar = progress::bar("sampling", " steps", 0);
         let out = pipeline::derender(
             &model,

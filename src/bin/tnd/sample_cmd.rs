@@ -35,7 +35,8 @@ pub struct SampleArgs {
 }
 
 pub fn run(a: SampleArgs) -> Result<()> {
-    let model = DiffusionModel::load(&a.model)?;
+    let device = tactile_derender::model::device::open_device(&a.derender.device)?;
+    let model = DiffusionModel::load_on(&a.model, &device)?;
     let imprint = npy::read_metres_image(&a.imprint)?;
     let mut bar = super::progress::bar("sampling", " steps", 0);
     let out = pipeline::derender(

@@ -18,6 +18,18 @@ pub mod sgemm;
 
 use serde::{Deserialize, Serialize};
 
+/// Which implementation of the network's custom operations a model runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kernels {
+    /// Our fused CPU kernels (convolutions, GroupNorm + SiLU, attention softmax, up-sampling).
+    #[default]
+    Fast,
+    /// candle's own tensor ops, which run on every candle device (CUDA, Metal) and differentiate through autograd;
+    /// on the CPU they check the fast kernels (`tests/model_unet.rs`).
+    Portable,
+}
+
 /// How the model's CPU work is run, process-wide: one value shared by the CLI and the workbench.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(default)]
