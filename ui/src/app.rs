@@ -28,6 +28,9 @@ const STORAGE_KEY: &str = "tnd-workbench";
 struct Persisted {
     state: State,
     session_path: Option<PathBuf>,
+    /// Recently opened or saved session files, newest first.
+    #[serde(default)]
+    recent: Vec<PathBuf>,
 }
 
 /// Text typed into path fields (not saved: the state holds the paths actually in use).
@@ -137,7 +140,12 @@ pub struct WorkbenchApp {
     auto_pose: bool,
     /// Undo and redo of scene, sensor and elastomer edits.
     pub history: crate::history::History,
+    /// Recently opened or saved session files, newest first (at most [`RECENT_SESSIONS`]; kept across restarts).
+    pub recent: Vec<PathBuf>,
 }
+
+/// How many recent sessions the Recent menu lists.
+pub const RECENT_SESSIONS: usize = 8;
 
 impl Default for WorkbenchApp {
     fn default() -> Self {
@@ -175,6 +183,7 @@ impl WorkbenchApp {
             auto_run: false,
             auto_pose: false,
             history: Default::default(),
+            recent: Vec::new(),
         };
         app.replace_state(state);
         app
@@ -186,6 +195,9 @@ impl WorkbenchApp {
         let persisted: Option<Persisted> =
             cc.storage.and_then(|s| eframe::get_value(s, STORAGE_KEY));
         let mut app = Self::default();
+        if let Some(p) = &persisted {
+            app.recent = p.recent.clone();
+        }
         if let Some(p) = persisted.filter(|_| launch.session.is_none()) {
             match crate::session::validate(&p.state) {
                 Ok(()) => {
@@ -492,6 +504,7 @@ impl eframe::App for WorkbenchApp {
             let p = Persisted {
                 state: self.state.clone(),
                 session_path: self.session_path.clone(),
+                recent: self.recent.clone(),
             };
             eframe::set_value(storage, STORAGE_KEY, &p);
         }

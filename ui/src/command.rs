@@ -147,6 +147,7 @@ impl WorkbenchApp {
                     self.replace_state(state);
                     self.inputs.session_path = path.display().to_string();
                     self.notice = Some(format!("opened {}", path.display()));
+                    self.remember_session(&path);
                     self.session_path = Some(path);
                 }
                 Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
@@ -155,6 +156,7 @@ impl WorkbenchApp {
                 Ok(()) => {
                     self.inputs.session_path = path.display().to_string();
                     self.notice = Some(format!("saved {}", path.display()));
+                    self.remember_session(&path);
                     self.session_path = Some(path);
                 }
                 Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
@@ -266,6 +268,13 @@ impl WorkbenchApp {
                 tactile_derender::error::render_anyhow(&e)
             ));
         }
+    }
+
+    /// Put `path` first in the recent sessions.
+    fn remember_session(&mut self, path: &std::path::Path) {
+        self.recent.retain(|p| p != path);
+        self.recent.insert(0, path.to_path_buf());
+        self.recent.truncate(crate::app::RECENT_SESSIONS);
     }
 
     /// Put an undo/redo snapshot back and re-simulate.

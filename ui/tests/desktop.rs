@@ -172,3 +172,26 @@ fn dropped_files_open_as_what_they_are() {
         "{errors:?}"
     );
 }
+
+#[test]
+fn recent_sessions_list_the_newest_first_and_reopen() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a.json"), dir.path().join("b.json"));
+    let mut first = State::default();
+    first.scene.press = 0.0041;
+    tnd_workbench::session::write(&a, &first).unwrap();
+    let mut h = harness(WorkbenchApp::with_state(State::default()));
+    h.run_ok();
+    h.state_mut().apply(Command::OpenSession(a.clone()));
+    h.state_mut().apply(Command::SaveSession(b.clone()));
+    h.state_mut().apply(Command::OpenSession(a.clone()));
+    assert_eq!(h.state().recent, vec![a.clone(), b.clone()]);
+    // Open b from the menu, then a again from it.
+    h.get_by_label("Recent").click();
+    h.run_ok();
+    h.get_by_label("b.json").click();
+    h.run_ok();
+    assert_eq!(h.state().session_path.as_deref(), Some(b.as_path()));
+    assert_eq!(h.state().recent, vec![b, a]);
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+}

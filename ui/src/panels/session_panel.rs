@@ -25,6 +25,26 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         {
             cmds.push(Command::Browse(DialogPurpose::OpenSession));
         }
+        ui.add_enabled_ui(!app.recent.is_empty(), |ui| {
+            ui.menu_button("Recent", |ui| {
+                for path in &app.recent {
+                    let name = path
+                        .file_name()
+                        .map(|n| n.to_string_lossy().into_owned())
+                        .unwrap_or_else(|| path.display().to_string());
+                    if ui
+                        .button(name)
+                        .on_hover_text(path.display().to_string())
+                        .clicked()
+                    {
+                        cmds.push(Command::OpenSession(path.clone()));
+                        ui.close();
+                    }
+                }
+            })
+            .response
+            .on_hover_text("recently opened or saved sessions");
+        });
         if ui
             .button("Save As…")
             .on_hover_text("save the session with a file dialog")
