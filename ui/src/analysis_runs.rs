@@ -73,6 +73,17 @@ pub struct AnalysisViews {
     dataset_generation: u64,
     pub derender: DerenderView,
     pub pose: PoseView,
+    /// The image shown enlarged in its own window, if any.
+    pub zoom: Option<ZoomTarget>,
+}
+
+/// An image of an analysis tab that can be shown enlarged (clicking its card).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ZoomTarget {
+    /// Image `k` of the de-rendering run (Y, X0, mean, std, …, then the samples).
+    Derender(usize),
+    /// Image `k` of the selected dataset pair.
+    DatasetPair(usize),
 }
 
 fn texture(

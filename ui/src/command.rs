@@ -84,6 +84,8 @@ pub enum Command {
     Redo,
     /// Open a file dropped on the window as what it is (mesh, session, imprint, model, dataset).
     OpenDropped(PathBuf),
+    /// Show an analysis image enlarged in its own window (`None`: close it).
+    ZoomImage(Option<crate::analysis_runs::ZoomTarget>),
 }
 
 impl WorkbenchApp {
@@ -236,6 +238,7 @@ impl WorkbenchApp {
                 self.report("export", r);
             }
             Command::HighlightSample(k) => self.analysis.pose.highlight = k,
+            Command::ZoomImage(target) => self.analysis.zoom = target,
             Command::Undo => {
                 let now = crate::history::Snapshot::of(&self.state);
                 match self.history.undo(now) {

@@ -597,6 +597,19 @@ fn an_imported_measurement_is_de_rendered_without_scores() {
     assert!(h
         .query_by_label("no ground truth for this input: no scores")
         .is_some());
+    // A card's image enlarges in its own window (clicking it pushes this command) and closes again.
+    let title = h.state().analysis.derender.images[0].title.clone();
+    let before = h.query_all_by_label(&title).count();
+    h.state_mut()
+        .apply(tnd_workbench::command::Command::ZoomImage(Some(
+            tnd_workbench::analysis_runs::ZoomTarget::Derender(0),
+        )));
+    h.run_ok();
+    assert_eq!(h.query_all_by_label(&title).count(), before + 1);
+    h.state_mut()
+        .apply(tnd_workbench::command::Command::ZoomImage(None));
+    h.run_ok();
+    assert_eq!(h.query_all_by_label(&title).count(), before);
     // Registration needs the object and sensor pose, which a measurement does not carry.
     h.get_by_label("Pose").click();
     h.run_ok();

@@ -239,7 +239,7 @@ fn selected_view(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Comma
     ));
     let side = ((ui.available_width() / 4.0) - 90.0)
         .min(ui.available_height() - 50.0)
-        .clamp(64.0, 320.0);
+        .clamp(64.0, 480.0);
     ui.horizontal(|ui| {
         for (i, shown) in sel.shown.iter().enumerate() {
             let scale = Scale {
@@ -247,14 +247,20 @@ fn selected_view(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Comma
                 millimetres: shown.millimetres,
                 zero_is_missing: shown.zero_is_missing,
             };
-            image_card::card(
+            let r = image_card::card(
                 ui,
                 shown.title,
                 shown.texture.id(),
                 sel.image(i),
                 &scale,
                 side,
-            );
+            )
+            .on_hover_text("click to enlarge");
+            if r.clicked() {
+                cmds.push(Command::ZoomImage(Some(
+                    crate::analysis_runs::ZoomTarget::DatasetPair(i),
+                )));
+            }
         }
     });
 }

@@ -3,7 +3,7 @@
 //! dataset pair, or an `.npy` measurement); run in the background with progress and Cancel; show the samples, their
 //! per-pixel mean and standard deviation, and L1 / PSNR / SSIM per sample when the ground truth is known.
 
-use crate::analysis_runs::RunImage;
+use crate::analysis_runs::{RunImage, ZoomTarget};
 use crate::app::WorkbenchApp;
 use crate::command::Command;
 use crate::derender;
@@ -88,7 +88,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     }
     run_row(app, ui, cmds);
     ui.separator();
-    results(app, ui);
+    results(app, ui, cmds);
 }
 
 fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
@@ -163,7 +163,7 @@ fn run_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     });
 }
 
-fn results(app: &mut WorkbenchApp, ui: &mut egui::Ui) {
+fn results(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let view = &app.analysis.derender;
     let Some(r) = view.result.as_ref() else {
         ui.weak("No samples yet: choose the input and press 'Run de-rendering'.");
@@ -190,10 +190,13 @@ fn results(app: &mut WorkbenchApp, ui: &mut egui::Ui) {
         .id_salt("derender_results")
         .auto_shrink([false, false])
         .show(ui, |ui| {
-            let big = ((ui.available_width() / n_fixed.max(1) as f32) - 80.0).clamp(64.0, 256.0);
+            // Cards grow with the window; a click shows one enlarged.
+            let big = ((ui.available_width() / n_fixed.max(1) as f32) - 80.0).clamp(64.0, 420.0);
             ui.horizontal(|ui| {
                 for (k, img) in view.images.iter().take(n_fixed).enumerate() {
-                    card(ui, img, fixed_image(r, k), big);
+                    if card(ui, img, fixed_image(r, k), big).clicked() {
+                        cmds.push(Command::ZoomImage(Some(ZoomTarget::Derender(k))));
+                    }
                 }
             });
             if !r.scores.is_empty() {
@@ -202,12 +205,15 @@ fn results(app: &mut WorkbenchApp, ui: &mut egui::Ui) {
                 ui.weak("no ground truth for this input: no scores");
             }
             ui.separator();
-            let small = 96.0;
+            let small = ((ui.available_width() / 6.0) - 80.0).clamp(72.0, 240.0);
             let cols = ((ui.available_width() / (small + 80.0)).floor() as usize).max(1);
             for (row, chunk) in view.images[n_fixed..].chunks(cols).enumerate() {
                 ui.horizontal(|ui| {
                     for (j, img) in chunk.iter().enumerate() {
-                        card(ui, img, &r.samples[row * cols + j], small);
+                        let s = row * cols + j;
+                        if card(ui, img, &r.samples[s], small).clicked() {
+                            cmds.push(Command::ZoomImage(Some(ZoomTarget::Derender(n_fixed + s))));
+                        }
                     }
                 });
             }
@@ -215,7 +221,7 @@ fn results(app: &mut WorkbenchApp, ui: &mut egui::Ui) {
 }
 
 /// The k-th fixed image of a run: Y, X0 (when known), mean, std.
-fn fixed_image(r: &derender::RunResult, k: usize) -> &tactile_derender::image::Image {
+pub(crate) fn fixed_image(r: &derender::RunResult, k: usize) -> &tactile_derender::image::Image {
     let mut list = vec![&r.input.imprint];
     if let Some(t) = &r.input.truth {
         list.push(t);
@@ -225,13 +231,19 @@ fn fixed_image(r: &derender::RunResult, k: usize) -> &tactile_derender::image::I
     list.get(k).copied().unwrap_or(&r.mean)
 }
 
-fn card(ui: &mut egui::Ui, img: &RunImage, data: &tactile_derender::image::Image, side: f32) {
+pub(crate) fn card(
+    ui: &mut egui::Ui,
+    img: &RunImage,
+    data: &tactile_derender::image::Image,
+    side: f32,
+) -> egui::Response {
     let scale = Scale {
         range: img.range,
         millimetres: img.millimetres,
         zero_is_missing: img.zero_is_missing,
     };
-    image_card::card(ui, &img.title, img.texture.id(), data, &scale, side);
+    image_card::card(ui, &img.title, img.texture.id(), data, &scale, side)
+        .on_hover_text("click to enlarge")
 }
 
 fn scores_table(ui: &mut egui::Ui, r: &derender::RunResult) {

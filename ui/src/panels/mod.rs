@@ -73,4 +73,58 @@ pub fn show_all(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Comman
             Tab::Pose => pose_panel::show(app, ui, cmds),
         }
     });
+    if let Some(target) = app.analysis.zoom {
+        zoom_window(app, ui.ctx(), target, cmds);
+    }
+}
+
+/// The enlarged image of an analysis tab, in its own window sized to the screen.
+fn zoom_window(
+    app: &WorkbenchApp,
+    ctx: &egui::Context,
+    target: crate::analysis_runs::ZoomTarget,
+    cmds: &mut Vec<Command>,
+) {
+    use crate::analysis_runs::ZoomTarget;
+    let screen = ctx.content_rect();
+    let side = (screen.height() * 0.7).min(screen.width() * 0.6).max(128.0);
+    let mut open = true;
+    let mut shown = false;
+    egui::Window::new("Image")
+        .open(&mut open)
+        .collapsible(false)
+        .resizable(false)
+        .show(ctx, |ui| match target {
+            ZoomTarget::Derender(k) => {
+                let view = &app.analysis.derender;
+                if let (Some(r), Some(img)) = (view.result.as_ref(), view.images.get(k)) {
+                    let n_fixed = view.images.len() - r.samples.len();
+                    let data = match k.checked_sub(n_fixed) {
+                        Some(s) => &r.samples[s],
+                        None => derender_panel::fixed_image(r, k),
+                    };
+                    derender_panel::card(ui, img, data, side);
+                    shown = true;
+                }
+            }
+            ZoomTarget::DatasetPair(i) => {
+                let sel = app
+                    .analysis
+                    .dataset
+                    .as_ref()
+                    .and_then(|b| b.selected.as_ref());
+                if let Some((sel, s)) = sel.and_then(|sel| sel.shown.get(i).map(|s| (sel, s))) {
+                    let scale = image_card::Scale {
+                        range: s.range,
+                        millimetres: s.millimetres,
+                        zero_is_missing: s.zero_is_missing,
+                    };
+                    image_card::card(ui, s.title, s.texture.id(), sel.image(i), &scale, side);
+                    shown = true;
+                }
+            }
+        });
+    if !open || !shown {
+        cmds.push(Command::ZoomImage(None));
+    }
 }
