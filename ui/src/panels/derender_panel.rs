@@ -46,8 +46,25 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
                 );
         });
         ui.separator();
-        ui.add(egui::Slider::new(&mut d.config.samples, 1..=64).text("samples"));
-        ui.add(egui::DragValue::new(&mut d.config.seed).prefix("seed "));
+        ui.add(egui::Slider::new(&mut d.config.samples, 1..=64).text("samples"))
+            .on_hover_text(
+                "samples of X0 drawn for the imprint in one batch: more give a smoother contact probability and a \
+                 steadier multi-sample pose (the paper's KDEs use 50)",
+            );
+        ui.add(egui::DragValue::new(&mut d.config.seed).prefix("seed "))
+            .on_hover_text("seed of the sampler's noise and the registration starts: the same seed gives the same samples");
+        egui::ComboBox::from_id_salt("derender_device")
+            .selected_text(format!("device {}", d.config.device))
+            .show_ui(ui, |ui| {
+                for dev in ["cpu", "cuda", "metal"] {
+                    ui.selectable_value(&mut d.config.device, dev.to_string(), dev);
+                }
+            })
+            .response
+            .on_hover_text(
+                "where the model runs: cpu (our fast kernels) or a GPU through candle (a build with the cuda or metal \
+                 feature)",
+            );
     });
     ui.horizontal(|ui| {
         ui.label("input");

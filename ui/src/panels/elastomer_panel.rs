@@ -16,21 +16,23 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     let e = &mut sim.elastomer;
     let parametric = e.mesh_file.is_none();
     ui.add_enabled_ui(parametric, |ui| {
-        mm_slider(ui, &mut e.footprint_x, 40.0..=200.0, "footprint x (mm)");
-        mm_slider(ui, &mut e.footprint_y, 30.0..=150.0, "footprint y (mm)");
-        mm_slider(ui, &mut e.inflation, 5.0..=60.0, "inflation (mm)");
+        mm_slider(ui, &mut e.footprint_x, 40.0..=200.0, "footprint x (mm)", "length of the membrane's elliptical footprint along sensor x, millimetres (Soft Bubble: 120)");
+        mm_slider(ui, &mut e.footprint_y, 30.0..=150.0, "footprint y (mm)", "width of the membrane's elliptical footprint along sensor y, millimetres (Soft Bubble: 80)");
+        mm_slider(ui, &mut e.inflation, 5.0..=60.0, "inflation (mm)", "height of the inflated dome's apex above its base, millimetres: the parameter to calibrate");
         ui.horizontal(|ui| {
             ui.label("tessellation");
             ui.add(
                 egui::DragValue::new(&mut e.rings)
                     .range(2..=256)
                     .prefix("rings "),
-            );
+            )
+            .on_hover_text("latitude rings of the membrane mesh from apex to rim (more: smoother, slower to rebuild)");
             ui.add(
                 egui::DragValue::new(&mut e.segments)
                     .range(8..=1024)
                     .prefix("segments "),
-            );
+            )
+            .on_hover_text("segments around the membrane's rim");
         });
     });
     ui.horizontal(|ui| {
@@ -74,6 +76,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
                     .range(1.0..=100.0)
                     .suffix(" mm"),
             )
+            .on_hover_text("lowest inflation of the sweep, millimetres")
             .changed()
         {
             cal.lo = lo * 1e-3;
@@ -85,6 +88,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
                     .range(1.0..=100.0)
                     .suffix(" mm"),
             )
+            .on_hover_text("highest inflation of the sweep, millimetres")
             .changed()
         {
             cal.hi = hi * 1e-3;
@@ -93,7 +97,8 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             egui::DragValue::new(&mut cal.steps)
                 .range(1..=200)
                 .suffix(" steps"),
-        );
+        )
+        .on_hover_text("number of inflation values simulated between the two");
     });
     ui.horizontal(|ui| {
         ui.label("measured imprint (.npy or dataset)");
@@ -116,10 +121,15 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
                     for split in SplitName::ALL {
                         ui.selectable_value(&mut cal.measured_split, split, split.as_str());
                     }
-                });
+                })
+                .response
+                .on_hover_text("the dataset split the measured pair comes from");
             let l = ui.label("pair");
             ui.add(egui::DragValue::new(&mut cal.measured_index))
-                .labelled_by(l.id);
+                .labelled_by(l.id)
+                .on_hover_text(
+                    "index of the pair within the split whose imprint is the measurement",
+                );
         });
     }
     ui.horizontal(|ui| {
@@ -148,7 +158,13 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             cmds.push(Command::UseMeasuredScene);
         }
     }
-    mm_slider(ui, &mut cal.threshold, 0.0..=10.0, "contact threshold (mm)");
+    mm_slider(
+        ui,
+        &mut cal.threshold,
+        0.0..=10.0,
+        "contact threshold (mm)",
+        "imprint depth above which a measured pixel counts as contact for the IoU, millimetres",
+    );
     if cal != app.state.calibration {
         cmds.push(Command::SetCalibration(cal));
     }

@@ -63,25 +63,57 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
 
     ui.add_space(4.0);
     ui.label("Object pose on the table");
-    mm_slider(ui, &mut scene.object_pose.x, -40.0..=40.0, "object x (mm)");
-    mm_slider(ui, &mut scene.object_pose.y, -40.0..=40.0, "object y (mm)");
+    mm_slider(
+        ui,
+        &mut scene.object_pose.x,
+        -40.0..=40.0,
+        "object x (mm)",
+        "object position on the table along the sensor's x axis, millimetres (stored in metres)",
+    );
+    mm_slider(
+        ui,
+        &mut scene.object_pose.y,
+        -40.0..=40.0,
+        "object y (mm)",
+        "object position on the table along the sensor's y axis, millimetres (stored in metres)",
+    );
     deg_slider(
         ui,
         &mut scene.object_pose.theta,
         -180.0..=180.0,
         "object θ (deg)",
+        "object rotation about the vertical, degrees (stored in radians)",
     );
     ui.add_space(4.0);
     ui.label("Sensor");
-    mm_slider(ui, &mut scene.sensor_x, -40.0..=40.0, "sensor x (mm)");
-    mm_slider(ui, &mut scene.sensor_y, -40.0..=40.0, "sensor y (mm)");
+    mm_slider(
+        ui,
+        &mut scene.sensor_x,
+        -40.0..=40.0,
+        "sensor x (mm)",
+        "sensor axis position on the table, x, millimetres",
+    );
+    mm_slider(
+        ui,
+        &mut scene.sensor_y,
+        -40.0..=40.0,
+        "sensor y (mm)",
+        "sensor axis position on the table, y, millimetres",
+    );
     deg_slider(
         ui,
         &mut scene.sensor_yaw,
         -180.0..=180.0,
         "sensor yaw (deg)",
+        "sensor rotation about the vertical, degrees (stored in radians)",
     );
-    mm_slider(ui, &mut scene.press, 0.0..=20.0, "press (mm)");
+    mm_slider(
+        ui,
+        &mut scene.press,
+        0.0..=20.0,
+        "press (mm)",
+        "press depth: how far the membrane apex goes below the object's highest point, millimetres",
+    );
     if scene.press < 0.0 {
         scene.press = 0.0;
     }

@@ -17,11 +17,14 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             &mut view.membrane,
             MembraneStyle::Translucent,
             "translucent",
-        );
+        )
+        .on_hover_text("how the membrane is drawn in the 3D view");
         ui.radio_value(&mut view.membrane, MembraneStyle::Wireframe, "wireframe");
         ui.radio_value(&mut view.membrane, MembraneStyle::Hidden, "hidden");
-        ui.checkbox(&mut view.show_frustum, "camera frustum");
-        ui.checkbox(&mut view.show_contacts, "contact points");
+        ui.checkbox(&mut view.show_frustum, "camera frustum")
+            .on_hover_text("draw the depth camera's viewing frustum inside the sensor");
+        ui.checkbox(&mut view.show_contacts, "contact points")
+            .on_hover_text("draw the back-projected in-contact points (X0), world frame");
         if ui.button("Reset camera").clicked() {
             view.camera = OrbitCamera::default();
         }

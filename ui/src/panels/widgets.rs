@@ -1,5 +1,5 @@
 //! Small input widgets shared by the panels: sliders in display units (mm, degrees) over SI values, each with its
-//! typed value box (click the number to type).
+//! typed value box (click the number to type) and a tooltip saying what it sets and in which units.
 
 use std::ops::RangeInclusive;
 
@@ -11,6 +11,7 @@ pub fn mm_slider(
     value_m: &mut f64,
     range_mm: RangeInclusive<f64>,
     label: &str,
+    help: &str,
 ) -> bool {
     let mut mm = *value_m * 1e3;
     let changed = ui
@@ -20,6 +21,7 @@ pub fn mm_slider(
                 .clamping(SliderClamping::Never)
                 .max_decimals(2),
         )
+        .on_hover_text(help)
         .changed();
     if changed && mm.is_finite() {
         *value_m = mm * 1e-3;
@@ -33,6 +35,7 @@ pub fn deg_slider(
     value_rad: &mut f64,
     range_deg: RangeInclusive<f64>,
     label: &str,
+    help: &str,
 ) -> bool {
     let mut deg = value_rad.to_degrees();
     let changed = ui
@@ -42,6 +45,7 @@ pub fn deg_slider(
                 .clamping(SliderClamping::Never)
                 .max_decimals(1),
         )
+        .on_hover_text(help)
         .changed();
     if changed && deg.is_finite() {
         *value_rad = deg.to_radians();
