@@ -13,7 +13,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use candle_core::{Device, Tensor};
+use candle_core::Tensor;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -108,6 +108,10 @@ pub struct TrainConfig {
     /// a fine-tune of an eps model with v re-targets its output layer.
     #[arg(long, value_enum)]
     pub prediction: Option<PredictionType>,
+    /// Device that trains: cpu (our fast kernels), cuda, cuda:N or metal (GPU builds: `--features cuda` or `metal`).
+    /// Not part of a run's identity: a run may resume on another device.
+    #[arg(long, default_value_t = TrainConfig::default().device)]
+    pub device: String,
 }
 
 impl Default for TrainConfig {
@@ -124,6 +128,7 @@ impl Default for TrainConfig {
             checkpoint_every_steps: 0,
             log_every: 50,
             prediction: None,
+            device: "cpu".into(),
         }
     }
 }
@@ -312,7 +317,7 @@ fn prepare(
             b.target.len()
         )));
     }
-    let dev = Device::Cpu;
+    let dev = run.vars.unet.conv_in.weight.device().clone();
     let x0: Vec<f32> = b.target.iter().map(|&v| norm.target.forward(v)).collect();
     let cond: Vec<f32> = b.imprint.iter().map(|&v| norm.imprint.forward(v)).collect();
     let mut rng = ChaCha8Rng::seed_from_u64(tc.seed);
@@ -359,6 +364,13 @@ fn open_run(
     model_cfg: &UNet2DConfig,
     init: Option<&Path>,
 ) -> Result<Run, ModelError> {
+    let device = super::device::open_device(&tc.device)?;
+    let portable = |mut vars: ModelVars| {
+        if !device.is_cpu() {
+            vars.unet.set_kernels(super::kernels::Kernels::Portable);
+        }
+        vars
+    };
     let state = state_path(run_dir);
     if state.is_file() {
         let file = read_tensors(&state)?;
@@ -391,13 +403,14 @@ fn open_run(
             path: state.clone(),
             message: "metadata 'step' is not an integer".into(),
         })?;
-        let vars = build(&cfg, &Device::Cpu)?;
+        let vars = portable(build(&cfg, &device)?);
         assign(&vars.varmap, &file, "param.")?;
         let mut adam = Adam::new(named_vars(&vars.varmap).into_iter().collect(), tc.lr)?;
         adam.t = step;
         for (i, (name, var)) in adam.vars.iter().enumerate() {
             for (prefix, slot) in [("adam_m.", &mut adam.m[i]), ("adam_v.", &mut adam.v[i])] {
-                *slot = state_tensor(&file, &format!("{prefix}{name}"), var.dims())?;
+                *slot = state_tensor(&file, &format!("{prefix}{name}"), var.dims())?
+                    .to_device(&device)?;
             }
         }
         let ema = match tc.ema {
@@ -407,7 +420,8 @@ fn open_run(
                     .map(|(n, v)| {
                         Ok((
                             n.clone(),
-                            state_tensor(&file, &format!("ema.{n}"), v.dims())?,
+                            state_tensor(&file, &format!("ema.{n}"), v.dims())?
+                                .to_device(&device)?,
                         ))
                     })
                     .collect::<Result<BTreeMap<_, _>, ModelError>>()?,
@@ -425,12 +439,12 @@ fn open_run(
     let (vars, mut cfg) = match init {
         Some(p) => {
             let (file, cfg) = locate(p)?;
-            let vars = build(&cfg, &Device::Cpu)?;
+            let vars = portable(build(&cfg, &device)?);
             assign(&vars.varmap, &file, "")?;
             (vars, cfg)
         }
         None => {
-            let vars = build(model_cfg, &Device::Cpu)?;
+            let vars = portable(build(model_cfg, &device)?);
             init_params(&vars.varmap, tc.seed)?;
             (vars, model_cfg.clone())
         }
