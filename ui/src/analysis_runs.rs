@@ -86,6 +86,21 @@ pub enum ZoomTarget {
     DatasetPair(usize),
 }
 
+/// The open dataset and its loaded selected pair.
+fn selected_pair(
+    views: &AnalysisViews,
+) -> Result<(&DatasetBrowser, &crate::dataset_view::SelectedPair)> {
+    let b = views
+        .dataset
+        .as_ref()
+        .ok_or_else(|| anyhow!("open a dataset first"))?;
+    let sel = b
+        .selected
+        .as_ref()
+        .ok_or_else(|| anyhow!("select a pair first (it may still be loading)"))?;
+    Ok((b, sel))
+}
+
 fn texture(
     ctx: &egui::Context,
     name: &str,
@@ -281,15 +296,7 @@ impl WorkbenchApp {
 
     /// Make the selected dataset pair the de-rendering input and show the De-render tab.
     pub(crate) fn send_pair_to_derender(&mut self) -> Result<()> {
-        let b = self
-            .analysis
-            .dataset
-            .as_ref()
-            .ok_or_else(|| anyhow!("open a dataset first"))?;
-        let sel = b
-            .selected
-            .as_ref()
-            .ok_or_else(|| anyhow!("select a pair first (it is still loading)"))?;
+        let (b, sel) = selected_pair(&self.analysis)?;
         let m = &sel.pair.meta;
         self.state.derender.input = DerenderInput::DatasetPair {
             dir: b.dir.clone(),
@@ -309,15 +316,7 @@ impl WorkbenchApp {
 
     /// Place the simulated scene where the selected dataset pair was taken.
     pub(crate) fn place_pair_scene(&mut self) -> Result<()> {
-        let b = self
-            .analysis
-            .dataset
-            .as_ref()
-            .ok_or_else(|| anyhow!("open a dataset first"))?;
-        let sel = b
-            .selected
-            .as_ref()
-            .ok_or_else(|| anyhow!("select a pair first"))?;
+        let (b, sel) = selected_pair(&self.analysis)?;
         let set = b.dataset.object_set()?;
         let m = &sel.pair.meta;
         let pair = PairScene {
