@@ -9,11 +9,11 @@ use super::{LoadedObject, PipelineError, Progress};
 use crate::image::Image;
 use crate::metrics::evaluate::{EvalConfig, EvalContext, EvalError, Evaluator};
 use crate::objects::ObjectSet;
-use crate::pose::{threshold_contact, Hypothesis, InitStrategy};
+use crate::pose::{threshold_contact, Hypothesis};
 use crate::recon::is_valid_depth;
 use crate::sensor::Se2;
 use crate::sim::Simulator;
-use crate::uncertainty::analysis::{analyse_with_progress, Signature};
+use crate::uncertainty::analysis::{analyse_with_progress, first_registration, Signature};
 use crate::uncertainty::UncertaintyReport;
 
 /// What the sensor saw: the camera's pose, the generated samples and the imprint (metres).
@@ -51,6 +51,16 @@ impl PoseEstimate {
     pub fn best(&self) -> Option<Se2> {
         self.hypotheses.first().map(|h| h.pose)
     }
+
+    /// The contact points the single-sample estimate was fitted to: sample `registered_sample` of `input`
+    /// back-projected, world frame, metres.
+    pub fn contact_points(&self, sim: &Simulator, input: &PoseInput<'_>) -> Vec<glam::DVec3> {
+        input
+            .samples
+            .get(self.registered_sample)
+            .map(|s| crate::recon::back_project(s, sim.intrinsics(), &input.t_world_camera).p_world)
+            .unwrap_or_default()
+    }
 }
 
 /// Register `input`'s samples to `object` seen by `sim`'s sensor (see the module docs). `progress` counts the
@@ -73,37 +83,17 @@ pub fn estimate_pose(
         .filter(|(_, s)| s.data.iter().any(|&d| is_valid_depth(d)))
         .map(|(i, _)| i)
         .collect();
-    let strategy = InitStrategy::Random {
-        count: config.inits,
-        radius_m: config.init_radius_m,
-        seed,
-    };
     // The first sample with contact that registers gives the start; one that fails is skipped here (the analysis
     // records it with the others).
-    let mut start = None;
-    let mut last_error = None;
-    for &i in &with_contact {
-        match evaluator.register_depth(
-            &model,
-            &input.samples[i],
-            &ctx,
-            &input.t_world_camera,
-            &strategy,
-            seed,
-        ) {
-            Ok(Some(h)) if !h.is_empty() => {
-                start = Some((i, h));
-                break;
-            }
-            Ok(_) => {}
-            Err(e) => last_error = Some(e),
-        }
-    }
-    let (registered_sample, hypotheses) = match (start, last_error) {
-        (Some(s), _) => s,
-        (None, Some(e)) => return Err(e.into()),
-        (None, None) => return Err(PipelineError::NoContact),
-    };
+    let (registered_sample, hypotheses) = first_registration(
+        &evaluator,
+        &model,
+        &ctx,
+        &input.t_world_camera,
+        input.samples,
+        seed,
+    )?
+    .ok_or(PipelineError::NoContact)?;
     let multi = usize::from(input.samples.len() > 1);
     let total = 2 + input.samples.len() + multi;
     if !progress(1, total) {
@@ -179,7 +169,7 @@ pub fn write_pose_geometry(
     let t_world_camera = &input.t_world_camera;
     let frame = "world frame, metres (tactile-derender)";
     if let Some(sample) = input.samples.get(estimate.registered_sample) {
-        let contact = back_project(sample, intrinsics, t_world_camera).p_world;
+        let contact = estimate.contact_points(sim, input);
         let name = "contact_points.ply";
         let comment = format!("contact of sample {}, {frame}", estimate.registered_sample);
         done(
@@ -259,17 +249,11 @@ pub fn write_fit_figure(
     figure: &crate::io::figure::FigureConfig,
 ) -> Result<[std::path::PathBuf; 2], PipelineError> {
     let outline = crate::pose::outline::outline(&object.mesh);
-    let contacts: Vec<[f64; 2]> = input
-        .samples
-        .get(estimate.registered_sample)
-        .map(|s| {
-            crate::recon::back_project(s, sim.intrinsics(), &input.t_world_camera)
-                .p_world
-                .iter()
-                .map(|p| [p.x, p.y])
-                .collect()
-        })
-        .unwrap_or_default();
+    let contacts: Vec<[f64; 2]> = estimate
+        .contact_points(sim, input)
+        .iter()
+        .map(|p| [p.x, p.y])
+        .collect();
     let fit = crate::pose::figure::FitFigure {
         object: &object.name,
         outline: &outline,

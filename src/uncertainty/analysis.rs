@@ -8,7 +8,7 @@ use super::{FailedRegistration, SampleError, UncertaintyReport};
 use crate::image::Image;
 use crate::metrics::evaluate::{EvalContext, EvalError, Evaluator, ObjectModel};
 use crate::pose::from_depth::consensus_depth;
-use crate::pose::InitStrategy;
+use crate::pose::{Hypothesis, InitStrategy, PoseError};
 use crate::sensor::Se2;
 
 /// Inputs of one analysis.
@@ -23,6 +23,34 @@ pub struct Signature<'a> {
     pub truth: Option<Se2>,
     /// The fixed start; `None`: the best of a K-start registration of the first sample with contact.
     pub init: Option<Se2>,
+}
+
+/// The K-start registration that gives an analysis its fixed start: the first of `samples` with contact that
+/// registers, as `(index, every hypothesis best first)`; `None` when no sample has contact. A sample that fails is
+/// skipped here (the analysis records it with the others); the error of the last one is returned when none
+/// registers.
+pub fn first_registration(
+    evaluator: &Evaluator,
+    object: &ObjectModel,
+    ctx: &EvalContext,
+    t_world_camera: &DAffine3,
+    samples: &[Image],
+    seed: u64,
+) -> Result<Option<(usize, Vec<Hypothesis>)>, PoseError> {
+    let strategy = InitStrategy::Random {
+        count: evaluator.config.inits,
+        radius_m: evaluator.config.init_radius_m,
+        seed,
+    };
+    let mut last_error = None;
+    for (i, s) in samples.iter().enumerate() {
+        match evaluator.register_depth(object, s, ctx, t_world_camera, &strategy, seed) {
+            Ok(Some(h)) if !h.is_empty() => return Ok(Some((i, h))),
+            Ok(_) => {}
+            Err(e) => last_error = Some(e),
+        }
+    }
+    last_error.map_or(Ok(None), Err)
 }
 
 /// Register each sample from the fixed start and measure the errors against the truth (or, without it, against the
@@ -61,10 +89,6 @@ pub fn analyse_with_progress(
             Err(EvalError::Cancelled)
         }
     };
-    let pose_err = |source| EvalError::Pose {
-        object: "uncertainty".into(),
-        source,
-    };
     let strategy = InitStrategy::Random {
         count: evaluator.config.inits,
         radius_m: evaluator.config.init_radius_m,
@@ -73,30 +97,24 @@ pub fn analyse_with_progress(
     let init = match sig.init {
         Some(i) => i,
         None => {
-            // The first sample with contact that registers gives the start (a sample that fails is skipped here
-            // and recorded below with the others).
-            let mut found = None;
-            let mut last_error = None;
-            for s in sig.samples {
-                match evaluator.register_depth(object, s, ctx, &sig.t_world_camera, &strategy, seed)
-                {
-                    Ok(Some(h)) => {
-                        found = h.first().map(|b| b.pose);
-                        break;
-                    }
-                    Ok(None) => {}
-                    Err(e) => last_error = Some(e),
-                }
-            }
-            let found = match (found, last_error) {
-                (Some(f), _) => f,
-                (None, Some(e)) => return Err(pose_err(e)),
-                (None, None) => {
-                    return Err(EvalError::Generator(
-                        "no generated sample has any contact; nothing to register".into(),
-                    ))
-                }
-            };
+            let found = first_registration(
+                evaluator,
+                object,
+                ctx,
+                &sig.t_world_camera,
+                sig.samples,
+                seed,
+            )
+            .map_err(|source| EvalError::Pose {
+                object: "uncertainty".into(),
+                source,
+            })?
+            .and_then(|(_, h)| h.first().map(|b| b.pose))
+            .ok_or_else(|| {
+                EvalError::Generator(
+                    "no generated sample has any contact; nothing to register".into(),
+                )
+            })?;
             step(&mut done)?;
             found
         }

@@ -43,8 +43,8 @@ pub struct DerenderView {
     pub progress: Option<(usize, usize)>,
     pub started: Option<Instant>,
     cancel: Option<Arc<AtomicBool>>,
-    /// The loaded model and the checkpoint it came from.
-    pub model: Option<(PathBuf, Arc<DiffusionModel>)>,
+    /// The loaded model with the checkpoint and the device it was loaded from and onto.
+    pub model: Option<(PathBuf, String, Arc<DiffusionModel>)>,
     pub result: Option<Box<RunResult>>,
     /// Input Y, truth X0 (if known), mean, std, contact probability, consensus, then the samples.
     pub images: Vec<RunImage>,
@@ -221,7 +221,11 @@ impl WorkbenchApp {
         }
         view.running = false;
         view.cancel = None;
-        view.model = Some((r.model.source().to_path_buf(), r.model.clone()));
+        view.model = Some((
+            r.model.source().to_path_buf(),
+            r.config.device.clone(),
+            r.model.clone(),
+        ));
         view.images = run_images(ctx, &r);
         view.pending_input = None;
         view.result = Some(r);
@@ -397,14 +401,10 @@ impl WorkbenchApp {
         let cached = view
             .model
             .as_ref()
-            .filter(|(p, m)| {
-                *p == model_path
-                    && tactile_derender::model::device::open_device(
-                        &self.state.derender.config.device,
-                    )
-                    .is_ok_and(|d| d.same_device(m.device()))
+            .filter(|(p, device, _)| {
+                *p == model_path && *device == self.state.derender.config.device
             })
-            .map(|(_, m)| m.clone());
+            .map(|(_, _, m)| m.clone());
         let req = RunRequest {
             generation: view.generation,
             model_path,

@@ -11,7 +11,6 @@ use anyhow::{anyhow, Context, Result};
 use tactile_derender::image::Image;
 use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::pipeline::{self, PoseInput};
-use tactile_derender::recon::back_project;
 use tactile_derender::sim::Simulator;
 
 use crate::derender::PoseContext;
@@ -58,15 +57,11 @@ pub fn run(
             !cancel.load(Ordering::Relaxed)
         },
     )?;
-    let contacts = back_project(
-        &req.samples[estimate.registered_sample],
-        sim.intrinsics(),
-        &c.t_world_camera,
-    )
-    .p_world
-    .iter()
-    .map(|p| [p.x, p.y])
-    .collect();
+    let contacts = estimate
+        .contact_points(&sim, &input)
+        .iter()
+        .map(|p| [p.x, p.y])
+        .collect();
     Ok(PoseAnalysis {
         object: estimate.object,
         outline: outline(&object.mesh),

@@ -75,12 +75,10 @@ impl SensorArgs {
 
 /// `--figure-size WxH` (pixels).
 pub fn parse_figure_size(s: &str) -> Result<tactile_derender::io::figure::FigureConfig, String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
-        .ok_or_else(|| format!("'{s}' must look like 2400x1000 (pixels)"))?;
+    let bad = || format!("'{s}' must look like 2400x1000 (pixels)");
+    let (w, h) = parse_resolution(s).map_err(|_| bad())?;
     Ok(tactile_derender::io::figure::FigureConfig {
-        width_px: w,
-        height_px: h,
+        width_px: u32::try_from(w).map_err(|_| bad())?,
+        height_px: u32::try_from(h).map_err(|_| bad())?,
     })
 }

@@ -101,7 +101,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         .map_err(|e| anyhow!("--truth: {e}"))?;
     let signature = a.signature.as_ref().map(|p| read(p, res)).transpose()?;
     let eval = EvalConfig::default();
-    let (generator, samples) = if a.model == "ground-truth" {
+    let (generator, samples, probability) = if a.model == "ground-truth" {
         let target = a.target.as_ref().ok_or_else(|| {
             anyhow!("--model ground-truth needs --target FILE.npy (the in-contact depth to use as every sample)")
         })?;
@@ -109,6 +109,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         (
             "ground-truth".to_string(),
             vec![target; a.derender.samples.max(1)],
+            None,
         )
     } else {
         let device = tactile_derender::model::device::open_device(&a.derender.device)?;
@@ -122,7 +123,11 @@ pub fn run(a: PoseArgs) -> Result<()> {
             &mut progress::callback(&mut bar),
         )?;
         progress::finish(&mut bar);
-        (format!("model {}", model.source().display()), out.samples)
+        (
+            format!("model {}", model.source().display()),
+            out.samples,
+            Some(out.contact_probability),
+        )
     };
     let input = PoseInput {
         t_world_camera: sim.t_world_camera(&sensor),
@@ -145,7 +150,10 @@ pub fn run(a: PoseArgs) -> Result<()> {
     report.write_with(&a.out, &a.figure_size)?;
     pipeline::write_fit_figure(&a.out, &object, &sim, &input, &estimate, &a.figure_size)?;
     if samples.len() > 1 {
-        let p = contact_probability(&samples)?;
+        let p = match probability {
+            Some(p) => p,
+            None => contact_probability(&samples)?,
+        };
         npy::write_image(&a.out.join("contact_probability.npy"), &p)?;
     }
     let geometry = pipeline::write_pose_geometry(

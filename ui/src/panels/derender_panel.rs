@@ -137,8 +137,8 @@ fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>)
         .derender
         .model
         .as_ref()
-        .filter(|(q, _)| *q == p)
-        .map(|(_, m)| {
+        .filter(|(q, _, _)| *q == p)
+        .map(|(_, _, m)| {
             let (w, h) = m.resolution();
             let predicts = match m.config().tactile_derender.prediction_type {
                 PredictionType::Epsilon => "ε",
