@@ -19,6 +19,7 @@ pub mod objects;
 pub mod pipeline;
 pub mod pose;
 pub mod recon;
+pub mod recording;
 pub mod sensor;
 pub mod sim;
 pub mod uncertainty;

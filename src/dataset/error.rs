@@ -73,6 +73,8 @@ pub enum DatasetError {
     },
     #[error("{path}: import: {message}")]
     Import { path: PathBuf, message: String },
+    #[error(transparent)]
+    Recording(#[from] crate::recording::RecordingError),
     #[error("cannot serialise {what}: {source}")]
     Serialize {
         what: &'static str,

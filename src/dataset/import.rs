@@ -107,8 +107,6 @@ pub fn import(
     }
     refuse_unless_interrupted_import(out)?;
     let sim = Simulator::new(sim_config.clone())?;
-    let camera = &sim_config.camera;
-    let (w, h) = camera.resolution;
     let mut reader = RowReader {
         from,
         table: &table,
@@ -118,19 +116,59 @@ pub fn import(
         global_reference: find_global_reference(from),
         tops: BTreeMap::new(),
     };
-    let mut objects = Vec::with_capacity(rows.len());
     let mut explicit_splits = Vec::with_capacity(rows.len());
     let mut records = Vec::with_capacity(rows.len());
     let mut sizes = Vec::new();
     for (i, row) in rows.iter().enumerate() {
         let (record, split, size) = reader.read(i, row)?;
-        objects.push(record.object);
         explicit_splits.push(split);
         sizes.push(size);
         records.push(record);
     }
+    let table_name = table
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    write_real_dataset(
+        out,
+        RealSource {
+            from: &from.display().to_string(),
+            table: &table_name,
+            sizes,
+        },
+        sim_config,
+        set,
+        config.seed,
+        records,
+        explicit_splits,
+    )
+}
+
+/// Where the pairs of a real dataset came from (recorded in its manifest).
+pub(crate) struct RealSource<'a> {
+    /// The imported directory or recording.
+    pub from: &'a str,
+    /// The pair table's file name, or the recording's depth topic.
+    pub table: &'a str,
+    /// Source frame sizes `[w, h]`.
+    pub sizes: Vec<[usize; 2]>,
+}
+
+/// Assign splits (explicit, else the automatic 9:1 rule with `seed`) and write `records` as a real dataset at `out`.
+pub(crate) fn write_real_dataset(
+    out: &Path,
+    source: RealSource<'_>,
+    sim_config: &SimConfig,
+    set: &ObjectSet,
+    seed: u64,
+    mut records: Vec<Record>,
+    explicit_splits: Vec<Option<SplitName>>,
+) -> Result<ImportReport, DatasetError> {
+    let (w, h) = sim_config.camera.resolution;
+    let objects: Vec<usize> = records.iter().map(|r| r.object).collect();
+    let mut sizes = source.sizes;
     let object_splits: Vec<_> = set.entries().iter().map(|e| e.split).collect();
-    let auto = split::assign(config.seed, &objects, &object_splits, 10);
+    let auto = split::assign(seed, &objects, &object_splits, 10);
     let mut counts = SplitCounts::default();
     for (r, (explicit, auto)) in records
         .iter_mut()
@@ -160,11 +198,8 @@ pub fn import(
         sim: sim_config.clone(),
         generation: None,
         import: Some(ImportInfo {
-            from: from.display().to_string(),
-            table: table
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default(),
+            from: source.from.to_string(),
+            table: source.table.to_string(),
             source_resolution: sizes,
         }),
         object_set: ObjectSetInfo {
@@ -347,7 +382,7 @@ impl RowReader<'_> {
 /// Import writes every shard before `manifest.json`, so a directory holding only `shards/`, `objects/` and temporary
 /// files is an interrupted import of ours and is overwritten (the same command resumes by starting over); anything
 /// else must be missing or empty.
-fn refuse_unless_interrupted_import(out: &Path) -> Result<(), DatasetError> {
+pub(crate) fn refuse_unless_interrupted_import(out: &Path) -> Result<(), DatasetError> {
     let Ok(entries) = std::fs::read_dir(out) else {
         return refuse_foreign_dir(out);
     };
@@ -465,7 +500,7 @@ fn find_global_reference(from: &Path) -> Option<PathBuf> {
 }
 
 /// Load one image in metres; `rel` is relative to `from` (`file.npz:name` picks an array of an npz).
-fn load_image(from: &Path, rel: &str, config: &ImportConfig) -> Result<Image, DatasetError> {
+pub(crate) fn load_image(from: &Path, rel: &str, config: &ImportConfig) -> Result<Image, DatasetError> {
     let (file, member) = match rel.rsplit_once(':') {
         Some((f, m)) if f.to_ascii_lowercase().ends_with(".npz") => (f, Some(m)),
         _ => (rel, None),

@@ -19,6 +19,7 @@
 pub mod config;
 pub mod gen;
 pub mod import;
+pub mod import_recording;
 pub mod manifest;
 pub mod npz;
 pub mod reader;

@@ -104,8 +104,23 @@ impl Simulator {
     /// Validate the configuration, build the membrane and its SDF, and render E.
     pub fn new(config: SimConfig) -> Result<Self, SimError> {
         config.camera.validate().map_err(SimError::Camera)?;
-        config.signature.validate().map_err(SimError::Signature)?;
         let intrinsics = config.camera.intrinsics();
+        Self::with_intrinsics(config, intrinsics)
+    }
+
+    /// The same sensor rendering the camera's whole **native** frame (e.g. 224 x 171, no crop, no resampling), as a
+    /// real recording holds it; the signature noise is then per native pixel.
+    pub fn native(mut config: SimConfig) -> Result<Self, SimError> {
+        config.camera.validate().map_err(SimError::Camera)?;
+        let native = config.camera.native;
+        config.camera.crop_rows = (0, native.height);
+        config.camera.crop_cols = (0, native.width);
+        config.camera.resolution = (native.width, native.height);
+        Self::with_intrinsics(config, native)
+    }
+
+    fn with_intrinsics(config: SimConfig, intrinsics: Intrinsics) -> Result<Self, SimError> {
+        config.signature.validate().map_err(SimError::Signature)?;
         let t_sensor_camera = config.mount.t_sensor_camera();
         let elastomer_mesh = config.elastomer.build()?;
         let caster = RayCaster::new(&elastomer_mesh)?;

@@ -8,11 +8,13 @@ use clap::{Args, Subcommand};
 use kdam::BarExt;
 use serde_json::json;
 use tactile_derender::dataset::import::{self, ImportConfig};
+use tactile_derender::dataset::import_recording::{self, PoseSource, RecordingImportConfig};
 use tactile_derender::dataset::{self, Dataset, GenConfig, SplitName};
 use tactile_derender::io::preview;
 use tactile_derender::objects::ObjectSet;
 
 use crate::args::SensorArgs;
+use crate::recording_cmd::RecordingReadArgs;
 
 #[derive(Args, Debug)]
 pub struct DatasetArgs {
@@ -24,7 +26,8 @@ pub struct DatasetArgs {
 pub enum DatasetCommand {
     /// Generate synthetic pairs (resumable: re-run the same command after an interruption).
     Gen(Box<GenArgs>),
-    /// Import real sensor pairs (npy/npz or 16-bit PNG, a CSV or JSON pair table) into the dataset format.
+    /// Import real sensor pairs (npy/npz or 16-bit PNG, a CSV or JSON pair table), or a recording (MCAP, a folder of
+    /// depth frames) with the object's pose per frame, into the dataset format.
     Import(Box<ImportArgs>),
     /// Counts per split and object, depth/imprint ranges and a contact-area histogram.
     Stats {
@@ -91,7 +94,8 @@ pub struct GenArgs {
 
 #[derive(Args, Debug)]
 pub struct ImportArgs {
-    /// Directory holding the pair table (pairs.csv or pairs.json) and the image files it names.
+    /// A directory holding a pair table (pairs.csv or pairs.json) and the image files it names, or a recording: an
+    /// .mcap file or a folder of depth frames (then --object and the poses are needed).
     #[arg(long)]
     pub from: PathBuf,
     /// Output dataset directory (must be new or empty).
@@ -102,18 +106,29 @@ pub struct ImportArgs {
     pub objects: String,
     #[command(flatten)]
     pub sensor: SensorArgs,
-    /// Metres per unit of .npy/.npz depth arrays (1 = metres, 0.001 = millimetres).
-    #[arg(long, default_value_t = 1.0)]
-    pub npy_scale: f64,
-    /// Metres per unit of 16-bit PNG depth images (default: millimetres).
-    #[arg(long, default_value_t = 0.001)]
-    pub png_scale: f64,
     /// Split for rows without a split column: "auto" (unseen objects -> unseen_objects, seen objects 9:1), or a split.
     #[arg(long, default_value = "auto")]
     pub split: String,
     /// Seed of the automatic 9:1 split.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    #[command(flatten)]
+    pub read: RecordingReadArgs,
+    /// Recordings: the pressed object (an entry of --objects).
+    #[arg(long)]
+    pub object: Option<String>,
+    /// Recordings: CSV of the object's pose per frame (columns frame or stamp_ns, x, y, theta, optional press).
+    #[arg(long, conflicts_with = "pose_topic")]
+    pub poses: Option<PathBuf>,
+    /// Recordings: the object-pose topic (geometry_msgs PoseStamped or Pose2D); default: the only pose topic.
+    #[arg(long)]
+    pub pose_topic: Option<String>,
+    /// Recordings: keep every n-th frame.
+    #[arg(long, default_value_t = 1)]
+    pub every: usize,
+    /// Recordings: frames with fewer contact pixels (imprint over --contact-threshold) are skipped.
+    #[arg(long, default_value_t = 10)]
+    pub min_contact_px: usize,
 }
 
 pub fn run(a: DatasetArgs) -> Result<()> {
@@ -202,14 +217,47 @@ fn run_import(a: ImportArgs) -> Result<()> {
                 .context("--split")?,
         ),
     };
-    let config = ImportConfig {
-        npy_scale: a.npy_scale,
-        png_scale: a.png_scale,
-        split,
-        seed: a.seed,
+    let is_table = a.from.join("pairs.csv").is_file() || a.from.join("pairs.json").is_file();
+    if is_table {
+        let config = ImportConfig {
+            npy_scale: a.read.npy_scale,
+            png_scale: a.read.png_scale,
+            split,
+            seed: a.seed,
+        };
+        let report = import::import(&a.from, &a.out, &sim, &set, &config)?;
+        println!("{}", serde_json::to_string(&report)?);
+        return Ok(());
+    }
+    let object = a.object.clone().ok_or_else(|| {
+        anyhow!(
+            "{}: no pairs.csv or pairs.json, so it is read as a recording; name the pressed object with --object",
+            a.from.display()
+        )
+    })?;
+    let poses = match &a.poses {
+        Some(csv) => PoseSource::Csv(csv.clone()),
+        None => PoseSource::Topic(a.pose_topic.clone()),
     };
-    let report = import::import(&a.from, &a.out, &sim, &set, &config)?;
-    println!("{}", serde_json::to_string(&report)?);
+    let mut config = RecordingImportConfig::new(&object, poses);
+    config.topic = a.read.topic.clone();
+    config.process = a.read.process();
+    config.folder = a.read.folder();
+    config.every = a.every;
+    config.min_contact_px = a.min_contact_px;
+    config.split = split;
+    config.seed = a.seed;
+    let mut bar = crate::progress::bar("frames", "frame", 0);
+    let report = import_recording::import_recording(
+        &a.from,
+        &a.out,
+        &sim,
+        &set,
+        &config,
+        &mut crate::progress::callback(&mut bar),
+    );
+    crate::progress::finish(&mut bar);
+    println!("{}", serde_json::to_string(&report?)?);
     Ok(())
 }
 

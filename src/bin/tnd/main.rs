@@ -8,6 +8,7 @@ mod model_cmd;
 mod objects_cmd;
 mod pose_cmd;
 mod progress;
+mod recording_cmd;
 mod sample_cmd;
 mod sim_cmd;
 mod train_cmd;
@@ -45,6 +46,8 @@ enum Command {
     Sample(sample_cmd::SampleArgs),
     /// Train (or resume, or fine-tune) the conditional DDPM on a dataset.
     Train(Box<train_cmd::TrainArgs>),
+    /// Real sensor recordings (MCAP, depth-frame folders): topics, reference, contact per frame; simulated ones.
+    Recording(recording_cmd::RecordingArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -67,6 +70,7 @@ fn main() -> std::process::ExitCode {
         Command::Pose(a) => pose_cmd::run(*a),
         Command::Model(a) => model_cmd::run(a),
         Command::Sample(a) => sample_cmd::run(a),
+        Command::Recording(a) => recording_cmd::run(a),
         Command::Train(a) => train_cmd::run(*a),
     };
     match result {

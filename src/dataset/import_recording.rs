@@ -1,0 +1,385 @@
+//! **Recordings as scored pairs**: as in the paper's real dataset, where the object's pose relative to the sensor is
+//! known for a frame (a pose topic in the recording, or a CSV table), the frame's true in-contact depth X0 is
+//! simulated with the calibrated sensor model, so a real press sequence becomes pairs for fine-tuning and
+//! evaluation (`tnd dataset import --from REC.mcap`).
+//!
+//! Per frame: the imprint Y = R − S from [`crate::recording::process`]; frames with less contact than
+//! `min_contact_px` (the no-contact part of a press) are skipped; the pose is the pose message nearest in time (within
+//! `max_pose_gap_s`) or the CSV row of the frame. The press depth comes from the CSV's `press` column, or, when no
+//! source gives it, is **estimated** by matching the simulated noise-free imprint to the measured one (a grid over
+//! `[-1 mm, max_press]` in 0.5 mm steps, then golden-section refinement; mean absolute imprint difference).
+//!
+//! Pose CSV columns: `frame` (0-based index in the depth stream) or `stamp_ns`, then `x`, `y` (metres), `theta`
+//! (radians) and optionally `press` (metres).
+
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::import::{
+    parse_csv, refuse_unless_interrupted_import, write_real_dataset, ImportReport, RealSource,
+};
+use super::shard::Record;
+use super::{DatasetError, SplitName};
+use crate::image::Image;
+use crate::objects::ObjectSet;
+use crate::recording::{self, FolderOptions, ProcessConfig, Recording};
+use crate::sensor::{Scene, Se2};
+use crate::sim::{PreparedObject, SimConfig, Simulator};
+
+/// Where the object's pose per frame comes from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PoseSource {
+    /// A `PoseStamped`/`Pose2D` topic of the recording (`None`: its only pose topic).
+    Topic(Option<String>),
+    /// A CSV table (module docs).
+    Csv(PathBuf),
+}
+
+/// Settings of a recording import.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RecordingImportConfig {
+    /// Depth topic (`None`: the only one).
+    pub topic: Option<String>,
+    pub process: ProcessConfig,
+    pub folder: FolderOptions,
+    /// The pressed object: an entry of the object set.
+    pub object: String,
+    pub poses: PoseSource,
+    /// Keep every n-th frame (default 1).
+    pub every: usize,
+    /// Frames with fewer contact pixels (imprint over the threshold) are skipped (default 10).
+    pub min_contact_px: usize,
+    /// Largest time between a frame and its pose message, seconds (default 0.05).
+    pub max_pose_gap_s: f64,
+    /// Deepest press the estimate considers, metres (default 0.03).
+    pub max_press_m: f64,
+    /// Split of every pair (`None`: the automatic rule, by the object's split).
+    pub split: Option<SplitName>,
+    /// Seed of the automatic 9:1 split.
+    pub seed: u64,
+}
+
+impl RecordingImportConfig {
+    /// Defaults for pressing `object` with poses from `poses`.
+    pub fn new(object: &str, poses: PoseSource) -> Self {
+        Self {
+            topic: None,
+            process: ProcessConfig::default(),
+            folder: FolderOptions::default(),
+            object: object.to_string(),
+            poses,
+            every: 1,
+            min_contact_px: 10,
+            max_pose_gap_s: 0.05,
+            max_press_m: 0.03,
+            split: None,
+            seed: 0,
+        }
+    }
+}
+
+/// What a recording import did.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RecordingImportReport {
+    pub frames: usize,
+    #[serde(flatten)]
+    pub written: ImportReport,
+    pub reference_frames: Vec<usize>,
+    pub skipped_no_contact: usize,
+    pub skipped_no_pose: usize,
+    /// Pairs whose press depth was estimated from the imprint.
+    pub press_estimated: usize,
+    /// Mean absolute imprint difference at the estimated presses, metres.
+    pub press_fit_residual_m: f64,
+}
+
+/// One frame's known pose.
+#[derive(Clone, Copy, Debug)]
+struct FramePose {
+    pose: Se2,
+    press: Option<f64>,
+}
+
+/// Import a recording (MCAP file or frame folder) at `from` into a new real dataset at `out`.
+pub fn import_recording(
+    from: &Path,
+    out: &Path,
+    sim_config: &SimConfig,
+    set: &ObjectSet,
+    config: &RecordingImportConfig,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+) -> Result<RecordingImportReport, DatasetError> {
+    let object_index = set
+        .entries()
+        .iter()
+        .position(|e| e.name == config.object)
+        .ok_or_else(|| {
+            DatasetError::Config(format!(
+                "object '{}' is not in the object set {}",
+                config.object,
+                set.spec()
+            ))
+        })?;
+    if config.every == 0 {
+        return Err(DatasetError::Config("--every must be at least 1".into()));
+    }
+    refuse_unless_interrupted_import(out)?;
+    let rec = Recording::open(from, &config.folder)?;
+    let stream = rec.depth_stream(config.topic.as_deref())?.clone();
+    let processed = recording::process(&rec, &stream, &sim_config.camera, &config.process, progress)?;
+    let poses = frame_poses(&rec, &processed.stamps_ns, config)?;
+
+    // Noise-free simulator: X0 and the press estimate do not depend on the measurement noise.
+    let mut quiet = sim_config.clone();
+    quiet.signature.noise_std = 0.0;
+    let sim = Simulator::new(quiet)?;
+    let object = PreparedObject::new(set.mesh(&config.object)?)?;
+
+    let mut skipped_no_contact = 0;
+    let mut skipped_no_pose = 0;
+    let mut todo = Vec::new();
+    for i in (0..processed.len()).step_by(config.every) {
+        if processed.contact_px[i] < config.min_contact_px {
+            skipped_no_contact += 1;
+        } else if let Some(p) = poses[i] {
+            todo.push((i, p));
+        } else {
+            skipped_no_pose += 1;
+        }
+    }
+    let made: Vec<(Record, Option<f64>)> = todo
+        .par_iter()
+        .map(|&(i, fp)| {
+            let y = &processed.imprints[i];
+            let (press, residual) = match fp.press {
+                Some(p) => (p, None),
+                None => {
+                    let (p, r) = estimate_press(&sim, &object, fp.pose, y, config.max_press_m);
+                    (p, Some(r))
+                }
+            };
+            let scene = Scene {
+                object: fp.pose,
+                sensor: sim.pressing_pose(&object, 0.0, 0.0, 0.0, press),
+            };
+            let depth = sim.render_depth(&object, &scene);
+            let (mask, target) = sim.contact(&depth);
+            let record = Record {
+                index: i,
+                seed: 0,
+                object: object_index,
+                split: SplitName::Train,
+                pose: fp.pose,
+                sensor: scene.sensor,
+                press,
+                contact_pixels: mask.count_nonzero(),
+                imprint: y.clone(),
+                target,
+                signature: processed.signatures[i].clone(),
+                reference: processed.reference.clone(),
+                mask,
+            };
+            (record, residual)
+        })
+        .collect();
+    let residuals: Vec<f64> = made.iter().filter_map(|(_, r)| *r).collect();
+    let mut records: Vec<Record> = made.into_iter().map(|(r, _)| r).collect();
+    if records.is_empty() {
+        return Err(DatasetError::Import {
+            path: from.to_path_buf(),
+            message: format!(
+                "no frame became a pair: {skipped_no_contact} frames without contact (< {} px over {} mm), \
+                 {skipped_no_pose} without a pose",
+                config.min_contact_px,
+                config.process.contact_threshold_m * 1e3
+            ),
+        });
+    }
+    for (k, r) in records.iter_mut().enumerate() {
+        r.index = k;
+    }
+    let n = records.len();
+    let written = write_real_dataset(
+        out,
+        RealSource {
+            from: &from.display().to_string(),
+            table: &stream.name,
+            sizes: vec![processed.source_size],
+        },
+        sim_config,
+        set,
+        config.seed,
+        records,
+        vec![config.split; n],
+    )?;
+    Ok(RecordingImportReport {
+        frames: processed.len(),
+        written,
+        reference_frames: processed.reference_frames.clone(),
+        skipped_no_contact,
+        skipped_no_pose,
+        press_estimated: residuals.len(),
+        press_fit_residual_m: if residuals.is_empty() {
+            0.0
+        } else {
+            residuals.iter().sum::<f64>() / residuals.len() as f64
+        },
+    })
+}
+
+/// The known pose of every frame (`None` where none is known).
+fn frame_poses(
+    rec: &Recording,
+    stamps_ns: &[u64],
+    config: &RecordingImportConfig,
+) -> Result<Vec<Option<FramePose>>, DatasetError> {
+    match &config.poses {
+        PoseSource::Topic(name) => {
+            let stream = rec.pose_stream(name.as_deref())?.clone();
+            let mut poses = rec.poses(&stream)?;
+            poses.sort_by_key(|p| p.0);
+            let gap = (config.max_pose_gap_s * 1e9) as u64;
+            Ok(stamps_ns
+                .iter()
+                .map(|&t| {
+                    let k = poses.partition_point(|p| p.0 < t);
+                    [k.checked_sub(1), Some(k)]
+                        .into_iter()
+                        .flatten()
+                        .filter_map(|j| poses.get(j))
+                        .min_by_key(|p| p.0.abs_diff(t))
+                        .filter(|p| p.0.abs_diff(t) <= gap)
+                        .map(|p| FramePose {
+                            pose: Se2::new(p.1[0], p.1[1], p.1[2]),
+                            press: None,
+                        })
+                })
+                .collect())
+        }
+        PoseSource::Csv(path) => csv_poses(path, stamps_ns, config.max_pose_gap_s),
+    }
+}
+
+fn csv_poses(
+    path: &Path,
+    stamps_ns: &[u64],
+    max_gap_s: f64,
+) -> Result<Vec<Option<FramePose>>, DatasetError> {
+    let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
+    let bad = |message: String| DatasetError::Import {
+        path: path.to_path_buf(),
+        message,
+    };
+    let rows = parse_csv(&text).map_err(bad)?;
+    let mut out = vec![None; stamps_ns.len()];
+    for (i, row) in rows.iter().enumerate() {
+        let at = |m: String| bad(format!("row {}: {m}", i + 1));
+        let num = |key: &str| -> Result<Option<f64>, DatasetError> {
+            match row.get(key).filter(|s| !s.is_empty()) {
+                None => Ok(None),
+                Some(s) => s
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .map(Some)
+                    .ok_or_else(|| at(format!("{key} '{s}' is not a finite number"))),
+            }
+        };
+        let need = |key: &str| num(key)?.ok_or_else(|| at(format!("missing '{key}'")));
+        let frame = match (row.get("frame"), row.get("stamp_ns")) {
+            (Some(f), _) => f
+                .parse::<usize>()
+                .map_err(|_| at(format!("frame '{f}' is not a frame number")))?,
+            (None, Some(s)) => {
+                let t: u64 = s
+                    .parse()
+                    .map_err(|_| at(format!("stamp_ns '{s}' is not an integer")))?;
+                let gap = (max_gap_s * 1e9) as u64;
+                match (0..stamps_ns.len())
+                    .min_by_key(|&k| stamps_ns[k].abs_diff(t))
+                    .filter(|&k| stamps_ns[k].abs_diff(t) <= gap)
+                {
+                    Some(k) => k,
+                    None => continue,
+                }
+            }
+            (None, None) => return Err(at("give a 'frame' or a 'stamp_ns' column".into())),
+        };
+        if frame >= out.len() {
+            return Err(at(format!(
+                "frame {frame} is beyond the recording's {} frames",
+                out.len()
+            )));
+        }
+        out[frame] = Some(FramePose {
+            pose: Se2::new(need("x")?, need("y")?, need("theta")?),
+            press: num("press")?,
+        });
+    }
+    Ok(out)
+}
+
+/// The press depth whose simulated noise-free imprint best matches `measured` (mean absolute difference over the
+/// pixels where both are defined), and that difference, metres.
+pub fn estimate_press(
+    sim: &Simulator,
+    object: &PreparedObject,
+    pose: Se2,
+    measured: &Image,
+    max_press: f64,
+) -> (f64, f64) {
+    let cost = |press: f64| -> f64 {
+        let scene = Scene {
+            object: pose,
+            sensor: sim.pressing_pose(object, 0.0, 0.0, 0.0, press),
+        };
+        let y = sim.simulate(object, &scene, 0).imprint;
+        let (mut s, mut n) = (0.0f64, 0usize);
+        for (&a, &b) in y.data.iter().zip(&measured.data) {
+            if a.is_finite() && b.is_finite() {
+                s += f64::from((a - b).abs());
+                n += 1;
+            }
+        }
+        if n == 0 {
+            f64::INFINITY
+        } else {
+            s / n as f64
+        }
+    };
+    let step = 0.0005;
+    let steps = ((max_press + 0.001) / step).ceil().max(1.0) as usize;
+    let (mut best, mut best_cost) = (0.0, f64::INFINITY);
+    for k in 0..=steps {
+        let p = -0.001 + k as f64 * step;
+        let c = cost(p);
+        if c < best_cost {
+            (best, best_cost) = (p, c);
+        }
+    }
+    // Golden-section search in the bracket around the best grid point.
+    let (mut a, mut b) = (best - step, best + step);
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
+    let (mut fc, mut fd) = (cost(c), cost(d));
+    for _ in 0..16 {
+        if fc < fd {
+            (b, d, fd) = (d, c, fc);
+            c = b - g * (b - a);
+            fc = cost(c);
+        } else {
+            (a, c, fc) = (c, d, fd);
+            d = a + g * (b - a);
+            fd = cost(d);
+        }
+    }
+    let (p, f) = if fc < fd { (c, fc) } else { (d, fd) };
+    if f < best_cost {
+        (p, f)
+    } else {
+        (best, best_cost)
+    }
+}

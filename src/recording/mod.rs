@@ -1,0 +1,67 @@
+//! **Real sensor recordings** in: a Soft Bubble's depth stream recorded as an MCAP file (ROS 2 bags; ROS 1 messages
+//! too) or as a folder of depth frames, turned into one imprint Y = R − S per frame exactly as the simulator and
+//! `tnd dataset import` do (crop and area-resample with the sensor's intrinsics, [`crate::dataset::resample`]), with
+//! the no-contact reference frame R picked by the user or detected.
+//!
+//! | module | what |
+//! | --- | --- |
+//! | [`ros`] | CDR / ROS 1 decoding of `sensor_msgs/Image`, `PointCloud2`, `geometry_msgs/PoseStamped`, `Pose2D` |
+//! | [`decode`] | depth images from those messages (16UC1 mm, 32FC1 m, projected clouds) |
+//! | [`source`] | opening an MCAP file or a frame folder, listing streams, reading a frame |
+//! | [`process`] | reference detection, imprint and contact area per frame |
+//! | [`synth`] | writing a simulated press sequence as an MCAP recording (demos and tests) |
+//!
+//! Turning a recording into scored pairs (X0 simulated from a known object pose) is
+//! [`crate::dataset::import_recording`].
+
+pub mod decode;
+pub mod process;
+pub mod ros;
+pub mod source;
+pub mod synth;
+
+use std::path::{Path, PathBuf};
+
+pub use process::{process, ProcessConfig, ProcessedRecording, ReferenceChoice};
+pub use source::{DepthFrame, FolderOptions, Recording, StreamInfo, StreamKind};
+
+/// Everything that can go wrong reading a recording; each names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Not a recording, or a damaged one.
+    #[error("{path}: {message}")]
+    Format { path: PathBuf, message: String },
+    /// No such topic or frame.
+    #[error("{path}: {message}")]
+    Topic { path: PathBuf, message: String },
+    /// One message cannot be decoded.
+    #[error("{path}: {topic}, message {index}: {message}")]
+    Message {
+        path: PathBuf,
+        topic: String,
+        index: usize,
+        message: String,
+    },
+    /// Frames that do not fit the camera (size), or a processing choice that cannot be met.
+    #[error("{path}: {message}")]
+    Frames { path: PathBuf, message: String },
+    #[error("cancelled")]
+    Cancelled,
+    #[error(transparent)]
+    Sim(#[from] crate::sim::SimError),
+}
+
+impl RecordingError {
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        RecordingError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}

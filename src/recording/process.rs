@@ -1,0 +1,303 @@
+//! From depth frames to **imprints**: every frame of a depth stream is brought to the model resolution (crop and
+//! area resampling, as `tnd dataset import`), the no-contact reference R is chosen, and each frame gets
+//! Y = R − S and its contact area (pixels where Y exceeds the threshold baseline's 3 mm).
+//!
+//! Reference detection (`ReferenceChoice::Auto`): the frame whose mean depth is largest (nothing pushes the membrane
+//! towards the camera) is a first reference; the frames whose imprint against it, averaged over 5 x 5 pixel windows
+//! (which divides per-pixel noise by 5), stays under `quiet_threshold_m` everywhere are the quiet frames, and R is the
+//! per-pixel median of up to `quiet_frames` of them, spread over the recording, which lowers R's noise.
+
+use serde::{Deserialize, Serialize};
+
+use super::source::{Recording, StreamInfo};
+use super::RecordingError;
+use crate::dataset::resample;
+use crate::image::Image;
+use crate::sensor::CameraConfig;
+
+/// Which frame is the no-contact reference R.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ReferenceChoice {
+    /// Detected: the median of the frames without contact (see the module docs).
+    #[default]
+    Auto,
+    /// This frame (0-based).
+    Frame(usize),
+}
+
+impl std::str::FromStr for ReferenceChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim() {
+            "auto" => Ok(Self::Auto),
+            n => n.parse().map(Self::Frame).map_err(|_| {
+                format!("reference '{s}' must be 'auto' or a frame number (0-based)")
+            }),
+        }
+    }
+}
+
+/// How a recording becomes imprints.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ProcessConfig {
+    pub reference: ReferenceChoice,
+    /// Imprint above which a pixel counts as contact for the contact area, metres (default 3 mm, the threshold
+    /// baseline's).
+    pub contact_threshold_m: f64,
+    /// Most quiet frames whose median makes an automatic reference (default 15).
+    pub quiet_frames: usize,
+    /// A frame is quiet (no contact) when its 5 x 5-averaged imprint stays under this, metres (default 1 mm).
+    pub quiet_threshold_m: f64,
+}
+
+impl Default for ProcessConfig {
+    fn default() -> Self {
+        Self {
+            reference: ReferenceChoice::Auto,
+            contact_threshold_m: 0.003,
+            quiet_frames: 15,
+            quiet_threshold_m: 0.001,
+        }
+    }
+}
+
+/// A depth stream as imprints at the model resolution.
+#[derive(Clone, Debug)]
+pub struct ProcessedRecording {
+    /// The depth stream's name.
+    pub stream: String,
+    /// Source frame size `[width, height]`.
+    pub source_size: [usize; 2],
+    /// Time stamp of each frame, nanoseconds.
+    pub stamps_ns: Vec<u64>,
+    /// S per frame, metres, model resolution.
+    pub signatures: Vec<Image>,
+    /// R, metres, model resolution.
+    pub reference: Image,
+    /// The frames R was made of.
+    pub reference_frames: Vec<usize>,
+    /// Y = R − S per frame, metres (0 where either is missing).
+    pub imprints: Vec<Image>,
+    /// Pixels with Y above the threshold, per frame.
+    pub contact_px: Vec<usize>,
+}
+
+impl ProcessedRecording {
+    /// Number of frames.
+    pub fn len(&self) -> usize {
+        self.imprints.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.imprints.is_empty()
+    }
+
+    /// Seconds from the first frame, per frame.
+    pub fn times_s(&self) -> Vec<f64> {
+        let t0 = self.stamps_ns.first().copied().unwrap_or(0);
+        self.stamps_ns
+            .iter()
+            .map(|&t| t.saturating_sub(t0) as f64 * 1e-9)
+            .collect()
+    }
+}
+
+/// The imprint `R − S` where both are measured, else 0.
+pub fn imprint(reference: &Image, signature: &Image) -> Image {
+    reference.zip_map(signature, |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 })
+}
+
+fn contact_pixels(y: &Image, threshold: f64) -> usize {
+    let t = threshold as f32;
+    y.data.iter().filter(|&&v| v > t).count()
+}
+
+fn mean_valid(img: &Image) -> f64 {
+    let (s, n) = img
+        .data
+        .iter()
+        .filter(|&&d| d > 0.0)
+        .fold((0.0f64, 0usize), |(s, n), &d| (s + f64::from(d), n + 1));
+    if n == 0 {
+        0.0
+    } else {
+        s / n as f64
+    }
+}
+
+fn median_image(images: &[&Image]) -> Image {
+    let first = images[0];
+    let mut out = Image::filled(first.width, first.height, 0.0);
+    let mut vals = Vec::with_capacity(images.len());
+    for (i, o) in out.data.iter_mut().enumerate() {
+        vals.clear();
+        vals.extend(images.iter().map(|im| im.data[i]).filter(|&d| d > 0.0));
+        if !vals.is_empty() {
+            vals.sort_by(f32::total_cmp);
+            let m = vals.len() / 2;
+            *o = if vals.len() % 2 == 1 {
+                vals[m]
+            } else {
+                0.5 * (vals[m - 1] + vals[m])
+            };
+        }
+    }
+    out
+}
+
+/// Read every frame of `stream`, bring it to `camera`'s model resolution and compute the imprints.
+/// `progress(done, total)` returning false cancels.
+pub fn process(
+    rec: &Recording,
+    stream: &StreamInfo,
+    camera: &CameraConfig,
+    config: &ProcessConfig,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+) -> Result<ProcessedRecording, RecordingError> {
+    let n = stream.messages;
+    let frames_err = |message: String| RecordingError::Frames {
+        path: rec.path().to_path_buf(),
+        message,
+    };
+    if n == 0 {
+        return Err(frames_err(format!("{} has no frames", stream.name)));
+    }
+    let mut signatures = Vec::with_capacity(n);
+    let mut stamps_ns = Vec::with_capacity(n);
+    let mut source_size = [0, 0];
+    for i in 0..n {
+        let f = rec.depth_frame(stream, i, &camera.native)?;
+        let size = [f.depth.width, f.depth.height];
+        if i == 0 {
+            source_size = size;
+        } else if size != source_size {
+            return Err(frames_err(format!(
+                "frame {i} is {}x{} but frame 0 is {}x{}",
+                size[0], size[1], source_size[0], source_size[1]
+            )));
+        }
+        let s = resample::to_model(camera, &f.depth)
+            .map_err(|m| frames_err(format!("frame {i}: {m}")))?;
+        signatures.push(s);
+        stamps_ns.push(f.stamp_ns);
+        if !progress(i + 1, n) {
+            return Err(RecordingError::Cancelled);
+        }
+    }
+    let reference_frames = match config.reference {
+        ReferenceChoice::Frame(k) if k < n => vec![k],
+        ReferenceChoice::Frame(k) => {
+            return Err(frames_err(format!(
+                "reference frame {k} is beyond the last frame {}",
+                n - 1
+            )))
+        }
+        ReferenceChoice::Auto => quiet_frames(&signatures, config),
+    };
+    let refs: Vec<&Image> = reference_frames.iter().map(|&k| &signatures[k]).collect();
+    let reference = median_image(&refs);
+    let imprints: Vec<Image> = signatures.iter().map(|s| imprint(&reference, s)).collect();
+    let contact_px = imprints
+        .iter()
+        .map(|y| contact_pixels(y, config.contact_threshold_m))
+        .collect();
+    Ok(ProcessedRecording {
+        stream: stream.name.clone(),
+        source_size,
+        stamps_ns,
+        signatures,
+        reference,
+        reference_frames,
+        imprints,
+        contact_px,
+    })
+}
+
+/// Largest mean of `y` over the (2·radius+1)² windows around each pixel (pixels that are 0 in `y` count as 0).
+fn box_max(y: &Image, radius: usize) -> f64 {
+    let (w, h) = (y.width, y.height);
+    // Summed-area table.
+    let mut sat = vec![0.0f64; (w + 1) * (h + 1)];
+    for v in 0..h {
+        let mut row = 0.0;
+        for u in 0..w {
+            row += f64::from(y.get(u, v));
+            sat[(v + 1) * (w + 1) + u + 1] = sat[v * (w + 1) + u + 1] + row;
+        }
+    }
+    let mut best = f64::NEG_INFINITY;
+    for v in 0..h {
+        let (v0, v1) = (v.saturating_sub(radius), (v + radius + 1).min(h));
+        for u in 0..w {
+            let (u0, u1) = (u.saturating_sub(radius), (u + radius + 1).min(w));
+            let sum = sat[v1 * (w + 1) + u1] - sat[v0 * (w + 1) + u1] - sat[v1 * (w + 1) + u0]
+                + sat[v0 * (w + 1) + u0];
+            best = best.max(sum / ((v1 - v0) * (u1 - u0)) as f64);
+        }
+    }
+    best
+}
+
+/// The frames an automatic reference is made of (see the module docs).
+fn quiet_frames(signatures: &[Image], config: &ProcessConfig) -> Vec<usize> {
+    let means: Vec<f64> = signatures.iter().map(mean_valid).collect();
+    let first = (0..signatures.len())
+        .max_by(|&a, &b| means[a].total_cmp(&means[b]))
+        .unwrap_or(0);
+    let r = &signatures[first];
+    let quiet: Vec<usize> = signatures
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| box_max(&imprint(r, s), 2) <= config.quiet_threshold_m)
+        .map(|(i, _)| i)
+        .collect();
+    let k = config.quiet_frames.max(1);
+    if quiet.len() <= k {
+        return if quiet.is_empty() { vec![first] } else { quiet };
+    }
+    // Spread over the recording: k evenly spaced picks among the quiet frames.
+    (0..k).map(|j| quiet[j * (quiet.len() - 1) / (k - 1).max(1)]).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn median_ignores_missing_pixels_and_reference_parses() {
+        let a = Image::from_vec(2, 1, vec![1.0, 0.0]).unwrap();
+        let b = Image::from_vec(2, 1, vec![3.0, 2.0]).unwrap();
+        let c = Image::from_vec(2, 1, vec![2.0, 4.0]).unwrap();
+        assert_eq!(median_image(&[&a, &b, &c]).data, vec![2.0, 3.0]);
+        assert_eq!("auto".parse::<ReferenceChoice>(), Ok(ReferenceChoice::Auto));
+        assert_eq!("7".parse::<ReferenceChoice>(), Ok(ReferenceChoice::Frame(7)));
+        assert!("x".parse::<ReferenceChoice>().is_err());
+    }
+
+    #[test]
+    fn quiet_frames_are_those_without_contact() {
+        // Frames 0, 1, 4 are flat at 90 mm; frames 2, 3 have a 5 mm press over 10 pixels.
+        let flat = Image::filled(16, 16, 0.09);
+        let mut pressed = flat.clone();
+        for d in pressed.data.iter_mut().take(10) {
+            *d = 0.085;
+        }
+        let frames = vec![flat.clone(), flat.clone(), pressed.clone(), pressed, flat];
+        let q = quiet_frames(&frames, &ProcessConfig::default());
+        assert_eq!(q, vec![0, 1, 4]);
+    }
+
+    #[test]
+    fn box_max_is_the_largest_window_mean() {
+        let mut y = Image::filled(7, 7, 0.0);
+        *y.get_mut(3, 3) = 25.0;
+        assert!((box_max(&y, 2) - 1.0).abs() < 1e-12);
+        // At a corner the window is clipped to the image: 3 x 3 pixels.
+        let mut c = Image::filled(7, 7, 0.0);
+        *c.get_mut(0, 0) = 9.0;
+        assert!((box_max(&c, 2) - 1.0).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,419 @@
+//! Opening a recording: an **MCAP file** (ROS 2 / ROS 1 bags; read with the `mcap` crate, chunked and compressed
+//! files included) or a **folder of depth frames** (16-bit PNG in millimetres, `.npy`/`.npz` scaled to metres),
+//! listing its streams and decoding one depth frame at a time at the camera's own resolution.
+//!
+//! An MCAP file is read into memory once; only the messages of recognised schemas are kept (depth images, point
+//! clouds, poses), so a bag with other topics costs their size only while it is read.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::ros::{self, Encoding};
+use super::RecordingError;
+use crate::dataset::import::{load_image, ImportConfig};
+use crate::image::Image;
+use crate::sensor::Intrinsics;
+
+/// What a stream holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StreamKind {
+    /// `sensor_msgs/Image` depth, or a folder's frames.
+    DepthImage,
+    /// `sensor_msgs/PointCloud2`, projected to a depth image with the camera's intrinsics.
+    PointCloud,
+    /// `geometry_msgs/PoseStamped` or `geometry_msgs/Pose2D`: the object's SE(2) pose relative to the sensor.
+    Pose,
+    /// Anything else (listed, not read).
+    Other,
+}
+
+/// One topic of an MCAP file (or the one stream of a folder).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StreamInfo {
+    /// Topic name (a folder: its path).
+    pub name: String,
+    /// Schema name, e.g. `sensor_msgs/msg/Image`.
+    pub schema: String,
+    pub kind: StreamKind,
+    /// Number of messages (frames).
+    pub messages: usize,
+}
+
+/// How folder frames are scaled and stamped.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct FolderOptions {
+    /// Metres per unit of `.npy`/`.npz` frames (default 1: metres).
+    pub npy_scale: f64,
+    /// Metres per unit of 16-bit PNG frames (default 0.001: millimetres).
+    pub png_scale: f64,
+    /// Frame rate for the frames' time stamps, frames per second (default 30).
+    pub fps: f64,
+}
+
+impl Default for FolderOptions {
+    fn default() -> Self {
+        Self {
+            npy_scale: 1.0,
+            png_scale: 0.001,
+            fps: 30.0,
+        }
+    }
+}
+
+/// A depth frame at the camera's resolution, metres (0 where the camera measured nothing).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DepthFrame {
+    /// Time stamp, nanoseconds (header stamp, or the MCAP log time when the header's is 0).
+    pub stamp_ns: u64,
+    pub depth: Image,
+}
+
+struct Topic {
+    encoding: Encoding,
+    schema: String,
+    kind: StreamKind,
+    /// (log time, message bytes).
+    messages: Vec<(u64, Vec<u8>)>,
+}
+
+enum Data {
+    Mcap(BTreeMap<String, Topic>),
+    Folder {
+        files: Vec<PathBuf>,
+        options: FolderOptions,
+    },
+}
+
+/// An opened recording.
+pub struct Recording {
+    path: PathBuf,
+    streams: Vec<StreamInfo>,
+    data: Data,
+}
+
+/// Frame file extensions of a folder recording.
+pub const FRAME_EXTENSIONS: [&str; 3] = ["png", "npy", "npz"];
+
+fn kind_of(schema: &str) -> StreamKind {
+    // ROS 2 names schemas "pkg/msg/Type", ROS 1 "pkg/Type".
+    match schema.replace("/msg/", "/").as_str() {
+        "sensor_msgs/Image" => StreamKind::DepthImage,
+        "sensor_msgs/PointCloud2" => StreamKind::PointCloud,
+        "geometry_msgs/PoseStamped" | "geometry_msgs/Pose2D" => StreamKind::Pose,
+        _ => StreamKind::Other,
+    }
+}
+
+impl Recording {
+    /// Open an `.mcap` file or a folder of depth frames.
+    pub fn open(path: &Path, folder: &FolderOptions) -> Result<Self, RecordingError> {
+        if path.is_dir() {
+            Self::open_folder(path, folder)
+        } else {
+            Self::open_mcap(path)
+        }
+    }
+
+    fn open_mcap(path: &Path) -> Result<Self, RecordingError> {
+        let bytes = std::fs::read(path).map_err(|e| RecordingError::io(path, e))?;
+        let bad = |message: String| RecordingError::Format {
+            path: path.to_path_buf(),
+            message,
+        };
+        if !bytes.starts_with(b"\x89MCAP") {
+            return Err(bad("not an MCAP file (no MCAP magic at the start)".into()));
+        }
+        let stream = mcap::MessageStream::new(&bytes)
+            .map_err(|e| bad(format!("unreadable MCAP: {e}")))?;
+        let mut topics: BTreeMap<String, Topic> = BTreeMap::new();
+        let mut counts: BTreeMap<String, (String, usize)> = BTreeMap::new();
+        for message in stream {
+            let m = message.map_err(|e| bad(format!("truncated or corrupt MCAP: {e}")))?;
+            let schema = m
+                .channel
+                .schema
+                .as_ref()
+                .map(|s| s.name.clone())
+                .unwrap_or_default();
+            let topic = m.channel.topic.clone();
+            let entry = counts.entry(topic.clone()).or_insert((schema.clone(), 0));
+            entry.1 += 1;
+            let kind = kind_of(&schema);
+            let Some(encoding) = Encoding::from_mcap(&m.channel.message_encoding) else {
+                continue;
+            };
+            if kind == StreamKind::Other {
+                continue;
+            }
+            topics
+                .entry(topic)
+                .or_insert_with(|| Topic {
+                    encoding,
+                    schema,
+                    kind,
+                    messages: Vec::new(),
+                })
+                .messages
+                .push((m.log_time, m.data.into_owned()));
+        }
+        let streams = counts
+            .into_iter()
+            .map(|(name, (schema, messages))| StreamInfo {
+                kind: topics.get(&name).map_or(StreamKind::Other, |t| t.kind),
+                name,
+                schema,
+                messages,
+            })
+            .collect();
+        Ok(Self {
+            path: path.to_path_buf(),
+            streams,
+            data: Data::Mcap(topics),
+        })
+    }
+
+    fn open_folder(path: &Path, options: &FolderOptions) -> Result<Self, RecordingError> {
+        if !(options.fps.is_finite() && options.fps > 0.0) {
+            return Err(RecordingError::Format {
+                path: path.to_path_buf(),
+                message: format!("frame rate {} must be positive", options.fps),
+            });
+        }
+        let entries = std::fs::read_dir(path).map_err(|e| RecordingError::io(path, e))?;
+        let mut files = Vec::new();
+        for e in entries {
+            let p = e.map_err(|e| RecordingError::io(path, e))?.path();
+            let ext = p
+                .extension()
+                .and_then(|e| e.to_str())
+                .map(str::to_ascii_lowercase);
+            let is_frame = ext.is_some_and(|e| FRAME_EXTENSIONS.contains(&e.as_str()));
+            let name = p.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+            // A reference frame or a pair table beside the frames is not a frame.
+            if is_frame && p.is_file() && !name.starts_with("reference.") {
+                files.push(p);
+            }
+        }
+        if files.is_empty() {
+            return Err(RecordingError::Format {
+                path: path.to_path_buf(),
+                message: "no depth frames (.png, .npy, .npz) in this folder".into(),
+            });
+        }
+        files.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
+        let streams = vec![StreamInfo {
+            name: path.display().to_string(),
+            schema: "depth frames".into(),
+            kind: StreamKind::DepthImage,
+            messages: files.len(),
+        }];
+        Ok(Self {
+            path: path.to_path_buf(),
+            streams,
+            data: Data::Folder {
+                files,
+                options: options.clone(),
+            },
+        })
+    }
+
+    /// The file or folder.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Every stream, sorted by name.
+    pub fn streams(&self) -> &[StreamInfo] {
+        &self.streams
+    }
+
+    /// The depth stream named `name`, or the only depth stream (images and point clouds) when `name` is `None`.
+    pub fn depth_stream(&self, name: Option<&str>) -> Result<&StreamInfo, RecordingError> {
+        self.pick(name, "depth", |k| {
+            matches!(k, StreamKind::DepthImage | StreamKind::PointCloud)
+        })
+    }
+
+    /// The pose stream named `name`, or the only one when `name` is `None`.
+    pub fn pose_stream(&self, name: Option<&str>) -> Result<&StreamInfo, RecordingError> {
+        self.pick(name, "pose", |k| k == StreamKind::Pose)
+    }
+
+    fn pick(
+        &self,
+        name: Option<&str>,
+        what: &str,
+        accept: impl Fn(StreamKind) -> bool,
+    ) -> Result<&StreamInfo, RecordingError> {
+        let candidates: Vec<&StreamInfo> = self.streams.iter().filter(|s| accept(s.kind)).collect();
+        let list = || {
+            let names: Vec<&str> = candidates.iter().map(|s| s.name.as_str()).collect();
+            if names.is_empty() {
+                format!("it has no {what} topic")
+            } else {
+                format!("its {what} topics: {}", names.join(", "))
+            }
+        };
+        let found = match name {
+            Some(n) => candidates.iter().find(|s| s.name == n).copied(),
+            None if candidates.len() == 1 => Some(candidates[0]),
+            None => None,
+        };
+        found.ok_or_else(|| RecordingError::Topic {
+            path: self.path.clone(),
+            message: match name {
+                Some(n) => format!("no {what} topic '{n}'; {}", list()),
+                None => format!("choose a {what} topic; {}", list()),
+            },
+        })
+    }
+
+    /// Decode frame `index` of the depth stream `stream` at its own resolution; point clouds are projected with
+    /// `native` (the cloud in the camera's optical frame: x right, y down, z forward; nearest point per pixel).
+    pub fn depth_frame(
+        &self,
+        stream: &StreamInfo,
+        index: usize,
+        native: &Intrinsics,
+    ) -> Result<DepthFrame, RecordingError> {
+        match &self.data {
+            Data::Folder { files, options } => {
+                let file = files.get(index).ok_or_else(|| self.no_frame(stream, index))?;
+                let config = ImportConfig {
+                    npy_scale: options.npy_scale,
+                    png_scale: options.png_scale,
+                    ..ImportConfig::default()
+                };
+                let depth = load_image(&self.path, &file.to_string_lossy(), &config).map_err(
+                    |e| RecordingError::Format {
+                        path: file.clone(),
+                        message: e.to_string(),
+                    },
+                )?;
+                Ok(DepthFrame {
+                    stamp_ns: (index as f64 * 1e9 / options.fps).round() as u64,
+                    depth,
+                })
+            }
+            Data::Mcap(topics) => {
+                let topic = topics
+                    .get(&stream.name)
+                    .ok_or_else(|| self.no_frame(stream, index))?;
+                let (log_time, bytes) = topic
+                    .messages
+                    .get(index)
+                    .ok_or_else(|| self.no_frame(stream, index))?;
+                let at = |message: String| RecordingError::Message {
+                    path: self.path.clone(),
+                    topic: stream.name.clone(),
+                    index,
+                    message,
+                };
+                let (stamp, depth) = match topic.kind {
+                    StreamKind::DepthImage => {
+                        let m = ros::decode_image(bytes, topic.encoding).map_err(at)?;
+                        (m.stamp_ns, super::decode::image_depth(&m).map_err(at)?)
+                    }
+                    StreamKind::PointCloud => {
+                        let m = ros::decode_point_cloud(bytes, topic.encoding).map_err(at)?;
+                        (m.stamp_ns, super::decode::cloud_depth(&m, native).map_err(at)?)
+                    }
+                    _ => return Err(at(format!("{} is not a depth stream", topic.schema))),
+                };
+                Ok(DepthFrame {
+                    stamp_ns: if stamp == 0 { *log_time } else { stamp },
+                    depth,
+                })
+            }
+        }
+    }
+
+    /// Every pose of a pose stream: (time stamp in ns, x, y, theta) in message order.
+    pub fn poses(&self, stream: &StreamInfo) -> Result<Vec<(u64, [f64; 3])>, RecordingError> {
+        let Data::Mcap(topics) = &self.data else {
+            return Ok(Vec::new());
+        };
+        let Some(topic) = topics.get(&stream.name) else {
+            return Ok(Vec::new());
+        };
+        let stamped = topic.schema.ends_with("PoseStamped");
+        topic
+            .messages
+            .iter()
+            .enumerate()
+            .map(|(index, (log_time, bytes))| {
+                let p = if stamped {
+                    ros::decode_pose_stamped(bytes, topic.encoding)
+                } else {
+                    ros::decode_pose2d(bytes, topic.encoding)
+                }
+                .map_err(|message| RecordingError::Message {
+                    path: self.path.clone(),
+                    topic: stream.name.clone(),
+                    index,
+                    message,
+                })?;
+                let stamp = p.stamp_ns.filter(|&s| s != 0).unwrap_or(*log_time);
+                Ok((stamp, [p.x, p.y, p.theta]))
+            })
+            .collect()
+    }
+
+    fn no_frame(&self, stream: &StreamInfo, index: usize) -> RecordingError {
+        RecordingError::Topic {
+            path: self.path.clone(),
+            message: format!(
+                "{} has {} frames; there is no frame {index}",
+                stream.name, stream.messages
+            ),
+        }
+    }
+}
+
+/// Compare file names with runs of digits as numbers ("frame2" < "frame10").
+fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
+    let (mut a, mut b) = (a.as_bytes(), b.as_bytes());
+    loop {
+        match (a.first(), b.first()) {
+            (None, None) => return std::cmp::Ordering::Equal,
+            (None, _) => return std::cmp::Ordering::Less,
+            (_, None) => return std::cmp::Ordering::Greater,
+            (Some(x), Some(y)) if x.is_ascii_digit() && y.is_ascii_digit() => {
+                let da = a.iter().take_while(|c| c.is_ascii_digit()).count();
+                let db = b.iter().take_while(|c| c.is_ascii_digit()).count();
+                let (na, nb) = (&a[..da], &b[..db]);
+                let strip = |s: &[u8]| -> usize { s.iter().take_while(|&&c| c == b'0').count() };
+                let (na, nb) = (&na[strip(na)..], &nb[strip(nb)..]);
+                let ord = na.len().cmp(&nb.len()).then(na.cmp(nb));
+                if ord != std::cmp::Ordering::Equal {
+                    return ord;
+                }
+                a = &a[da..];
+                b = &b[db..];
+            }
+            (Some(x), Some(y)) => {
+                if x != y {
+                    return x.cmp(y);
+                }
+                a = &a[1..];
+                b = &b[1..];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn natural_order_compares_numbers_as_numbers() {
+        let mut v = vec!["f10.png", "f2.png", "f1.png", "f02.npy", "g.png"];
+        v.sort_by(|a, b| natural_cmp(a, b));
+        assert_eq!(v, vec!["f1.png", "f02.npy", "f2.png", "f10.png", "g.png"]);
+    }
+}

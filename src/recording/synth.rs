@@ -1,0 +1,214 @@
+//! A **simulated recording**: the simulator run at the camera's native resolution over a press sequence (the sensor
+//! lowered onto the object and lifted again), written as an MCAP file the way a ROS 2 Soft Bubble driver records it:
+//! a `sensor_msgs/msg/Image` depth topic (`16UC1` millimetres or `32FC1` metres) or a `sensor_msgs/msg/PointCloud2`
+//! topic, and the object's pose relative to the sensor as `geometry_msgs/msg/PoseStamped`. For trying the recording
+//! tools without a sensor, and for the tests (a recording made here has a known truth per frame).
+
+use std::collections::BTreeMap;
+use std::io::Cursor;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::ros::{self, ImageMsg, PointCloudMsg, PointField};
+use super::RecordingError;
+use crate::sensor::{Scene, Se2};
+use crate::sim::{PreparedObject, SimConfig, Simulator};
+
+/// How depth is written.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum DepthEncoding {
+    /// `sensor_msgs/Image`, `16UC1`, millimetres (what depth drivers publish).
+    #[default]
+    Mm16,
+    /// `sensor_msgs/Image`, `32FC1`, metres.
+    F32,
+    /// `sensor_msgs/PointCloud2` with float32 x, y, z in the camera's optical frame.
+    Cloud,
+}
+
+/// The press sequence to record.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PressSequence {
+    /// Object pose relative to the sensor axis (x, y metres, theta radians).
+    pub pose: Se2,
+    /// Press depth of each frame, metres (negative: the membrane apex above the object's top, no contact).
+    pub presses: Vec<f64>,
+    /// Time between frames, seconds.
+    pub frame_period_s: f64,
+    pub encoding: DepthEncoding,
+    /// Seed of the measurement noise.
+    pub seed: u64,
+    /// Depth topic name.
+    pub depth_topic: String,
+    /// Pose topic name (`None`: no pose topic).
+    pub pose_topic: Option<String>,
+}
+
+impl PressSequence {
+    /// `rest` frames 2 mm above the object, then down to `max_press` and back up in `2 * ramp` frames, then `rest`
+    /// frames above again.
+    pub fn down_and_up(pose: Se2, max_press: f64, rest: usize, ramp: usize) -> Self {
+        let mut presses = vec![-0.002; rest];
+        let ramp = ramp.max(1);
+        presses.extend((1..=ramp).map(|i| max_press * i as f64 / ramp as f64));
+        presses.extend((1..ramp).rev().map(|i| max_press * i as f64 / ramp as f64));
+        presses.extend(std::iter::repeat_n(-0.002, rest));
+        Self {
+            pose,
+            presses,
+            frame_period_s: 1.0 / 30.0,
+            encoding: DepthEncoding::Mm16,
+            seed: 0,
+            depth_topic: "/bubble/depth/image_rect_raw".into(),
+            pose_topic: Some("/object/pose".into()),
+        }
+    }
+}
+
+/// Write the press sequence of `object` as an MCAP file (atomically); returns the number of frames.
+pub fn write_press_recording(
+    path: &Path,
+    sim_config: &SimConfig,
+    object: &PreparedObject,
+    seq: &PressSequence,
+) -> Result<usize, RecordingError> {
+    let sim = Simulator::native(sim_config.clone())?;
+    let k = *sim.intrinsics();
+    let mcap_err = |e: mcap::McapError| RecordingError::Format {
+        path: path.to_path_buf(),
+        message: format!("writing MCAP: {e}"),
+    };
+    let mut w = mcap::WriteOptions::new()
+        .profile("ros2")
+        .create(Cursor::new(Vec::new()))
+        .map_err(mcap_err)?;
+    let no_meta = BTreeMap::new();
+    let (schema_name, schema_text) = match seq.encoding {
+        DepthEncoding::Cloud => ("sensor_msgs/msg/PointCloud2", POINT_CLOUD_SCHEMA),
+        _ => ("sensor_msgs/msg/Image", IMAGE_SCHEMA),
+    };
+    let depth_schema = w
+        .add_schema(schema_name, "ros2msg", schema_text.as_bytes())
+        .map_err(mcap_err)?;
+    let depth_channel = w
+        .add_channel(depth_schema, &seq.depth_topic, "cdr", &no_meta)
+        .map_err(mcap_err)?;
+    let pose_channel = match &seq.pose_topic {
+        Some(topic) => {
+            let s = w
+                .add_schema(
+                    "geometry_msgs/msg/PoseStamped",
+                    "ros2msg",
+                    POSE_SCHEMA.as_bytes(),
+                )
+                .map_err(mcap_err)?;
+            Some(w.add_channel(s, topic, "cdr", &no_meta).map_err(mcap_err)?)
+        }
+        None => None,
+    };
+    let t0_ns: u64 = 1_700_000_000_000_000_000;
+    for (i, &press) in seq.presses.iter().enumerate() {
+        let stamp = t0_ns + (i as f64 * seq.frame_period_s * 1e9).round() as u64;
+        let scene = Scene {
+            object: seq.pose,
+            sensor: sim.pressing_pose(object, 0.0, 0.0, 0.0, press),
+        };
+        let out = sim.simulate(object, &scene, seq.seed.wrapping_add(i as u64));
+        let s = &out.signature;
+        let data = match seq.encoding {
+            DepthEncoding::Mm16 => {
+                let m = ImageMsg {
+                    stamp_ns: stamp,
+                    height: k.height as u32,
+                    width: k.width as u32,
+                    encoding: "16UC1".into(),
+                    is_bigendian: false,
+                    step: 2 * k.width as u32,
+                    data: s
+                        .data
+                        .iter()
+                        .flat_map(|&d| {
+                            let mm = (f64::from(d) * 1000.0).round();
+                            let v = if d.is_finite() && d > 0.0 && mm < 65535.0 { mm as u16 } else { 0 };
+                            v.to_le_bytes()
+                        })
+                        .collect(),
+                };
+                ros::encode_image(&m, "bubble_camera")
+            }
+            DepthEncoding::F32 => {
+                let m = ImageMsg {
+                    stamp_ns: stamp,
+                    height: k.height as u32,
+                    width: k.width as u32,
+                    encoding: "32FC1".into(),
+                    is_bigendian: false,
+                    step: 4 * k.width as u32,
+                    data: s.data.iter().flat_map(|d| d.to_le_bytes()).collect(),
+                };
+                ros::encode_image(&m, "bubble_camera")
+            }
+            DepthEncoding::Cloud => {
+                let mut data = Vec::with_capacity(12 * s.data.len());
+                let mut n = 0u32;
+                for v in 0..k.height {
+                    for u in 0..k.width {
+                        let d = s.get(u, v);
+                        if d.is_finite() && d > 0.0 {
+                            let p = k.back_project(u as f64, v as f64, f64::from(d));
+                            for c in [p.x, p.y, p.z] {
+                                data.extend((c as f32).to_le_bytes());
+                            }
+                            n += 1;
+                        }
+                    }
+                }
+                let fields = ["x", "y", "z"]
+                    .iter()
+                    .enumerate()
+                    .map(|(j, name)| PointField {
+                        name: (*name).into(),
+                        offset: 4 * j as u32,
+                        datatype: 7,
+                        count: 1,
+                    })
+                    .collect();
+                let m = PointCloudMsg {
+                    stamp_ns: stamp,
+                    height: 1,
+                    width: n,
+                    fields,
+                    is_bigendian: false,
+                    point_step: 12,
+                    row_step: 12 * n,
+                    data,
+                };
+                ros::encode_point_cloud(&m, "bubble_camera")
+            }
+        };
+        let header = |channel_id| mcap::records::MessageHeader {
+            channel_id,
+            sequence: i as u32,
+            log_time: stamp,
+            publish_time: stamp,
+        };
+        w.write_to_known_channel(&header(depth_channel), &data)
+            .map_err(mcap_err)?;
+        if let Some(c) = pose_channel {
+            let p = &seq.pose;
+            let pose = ros::encode_pose_stamped(stamp, p.x, p.y, p.theta, "bubble");
+            w.write_to_known_channel(&header(c), &pose)
+                .map_err(mcap_err)?;
+        }
+    }
+    w.finish().map_err(mcap_err)?;
+    let bytes = w.into_inner().into_inner();
+    crate::io::atomic::write_atomic(path, &bytes).map_err(|e| RecordingError::io(path, e))?;
+    Ok(seq.presses.len())
+}
+
+const IMAGE_SCHEMA: &str = "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n";
+const POINT_CLOUD_SCHEMA: &str = "std_msgs/Header header\nuint32 height\nuint32 width\nsensor_msgs/PointField[] fields\nbool is_bigendian\nuint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense\n";
+const POSE_SCHEMA: &str = "std_msgs/Header header\ngeometry_msgs/Pose pose\n";
