@@ -292,8 +292,8 @@ mod tests {
 
     #[test]
     fn box_max_is_the_largest_window_mean() {
-        let mut y = Image::filled(7, 7, 0.0);
-        *y.get_mut(3, 3) = 25.0;
+        let mut y = Image::filled(11, 11, 0.0);
+        *y.get_mut(5, 5) = 25.0;
         assert!((box_max(&y, 2) - 1.0).abs() < 1e-12);
         // At a corner the window is clipped to the image: 3 x 3 pixels.
         let mut c = Image::filled(7, 7, 0.0);
