@@ -67,7 +67,14 @@ fn recorded_frames_give_the_simulators_model_resolution_imprints() {
     assert_eq!(names, vec!["/bubble/depth/image_rect_raw", "/object/pose"]);
     let stream = rec.depth_stream(None).unwrap().clone();
     assert_eq!(stream.messages, seq.presses.len());
-    let p = process(&rec, &stream, &config.camera, &ProcessConfig::default(), &mut |_, _| true).unwrap();
+    let p = process(
+        &rec,
+        &stream,
+        &config.camera,
+        &ProcessConfig::default(),
+        &mut |_, _| true,
+    )
+    .unwrap();
     assert_eq!(p.source_size, [224, 171]);
     // Every frame of the reference shows no contact in the simulation itself.
     let sim = Simulator::new(config.clone()).unwrap();
@@ -98,7 +105,10 @@ fn recorded_frames_give_the_simulators_model_resolution_imprints() {
         assert!(d < 2.5e-4, "frame {i}: mean |ΔY| = {d} m");
         let above = |y: &Image| y.data.iter().filter(|&&v| v > 0.003).count() as f64;
         let (a, b) = (above(&p.imprints[i]), above(&truth));
-        assert!((a - b).abs() <= 0.05 * b, "frame {i}: {a} vs {b} contact px");
+        assert!(
+            (a - b).abs() <= 0.05 * b,
+            "frame {i}: {a} vs {b} contact px"
+        );
     }
 }
 
@@ -123,14 +133,26 @@ fn float_images_point_clouds_and_frame_folders_read_like_millimetre_images() {
     let b = f32_rec.depth_frame(&f32_s, deepest, &k).unwrap().depth;
     let c = cloud.depth_frame(&cloud_s, deepest, &k).unwrap().depth;
     // 16UC1 rounds to the millimetre; the float image and the projected cloud keep the float depth.
-    assert!(a.data.iter().zip(&b.data).all(|(x, y)| (x - y).abs() <= 0.0005 + 1e-6));
-    assert!(b.data.iter().zip(&c.data).all(|(x, y)| (x - y).abs() <= 1e-6));
+    assert!(a
+        .data
+        .iter()
+        .zip(&b.data)
+        .all(|(x, y)| (x - y).abs() <= 0.0005 + 1e-6));
+    assert!(b
+        .data
+        .iter()
+        .zip(&c.data)
+        .all(|(x, y)| (x - y).abs() <= 1e-6));
     // The same frames as a folder of 16-bit PNGs (millimetres) give the same imprints as the MCAP file.
     let folder = dir.path().join("frames");
     std::fs::create_dir_all(&folder).unwrap();
     for i in 0..mm_s.messages {
         let d = mm.depth_frame(&mm_s, i, &k).unwrap().depth;
-        let px: Vec<u16> = d.data.iter().map(|&m| (m * 1000.0).round() as u16).collect();
+        let px: Vec<u16> = d
+            .data
+            .iter()
+            .map(|&m| (m * 1000.0).round() as u16)
+            .collect();
         let img = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(224, 171, px).unwrap();
         img.save(folder.join(format!("frame{i}.png"))).unwrap();
     }
@@ -206,9 +228,21 @@ fn imported_recording_has_the_true_presses_and_scores_perfectly_with_the_ground_
         .unwrap();
     assert_eq!(r.pairs, report.written.pairs);
     assert!(r.failed.is_empty());
-    assert!(r.model.position_mm.median < 0.05, "{:?}", r.model.position_mm);
+    assert!(
+        r.model.position_mm.median < 0.05,
+        "{:?}",
+        r.model.position_mm
+    );
     // A second import into the same directory is refused, the first dataset kept.
-    assert!(import_recording(&path, &out, &config, &ObjectSet::builtin(), &ic, &mut |_, _| true).is_err());
+    assert!(import_recording(
+        &path,
+        &out,
+        &config,
+        &ObjectSet::builtin(),
+        &ic,
+        &mut |_, _| true
+    )
+    .is_err());
     assert!(Dataset::open(&out).is_ok());
 }
 
@@ -221,10 +255,20 @@ fn csv_poses_with_presses_and_bad_recordings_give_one_line_errors() {
     let path = record(dir.path(), &config, &seq);
     // Without a pose topic the import says which topics there are.
     let ic = RecordingImportConfig::new(OBJECT, PoseSource::Topic(None));
-    let e = import_recording(&path, &dir.path().join("a"), &config, &ObjectSet::builtin(), &ic, &mut |_, _| true)
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("press.mcap") && e.contains("no pose topic"), "{e}");
+    let e = import_recording(
+        &path,
+        &dir.path().join("a"),
+        &config,
+        &ObjectSet::builtin(),
+        &ic,
+        &mut |_, _| true,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("press.mcap") && e.contains("no pose topic"),
+        "{e}"
+    );
     // A CSV with the poses and presses of frames 8..=12 (presses of 5..8 mm).
     let mut csv = String::from("frame,x,y,theta,press\n");
     for f in 8..=12 {
@@ -234,8 +278,15 @@ fn csv_poses_with_presses_and_bad_recordings_give_one_line_errors() {
     let csv_path = dir.path().join("poses.csv");
     std::fs::write(&csv_path, csv).unwrap();
     let ic = RecordingImportConfig::new(OBJECT, PoseSource::Csv(csv_path));
-    let r = import_recording(&path, &dir.path().join("b"), &config, &ObjectSet::builtin(), &ic, &mut |_, _| true)
-        .unwrap();
+    let r = import_recording(
+        &path,
+        &dir.path().join("b"),
+        &config,
+        &ObjectSet::builtin(),
+        &ic,
+        &mut |_, _| true,
+    )
+    .unwrap();
     assert_eq!(r.press_estimated, 0);
     assert_eq!(r.written.pairs, 5);
     assert!(r.skipped_no_pose > 0);
@@ -243,11 +294,20 @@ fn csv_poses_with_presses_and_bad_recordings_give_one_line_errors() {
     let bytes = std::fs::read(&path).unwrap();
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
-    let e = Recording::open(&cut, &FolderOptions::default()).err().unwrap().to_string();
-    assert!(e.starts_with(&cut.display().to_string()) && !e.contains('\n'), "{e}");
+    let e = Recording::open(&cut, &FolderOptions::default())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.starts_with(&cut.display().to_string()) && !e.contains('\n'),
+        "{e}"
+    );
     let rec = Recording::open(&path, &FolderOptions::default()).unwrap();
     let e = rec.depth_stream(Some("/nope")).unwrap_err().to_string();
-    assert!(e.contains("/nope") && e.contains("/bubble/depth/image_rect_raw"), "{e}");
+    assert!(
+        e.contains("/nope") && e.contains("/bubble/depth/image_rect_raw"),
+        "{e}"
+    );
     let junk = dir.path().join("junk.mcap");
     std::fs::write(&junk, b"hello").unwrap();
     assert!(matches!(

@@ -500,7 +500,11 @@ fn find_global_reference(from: &Path) -> Option<PathBuf> {
 }
 
 /// Load one image in metres; `rel` is relative to `from` (`file.npz:name` picks an array of an npz).
-pub(crate) fn load_image(from: &Path, rel: &str, config: &ImportConfig) -> Result<Image, DatasetError> {
+pub(crate) fn load_image(
+    from: &Path,
+    rel: &str,
+    config: &ImportConfig,
+) -> Result<Image, DatasetError> {
     let (file, member) = match rel.rsplit_once(':') {
         Some((f, m)) if f.to_ascii_lowercase().ends_with(".npz") => (f, Some(m)),
         _ => (rel, None),

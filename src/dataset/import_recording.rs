@@ -129,7 +129,8 @@ pub fn import_recording(
     refuse_unless_interrupted_import(out)?;
     let rec = Recording::open(from, &config.folder)?;
     let stream = rec.depth_stream(config.topic.as_deref())?.clone();
-    let processed = recording::process(&rec, &stream, &sim_config.camera, &config.process, progress)?;
+    let processed =
+        recording::process(&rec, &stream, &sim_config.camera, &config.process, progress)?;
     let poses = frame_poses(&rec, &processed.stamps_ns, config)?;
 
     // Noise-free simulator: X0 and the press estimate do not depend on the measurement noise.

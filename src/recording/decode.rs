@@ -91,7 +91,9 @@ pub fn cloud_depth(m: &PointCloudMsg, k: &Intrinsics) -> Result<Image, String> {
         }
     }
     let row_step = (m.row_step as usize).max(step * m.width as usize);
-    let rows_needed = (m.height as usize).saturating_sub(1).saturating_mul(row_step);
+    let rows_needed = (m.height as usize)
+        .saturating_sub(1)
+        .saturating_mul(row_step);
     if n > 0 && m.data.len() < rows_needed.saturating_add(step.saturating_mul(m.width as usize)) {
         return Err(format!(
             "point data is {} bytes, too short for {}x{} points of {step} bytes",
@@ -103,7 +105,16 @@ pub fn cloud_depth(m: &PointCloudMsg, k: &Intrinsics) -> Result<Image, String> {
     let read = |p: &[u8], f: &super::ros::PointField| -> f64 {
         let o = f.offset as usize;
         if f.datatype == 8 {
-            let b: [u8; 8] = [p[o], p[o + 1], p[o + 2], p[o + 3], p[o + 4], p[o + 5], p[o + 6], p[o + 7]];
+            let b: [u8; 8] = [
+                p[o],
+                p[o + 1],
+                p[o + 2],
+                p[o + 3],
+                p[o + 4],
+                p[o + 5],
+                p[o + 6],
+                p[o + 7],
+            ];
             if m.is_bigendian {
                 f64::from_be_bytes(b)
             } else {

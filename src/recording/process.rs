@@ -31,9 +31,10 @@ impl std::str::FromStr for ReferenceChoice {
     fn from_str(s: &str) -> Result<Self, String> {
         match s.trim() {
             "auto" => Ok(Self::Auto),
-            n => n.parse().map(Self::Frame).map_err(|_| {
-                format!("reference '{s}' must be 'auto' or a frame number (0-based)")
-            }),
+            n => n
+                .parse()
+                .map(Self::Frame)
+                .map_err(|_| format!("reference '{s}' must be 'auto' or a frame number (0-based)")),
         }
     }
 }
@@ -106,7 +107,10 @@ impl ProcessedRecording {
 
 /// The imprint `R − S` where both are measured, else 0.
 pub fn imprint(reference: &Image, signature: &Image) -> Image {
-    reference.zip_map(signature, |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 })
+    reference.zip_map(
+        signature,
+        |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 },
+    )
 }
 
 fn contact_pixels(y: &Image, threshold: f64) -> usize {
@@ -258,7 +262,9 @@ fn quiet_frames(signatures: &[Image], config: &ProcessConfig) -> Vec<usize> {
         return if quiet.is_empty() { vec![first] } else { quiet };
     }
     // Spread over the recording: k evenly spaced picks among the quiet frames.
-    (0..k).map(|j| quiet[j * (quiet.len() - 1) / (k - 1).max(1)]).collect()
+    (0..k)
+        .map(|j| quiet[j * (quiet.len() - 1) / (k - 1).max(1)])
+        .collect()
 }
 
 #[cfg(test)]
@@ -273,7 +279,10 @@ mod tests {
         let c = Image::from_vec(2, 1, vec![2.0, 4.0]).unwrap();
         assert_eq!(median_image(&[&a, &b, &c]).data, vec![2.0, 3.0]);
         assert_eq!("auto".parse::<ReferenceChoice>(), Ok(ReferenceChoice::Auto));
-        assert_eq!("7".parse::<ReferenceChoice>(), Ok(ReferenceChoice::Frame(7)));
+        assert_eq!(
+            "7".parse::<ReferenceChoice>(),
+            Ok(ReferenceChoice::Frame(7))
+        );
         assert!("x".parse::<ReferenceChoice>().is_err());
     }
 

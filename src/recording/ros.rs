@@ -143,7 +143,10 @@ impl<'a> Reader<'a> {
     }
 
     fn u32(&mut self, what: &str) -> Result<u32, String> {
-        let b: [u8; 4] = self.take(4, what)?.try_into().map_err(|_| what.to_string())?;
+        let b: [u8; 4] = self
+            .take(4, what)?
+            .try_into()
+            .map_err(|_| what.to_string())?;
         Ok(if self.little {
             u32::from_le_bytes(b)
         } else {
@@ -152,7 +155,10 @@ impl<'a> Reader<'a> {
     }
 
     fn f64(&mut self, what: &str) -> Result<f64, String> {
-        let b: [u8; 8] = self.take(8, what)?.try_into().map_err(|_| what.to_string())?;
+        let b: [u8; 8] = self
+            .take(8, what)?
+            .try_into()
+            .map_err(|_| what.to_string())?;
         Ok(if self.little {
             f64::from_le_bytes(b)
         } else {
@@ -194,7 +200,11 @@ impl<'a> Reader<'a> {
         let nsec = self.u32("header.stamp.nanosec")?;
         self.string("header.frame_id")?;
         // ROS 2's sec is an int32: negative stamps (before 1970) clamp to 0.
-        let sec = if self.ros1 { sec as u64 } else { (sec as i32).max(0) as u64 };
+        let sec = if self.ros1 {
+            sec as u64
+        } else {
+            (sec as i32).max(0) as u64
+        };
         Ok(sec * 1_000_000_000 + nsec as u64)
     }
 }
@@ -319,7 +329,7 @@ impl CdrWriter {
     }
 
     fn align(&mut self, n: usize) {
-        while (self.buf.len() - 4) % n != 0 {
+        while !(self.buf.len() - 4).is_multiple_of(n) {
             self.buf.push(0);
         }
     }
@@ -515,7 +525,13 @@ mod tests {
         w.header(0, "").u32(1).u32(1).u32(u32::MAX); // claims 4 G point fields
         assert!(decode_point_cloud(&w.finish(), Encoding::Cdr).is_err());
         let mut w = CdrWriter::new();
-        w.header(0, "").u32(1).u32(1).string("16UC1").u8(0).u32(2).u32(u32::MAX);
+        w.header(0, "")
+            .u32(1)
+            .u32(1)
+            .string("16UC1")
+            .u8(0)
+            .u32(2)
+            .u32(u32::MAX);
         assert!(decode_image(&w.finish(), Encoding::Cdr).is_err());
     }
 }

@@ -127,8 +127,8 @@ impl Recording {
         if !bytes.starts_with(b"\x89MCAP") {
             return Err(bad("not an MCAP file (no MCAP magic at the start)".into()));
         }
-        let stream = mcap::MessageStream::new(&bytes)
-            .map_err(|e| bad(format!("unreadable MCAP: {e}")))?;
+        let stream =
+            mcap::MessageStream::new(&bytes).map_err(|e| bad(format!("unreadable MCAP: {e}")))?;
         let mut topics: BTreeMap<String, Topic> = BTreeMap::new();
         let mut counts: BTreeMap<String, (String, usize)> = BTreeMap::new();
         for message in stream {
@@ -282,18 +282,21 @@ impl Recording {
     ) -> Result<DepthFrame, RecordingError> {
         match &self.data {
             Data::Folder { files, options } => {
-                let file = files.get(index).ok_or_else(|| self.no_frame(stream, index))?;
+                let file = files
+                    .get(index)
+                    .ok_or_else(|| self.no_frame(stream, index))?;
                 let config = ImportConfig {
                     npy_scale: options.npy_scale,
                     png_scale: options.png_scale,
                     ..ImportConfig::default()
                 };
-                let depth = load_image(&self.path, &file.to_string_lossy(), &config).map_err(
-                    |e| RecordingError::Format {
-                        path: file.clone(),
-                        message: e.to_string(),
-                    },
-                )?;
+                let depth =
+                    load_image(&self.path, &file.to_string_lossy(), &config).map_err(|e| {
+                        RecordingError::Format {
+                            path: file.clone(),
+                            message: e.to_string(),
+                        }
+                    })?;
                 Ok(DepthFrame {
                     stamp_ns: (index as f64 * 1e9 / options.fps).round() as u64,
                     depth,
@@ -320,7 +323,10 @@ impl Recording {
                     }
                     StreamKind::PointCloud => {
                         let m = ros::decode_point_cloud(bytes, topic.encoding).map_err(at)?;
-                        (m.stamp_ns, super::decode::cloud_depth(&m, native).map_err(at)?)
+                        (
+                            m.stamp_ns,
+                            super::decode::cloud_depth(&m, native).map_err(at)?,
+                        )
                     }
                     _ => return Err(at(format!("{} is not a depth stream", topic.schema))),
                 };

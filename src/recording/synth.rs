@@ -131,7 +131,11 @@ pub fn write_press_recording(
                         .iter()
                         .flat_map(|&d| {
                             let mm = (f64::from(d) * 1000.0).round();
-                            let v = if d.is_finite() && d > 0.0 && mm < 65535.0 { mm as u16 } else { 0 };
+                            let v = if d.is_finite() && d > 0.0 && mm < 65535.0 {
+                                mm as u16
+                            } else {
+                                0
+                            };
                             v.to_le_bytes()
                         })
                         .collect(),

@@ -357,7 +357,7 @@ impl WorkbenchApp {
                 InputSource::Images(Box::new(RunInput {
                     pose: Some(PoseContext {
                         object: self.state.scene.object.clone(),
-                        truth: self.state.scene.object_pose,
+                        truth: Some(self.state.scene.object_pose),
                         t_world_camera: sim.t_world_camera,
                         signature: out.signature.clone(),
                         sim: self.state.sim.clone(),
@@ -382,6 +382,31 @@ impl WorkbenchApp {
                 }
             }
             DerenderInput::Measurement { path } => InputSource::Npy(path.clone()),
+            DerenderInput::RecordingFrame { path, frame } => {
+                let loaded = self
+                    .recording
+                    .loaded
+                    .as_ref()
+                    .filter(|l| &l.path == path)
+                    .ok_or_else(|| {
+                        anyhow!(
+                            "open the recording {} in the Recording tab first",
+                            path.display()
+                        )
+                    })?;
+                InputSource::RecordingFrame(Box::new(crate::derender::RecordingFrameInput {
+                    recording: loaded.processed.clone(),
+                    frame: *frame,
+                    name: path.file_name().map_or_else(
+                        || path.display().to_string(),
+                        |n| n.to_string_lossy().into(),
+                    ),
+                    pose: loaded.poses.get(*frame).copied().flatten(),
+                    object: self.state.scene.object.clone(),
+                    scene: self.state.scene.clone(),
+                    sim: self.state.sim.clone(),
+                }))
+            }
         })
     }
 
@@ -497,7 +522,7 @@ impl WorkbenchApp {
             samples: &req.samples,
             imprint: &req.imprint,
             signature: Some(&c.signature),
-            truth: Some(c.truth),
+            truth: c.truth,
         };
         let files = tactile_derender::pipeline::write_pose_geometry(
             &dir,

@@ -50,6 +50,8 @@ pub enum DerenderInput {
     },
     /// An imported measurement: an `.npy` imprint in metres (no ground truth).
     Measurement { path: PathBuf },
+    /// Frame `frame` of the recording open in the Recording tab.
+    RecordingFrame { path: PathBuf, frame: usize },
 }
 
 /// Settings of a de-rendering run.

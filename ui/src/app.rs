@@ -44,6 +44,7 @@ pub struct PathInputs {
     pub dataset_path: String,
     pub model_path: String,
     pub imprint_path: String,
+    pub recording_path: String,
 }
 
 impl Default for PathInputs {
@@ -57,6 +58,7 @@ impl Default for PathInputs {
             dataset_path: String::new(),
             model_path: String::new(),
             imprint_path: String::new(),
+            recording_path: String::new(),
         }
     }
 }
@@ -119,6 +121,8 @@ pub struct WorkbenchApp {
     pub(crate) measured: Option<Measured>,
     /// Dataset inspector and de-rendering runs (live side).
     pub analysis: crate::analysis_runs::AnalysisViews,
+    /// The Recording tab's loaded recording and textures.
+    pub recording: crate::recording_view::RecordingView,
     /// Errors shown in the window until dismissed.
     pub errors: Vec<String>,
     /// The last informational message.
@@ -137,7 +141,7 @@ pub struct WorkbenchApp {
     /// A de-rendering run to start once the scene is simulated (`--run-derender`).
     auto_run: bool,
     /// A pose analysis to start once the run's samples are there (`--run-pose`).
-    auto_pose: bool,
+    pub(crate) auto_pose: bool,
     /// Undo and redo of scene, sensor and elastomer edits.
     pub history: crate::history::History,
     /// Recently opened or saved session files, newest first (at most [`RECENT_SESSIONS`]; kept across restarts).
@@ -169,6 +173,7 @@ impl WorkbenchApp {
             calibration: CalibrationView::default(),
             measured: None,
             analysis: Default::default(),
+            recording: Default::default(),
             errors: Vec::new(),
             notice: None,
             timings: Timings::default(),
@@ -243,6 +248,7 @@ impl WorkbenchApp {
         self.calibration.running
             || self.analysis.derender.running
             || self.analysis.pose.running
+            || self.recording.loading
             || self.worker.is_some()
                 && self.sim.as_ref().map(|s| s.generation) != Some(self.generation)
                 && !self.sim_failed_for_latest()
@@ -291,6 +297,9 @@ impl WorkbenchApp {
                 if let Some(p) = self.state.dataset.path.clone() {
                     self.open_dataset(p);
                 }
+                if self.state.recording.path.is_some() {
+                    self.load_recording();
+                }
             }
             Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
         }
@@ -323,12 +332,16 @@ impl WorkbenchApp {
                 WorkerMsg::Progress { job, done, total } => match job {
                     JobKind::Calibration => self.calibration.progress = Some((done, total)),
                     JobKind::Derender => self.analysis.derender.progress = Some((done, total)),
+                    JobKind::Recording if self.recording.loading => {
+                        self.recording.progress = Some((done, total))
+                    }
                     JobKind::Pose if self.analysis.pose.running => {
                         self.analysis.pose.progress = Some((done, total))
                     }
                     _ => {}
                 },
                 WorkerMsg::Dataset(msg) => self.dataset_message(ctx, msg),
+                WorkerMsg::Recording(msg) => self.recording_message(msg),
                 WorkerMsg::Derendered(result) => self.derendered(ctx, result),
                 WorkerMsg::Posed {
                     generation,
@@ -354,6 +367,11 @@ impl WorkbenchApp {
                         JobKind::Derender => {
                             self.derender_failed(generation, message);
                             continue;
+                        }
+                        JobKind::Recording if generation != self.recording.generation => continue,
+                        JobKind::Recording => {
+                            self.recording.loading = false;
+                            self.recording.cancel = None;
                         }
                         JobKind::Pose if generation != self.analysis.pose.generation => continue,
                         JobKind::Pose => {

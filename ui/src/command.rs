@@ -84,6 +84,14 @@ pub enum Command {
     Redo,
     /// Open a file dropped on the window as what it is (mesh, session, imprint, model, dataset).
     OpenDropped(PathBuf),
+    /// Open a recording (`.mcap` file or depth-frame folder) in the Recording tab.
+    OpenRecording(PathBuf),
+    /// Replace the Recording tab's settings (a new topic or reference reloads; a new frame moves the cursor).
+    SetRecording(crate::recording_view::RecordingSettings),
+    /// Stop reading the recording.
+    CancelRecording,
+    /// De-render the frame under the timeline cursor (and, with `pose`, register the samples when they are in).
+    DerenderFrame { pose: bool },
     /// Show an analysis image enlarged in its own window (`None`: close it).
     ZoomImage(Option<crate::analysis_runs::ZoomTarget>),
 }
@@ -239,6 +247,20 @@ impl WorkbenchApp {
             }
             Command::HighlightSample(k) => self.analysis.pose.highlight = k,
             Command::ZoomImage(target) => self.analysis.zoom = target,
+            Command::OpenRecording(path) => {
+                self.state.recording = crate::recording_view::RecordingSettings {
+                    path: Some(path),
+                    ..Default::default()
+                };
+                self.state.view.tab = Tab::Recording;
+                self.load_recording();
+            }
+            Command::SetRecording(settings) => self.set_recording(settings),
+            Command::CancelRecording => self.cancel_recording(),
+            Command::DerenderFrame { pose } => {
+                let r = self.derender_frame(pose);
+                self.report("de-render", r);
+            }
             Command::Undo => {
                 let now = crate::history::Snapshot::of(&self.state);
                 match self.history.undo(now) {
@@ -369,6 +391,9 @@ impl WorkbenchApp {
             DialogPurpose::OpenDataset => self.apply(Command::OpenDataset(path)),
             DialogPurpose::OpenCheckpoint => {
                 self.apply(Command::SetModel(ModelSettings { path: Some(path) }))
+            }
+            DialogPurpose::OpenRecording | DialogPurpose::OpenRecordingFolder => {
+                self.apply(Command::OpenRecording(path))
             }
             DialogPurpose::OpenDerenderImprint => {
                 self.inputs.imprint_path = path.display().to_string();

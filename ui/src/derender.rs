@@ -42,8 +42,8 @@ pub fn default_model_path() -> PathBuf {
 pub struct PoseContext {
     /// The pressed object.
     pub object: crate::state::ObjectSource,
-    /// Its true pose `t_world_object`.
-    pub truth: tactile_derender::sensor::Se2,
+    /// Its true pose `t_world_object`, when known (not for a recording without a pose topic).
+    pub truth: Option<tactile_derender::sensor::Se2>,
     /// The sensor camera's pose.
     pub t_world_camera: glam::DAffine3,
     /// S, for the threshold baseline, metres.
@@ -65,7 +65,7 @@ impl PoseContext {
                 set: set.spec(),
                 name: pair.meta.object.clone(),
             },
-            truth: pair.meta.object_pose,
+            truth: Some(pair.meta.object_pose),
             t_world_camera: pair.meta.sensor.t_world_sensor() * sim.mount.t_sensor_camera(),
             signature: pair.signature.clone(),
             sim,
@@ -99,6 +99,82 @@ pub enum InputSource {
     },
     /// An `.npy` imprint in metres (no ground truth).
     Npy(PathBuf),
+    /// A frame of a loaded recording.
+    RecordingFrame(Box<RecordingFrameInput>),
+}
+
+/// A recording frame to de-render, and what is known about its scene.
+#[derive(Clone, Debug)]
+pub struct RecordingFrameInput {
+    pub recording: Arc<tactile_derender::recording::ProcessedRecording>,
+    pub frame: usize,
+    /// A label for the recording (its file name).
+    pub name: String,
+    /// The object's pose from the recording's pose topic, if any.
+    pub pose: Option<tactile_derender::sensor::Se2>,
+    /// The object the user loaded (Scene panel).
+    pub object: crate::state::ObjectSource,
+    /// The scene (its sensor placement is used when the recording has no pose).
+    pub scene: crate::state::SceneState,
+    pub sim: tactile_derender::sim::SimConfig,
+}
+
+impl RecordingFrameInput {
+    /// The run input: with a recorded pose, the press is estimated from the imprint (as `tnd dataset import`) and X0
+    /// simulated there; without one, the sensor stands where the Scene panel places it and nothing is known.
+    fn resolve(self) -> Result<RunInput> {
+        use tactile_derender::dataset::import_recording::estimate_press;
+        use tactile_derender::sim::{PreparedObject, Simulator};
+        let p = &self.recording;
+        let k = self.frame;
+        let imprint = p
+            .imprints
+            .get(k)
+            .ok_or_else(|| anyhow!("the recording has no frame {k}"))?
+            .clone();
+        let signature = p.signatures[k].clone();
+        let mut quiet = self.sim.clone();
+        quiet.signature.noise_std = 0.0;
+        let sim = Simulator::new(quiet)?;
+        let object = PreparedObject::new(self.object.spec().load()?.mesh)?;
+        let t = p.times_s().get(k).copied().unwrap_or(0.0);
+        let (scene, truth, label) = match self.pose {
+            Some(pose) => {
+                let (press, _) = estimate_press(&sim, &object, pose, &imprint, 0.03);
+                let scene = tactile_derender::sensor::Scene {
+                    object: pose,
+                    sensor: sim.pressing_pose(&object, 0.0, 0.0, 0.0, press),
+                };
+                let (_, x0) = sim.contact(&sim.render_depth(&object, &scene));
+                let label = format!(
+                    "{} frame {k} (t = {t:.2} s); X0 simulated at the recorded pose, press {:.1} mm (estimated)",
+                    self.name,
+                    press * 1e3
+                );
+                (scene, Some(x0), label)
+            }
+            None => {
+                let scene = crate::worker::scene_of(&self.scene, &sim, &object);
+                let label = format!(
+                    "{} frame {k} (t = {t:.2} s); no recorded pose: sensor placed as in the Scene panel",
+                    self.name
+                );
+                (scene, None, label)
+            }
+        };
+        Ok(RunInput {
+            pose: Some(PoseContext {
+                object: self.object,
+                truth: self.pose,
+                t_world_camera: sim.t_world_camera(&scene.sensor),
+                signature,
+                sim: self.sim,
+            }),
+            imprint,
+            truth,
+            label,
+        })
+    }
 }
 
 impl InputSource {
@@ -127,6 +203,7 @@ impl InputSource {
                     pose: None,
                 })
             }
+            InputSource::RecordingFrame(f) => f.resolve(),
         }
     }
 }

@@ -44,5 +44,12 @@ pub fn run(purpose: DialogPurpose, start_dir: Option<PathBuf>) -> Option<PathBuf
             .set_title("Open measured imprint (metres)")
             .add_filter("numpy", &["npy"])
             .pick_file(),
+        DialogPurpose::OpenRecording => d
+            .set_title("Open recording")
+            .add_filter("MCAP (ROS 2 bag)", &["mcap", "MCAP"])
+            .pick_file(),
+        DialogPurpose::OpenRecordingFolder => d
+            .set_title("Open a folder of depth frames (16-bit PNG mm, .npy m)")
+            .pick_folder(),
     }
 }

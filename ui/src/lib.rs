@@ -18,6 +18,7 @@ pub mod measured;
 pub mod panels;
 pub mod pose_job;
 pub mod pose_view;
+pub mod recording_view;
 pub mod session;
 pub mod shortcuts;
 pub mod state;

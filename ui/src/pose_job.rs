@@ -44,7 +44,7 @@ pub fn run(
         samples: &req.samples,
         imprint: &req.imprint,
         signature: Some(&c.signature),
-        truth: Some(c.truth),
+        truth: c.truth,
     };
     let estimate = pipeline::estimate_pose(
         &object,
@@ -65,7 +65,7 @@ pub fn run(
     Ok(PoseAnalysis {
         object: estimate.object,
         outline: outline(&object.mesh),
-        truth: Some(c.truth),
+        truth: c.truth,
         registered_sample: estimate.registered_sample,
         hypotheses: estimate.hypotheses,
         contacts,

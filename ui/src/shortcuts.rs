@@ -65,6 +65,9 @@ pub fn purpose_of(path: &Path, de_render_tab: bool) -> Option<DialogPurpose> {
         if path.join("diffusion_pytorch_model.safetensors").is_file() {
             return Some(DialogPurpose::OpenCheckpoint);
         }
+        if has_depth_frames(path) {
+            return Some(DialogPurpose::OpenRecordingFolder);
+        }
         return None;
     }
     if tactile_derender::mesh::is_mesh_file(path) {
@@ -79,15 +82,32 @@ pub fn purpose_of(path: &Path, de_render_tab: bool) -> Option<DialogPurpose> {
         "npy" if de_render_tab => Some(DialogPurpose::OpenDerenderImprint),
         "npy" => Some(DialogPurpose::OpenMeasured),
         "safetensors" => Some(DialogPurpose::OpenCheckpoint),
+        "mcap" => Some(DialogPurpose::OpenRecording),
         _ => None,
     }
+}
+
+/// A folder holding depth frames (a recording), without a pair table (that is an import source, not a recording).
+fn has_depth_frames(dir: &Path) -> bool {
+    use tactile_derender::recording::source::FRAME_EXTENSIONS;
+    if dir.join("pairs.csv").is_file() || dir.join("pairs.json").is_file() {
+        return false;
+    }
+    std::fs::read_dir(dir).is_ok_and(|entries| {
+        entries.flatten().any(|e| {
+            let p = e.path();
+            p.extension()
+                .and_then(|x| x.to_str())
+                .is_some_and(|x| FRAME_EXTENSIONS.contains(&x.to_ascii_lowercase().as_str()))
+        })
+    })
 }
 
 /// The message for a dropped path the workbench cannot open.
 pub fn unknown(path: &Path) -> String {
     format!(
         "{}: cannot open a dropped file of this kind (meshes .obj .stl .ply .gltf .glb, sessions .json, imprints .npy, \
-         models .safetensors or folders, dataset folders)",
+         models .safetensors or folders, dataset folders, recordings .mcap or depth-frame folders)",
         path.display()
     )
 }

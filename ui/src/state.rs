@@ -39,6 +39,8 @@ pub struct State {
     pub dataset: DatasetSettings,
     /// De-rendering runs: sampler, sample count, seed, input.
     pub derender: DerenderSettings,
+    /// The open sensor recording, its topic, reference and timeline position.
+    pub recording: crate::recording_view::RecordingSettings,
 }
 
 impl Default for State {
@@ -53,6 +55,7 @@ impl Default for State {
             model: ModelSettings::default(),
             dataset: DatasetSettings::default(),
             derender: DerenderSettings::default(),
+            recording: Default::default(),
         }
     }
 }
@@ -191,6 +194,8 @@ pub enum Tab {
     Derender,
     /// Pose registration of the samples and KDE uncertainty.
     Pose,
+    /// A real sensor recording: timeline, imprint per frame, contact area over time.
+    Recording,
 }
 
 /// Orbit camera of the 3D view, around a target point.

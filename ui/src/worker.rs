@@ -27,6 +27,7 @@ pub enum JobKind {
     Dataset,
     Derender,
     Pose,
+    Recording,
 }
 
 /// What a file dialog was opened for; its answer comes back with it.
@@ -41,6 +42,10 @@ pub enum DialogPurpose {
     OpenDataset,
     OpenCheckpoint,
     OpenDerenderImprint,
+    /// An `.mcap` recording.
+    OpenRecording,
+    /// A folder of depth frames.
+    OpenRecordingFolder,
 }
 
 /// Everything background threads report.
@@ -60,6 +65,8 @@ pub enum WorkerMsg {
     },
     /// The dataset inspector's loader (thumbnails, the selected pair, object index).
     Dataset(crate::dataset_view::DatasetMsg),
+    /// A loaded recording.
+    Recording(crate::recording_view::RecordingMsg),
     /// A finished de-rendering run.
     Derendered(Box<crate::derender::RunResult>),
     /// A finished pose analysis.

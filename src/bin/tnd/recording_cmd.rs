@@ -155,7 +155,10 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         .map_err(|e| anyhow!(e))
         .context("--pose")?;
     if !(a.max_press.is_finite() && a.max_press > 0.0) {
-        return Err(anyhow!("--max-press must be a positive depth in metres, got {}", a.max_press));
+        return Err(anyhow!(
+            "--max-press must be a positive depth in metres, got {}",
+            a.max_press
+        ));
     }
     let config = a.sensor.sim_config()?;
     let loaded = a.object.load()?;

@@ -16,6 +16,7 @@ pub mod derender_panel;
 pub mod elastomer_panel;
 pub mod image_card;
 pub mod pose_panel;
+pub mod recording_panel;
 pub mod scene_panel;
 pub mod sensor_panel;
 pub mod session_panel;
@@ -56,6 +57,7 @@ pub fn show_all(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Comman
             ui.selectable_value(&mut view.tab, Tab::Dataset, "Dataset");
             ui.selectable_value(&mut view.tab, Tab::Derender, "De-render");
             ui.selectable_value(&mut view.tab, Tab::Pose, "Pose");
+            ui.selectable_value(&mut view.tab, Tab::Recording, "Recording");
         });
         if view != app.state.view {
             cmds.push(Command::SetView(view));
@@ -71,6 +73,7 @@ pub fn show_all(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Comman
             Tab::Dataset => dataset_panel::show(app, ui, cmds),
             Tab::Derender => derender_panel::show(app, ui, cmds),
             Tab::Pose => pose_panel::show(app, ui, cmds),
+            Tab::Recording => recording_panel::show(app, ui, cmds),
         }
     });
     if let Some(target) = app.analysis.zoom {

@@ -1,0 +1,282 @@
+//! Recording tab: a real sensor recording (MCAP file or depth-frame folder) on a timeline. Scrub the frames, see the
+//! imprint, signature and reference of the frame under the cursor, the contact area over time, and de-render (and
+//! register) the frame under the cursor.
+
+use egui_plot::{Line, Plot, PlotPoints, VLine};
+use tactile_derender::recording::{ReferenceChoice, StreamKind};
+
+use super::image_card::{self, Scale};
+use super::widgets::path_field;
+use crate::app::WorkbenchApp;
+use crate::command::Command;
+use crate::recording_view::IMPRINT_RANGE;
+use crate::worker::DialogPurpose;
+
+pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    open_row(app, ui, cmds);
+    if app.recording.loading {
+        ui.horizontal(|ui| {
+            let (done, total) = app.recording.progress.unwrap_or((0, 0));
+            ui.label(format!("reading frames… {done}/{total}"));
+            ui.add(
+                egui::ProgressBar::new(if total > 0 {
+                    done as f32 / total as f32
+                } else {
+                    0.0
+                })
+                .desired_width(200.0),
+            );
+            if ui.button("Cancel reading").clicked() {
+                cmds.push(Command::CancelRecording);
+            }
+        });
+    }
+    let Some(loaded) = &app.recording.loaded else {
+        if !app.recording.loading {
+            ui.label(
+                "Open a sensor recording: an MCAP file (a ROS 2 bag with sensor_msgs/Image depth in 16UC1 mm or 32FC1 \
+                 m, or PointCloud2) or a folder of depth frames (16-bit PNG in mm, .npy in metres). Each frame becomes \
+                 an imprint Y = R − S at the model resolution, cropped and resampled as the simulator does. Try one \
+                 made by `tnd recording simulate press.mcap --object cylinder_r12`.",
+            );
+        }
+        return;
+    };
+    let p = loaded.processed.clone();
+    let n = p.len();
+    let mut s = app.state.recording.clone();
+    let has_pose = loaded.poses.iter().any(Option::is_some);
+    ui.horizontal(|ui| {
+        let depth: Vec<&str> = loaded
+            .streams
+            .iter()
+            .filter(|t| matches!(t.kind, StreamKind::DepthImage | StreamKind::PointCloud))
+            .map(|t| t.name.as_str())
+            .collect();
+        ui.label("depth topic");
+        egui::ComboBox::from_id_salt("rec_topic")
+            .selected_text(p.stream.as_str())
+            .show_ui(ui, |ui| {
+                for t in depth {
+                    ui.selectable_value(&mut s.topic, Some(t.to_string()), t);
+                }
+            })
+            .response
+            .on_hover_text("the depth stream of the recording (sensor_msgs/Image or PointCloud2)");
+        ui.label("reference");
+        let auto = s.reference == ReferenceChoice::Auto;
+        if ui
+            .radio(auto, "auto")
+            .on_hover_text(
+                "the median of the frames without contact (5 x 5-averaged imprint under 1 mm against the deepest frame)",
+            )
+            .clicked()
+        {
+            s.reference = ReferenceChoice::Auto;
+        }
+        if ui
+            .button("Use this frame as the reference")
+            .on_hover_text("take the frame under the cursor as the no-contact reference R")
+            .clicked()
+        {
+            s.reference = ReferenceChoice::Frame(s.frame);
+        }
+        if let ReferenceChoice::Frame(k) = s.reference {
+            ui.label(format!("frame {k}"));
+        }
+    });
+    ui.weak(format!(
+        "{n} frames of {}x{}, resampled to {}x{}; reference from frame(s) {}; object pose: {}",
+        p.source_size[0],
+        p.source_size[1],
+        app.state.sim.camera.resolution.0,
+        app.state.sim.camera.resolution.1,
+        short_list(&p.reference_frames),
+        if has_pose {
+            "from the recording's pose topic"
+        } else {
+            "none recorded (de-rendering places the sensor as the Scene panel does)"
+        }
+    ));
+    // Timeline.
+    let times = p.times_s();
+    ui.horizontal(|ui| {
+        if ui
+            .button("< previous")
+            .on_hover_text("previous frame")
+            .clicked()
+        {
+            s.frame = s.frame.saturating_sub(1);
+        }
+        let width = (ui.available_width() - 260.0).max(120.0);
+        ui.spacing_mut().slider_width = width;
+        ui.add(egui::Slider::new(&mut s.frame, 0..=n.saturating_sub(1)).text("frame"))
+            .on_hover_text("scrub the recording; the images and the cursor follow");
+        if ui.button("next >").on_hover_text("next frame").clicked() {
+            s.frame = (s.frame + 1).min(n.saturating_sub(1));
+        }
+    });
+    let k = s.frame.min(n.saturating_sub(1));
+    ui.label(format!(
+        "frame {k} of {n}, t = {:.3} s, contact {} px (imprint > 3 mm){}",
+        times.get(k).copied().unwrap_or(0.0),
+        p.contact_px.get(k).copied().unwrap_or(0),
+        loaded
+            .poses
+            .get(k)
+            .copied()
+            .flatten()
+            .map_or(String::new(), |q| format!(
+                ", object at x {:.1} mm, y {:.1} mm, θ {:.1}°",
+                q.x * 1e3,
+                q.y * 1e3,
+                q.theta.to_degrees()
+            ))
+    ));
+    ui.horizontal(|ui| {
+        if ui
+            .button("De-render this frame")
+            .on_hover_text(
+                "sample the in-contact depth of this frame's imprint (De-render tab settings)",
+            )
+            .clicked()
+        {
+            cmds.push(Command::DerenderFrame { pose: false });
+        }
+        if ui
+            .button("De-render and register this frame")
+            .on_hover_text(
+                "sample, then register the samples to the Scene panel's object (Pose tab)",
+            )
+            .clicked()
+        {
+            cmds.push(Command::DerenderFrame { pose: true });
+        }
+    });
+    // Contact area over time; a click moves the cursor.
+    let area: Vec<[f64; 2]> = times
+        .iter()
+        .zip(&p.contact_px)
+        .map(|(&t, &c)| [t, c as f64])
+        .collect();
+    let cursor = times.get(k).copied().unwrap_or(0.0);
+    let plot = Plot::new("rec_contact")
+        .height(140.0)
+        .x_axis_label("time (s)")
+        .y_axis_label("contact (px)")
+        .allow_drag(false)
+        .show(ui, |pl| {
+            pl.line(Line::new("contact area", PlotPoints::from(area)));
+            pl.vline(VLine::new("frame", cursor));
+            pl.pointer_coordinate()
+        });
+    if plot.response.clicked() {
+        if let Some(at) = plot.inner {
+            if let Some(best) =
+                (0..n).min_by(|&a, &b| (times[a] - at.x).abs().total_cmp(&(times[b] - at.x).abs()))
+            {
+                s.frame = best;
+            }
+        }
+    }
+    let side = ((ui.available_width() - 3.0 * 90.0) / 3.0).clamp(96.0, 420.0);
+    let ctx = ui.ctx().clone();
+    if let Some(tex) = app.recording.textures_for(&ctx, k) {
+        let depth = p.signatures[k]
+            .range_where(|d| d > 0.0)
+            .map_or((0.07, 0.1), |(lo, hi)| (lo, hi.max(lo + 0.004)));
+        ui.horizontal(|ui| {
+            let imprint = Scale {
+                range: IMPRINT_RANGE,
+                millimetres: true,
+                zero_is_missing: false,
+            };
+            let depth_scale = Scale {
+                range: depth,
+                millimetres: true,
+                zero_is_missing: true,
+            };
+            image_card::card(
+                ui,
+                "imprint Y = R - S",
+                tex.imprint.id(),
+                &p.imprints[k],
+                &imprint,
+                side,
+            );
+            image_card::card(
+                ui,
+                "signature S",
+                tex.signature.id(),
+                &p.signatures[k],
+                &depth_scale,
+                side,
+            );
+            image_card::card(
+                ui,
+                "reference R",
+                tex.reference.id(),
+                &p.reference,
+                &depth_scale,
+                side,
+            );
+        });
+    }
+    if s != app.state.recording {
+        cmds.push(Command::SetRecording(s));
+    }
+}
+
+fn open_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    ui.horizontal(|ui| {
+        let r = path_field(
+            ui,
+            "recording",
+            &mut app.inputs.recording_path,
+            ".mcap file or frame folder",
+        );
+        let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+        if (ui.button("Open recording").clicked() || enter)
+            && !app.inputs.recording_path.trim().is_empty()
+        {
+            cmds.push(Command::OpenRecording(
+                app.inputs.recording_path.trim().into(),
+            ));
+        }
+        if ui
+            .button("Browse MCAP…")
+            .on_hover_text("a ROS 2 bag (.mcap); dropping it on the window opens it too")
+            .clicked()
+        {
+            cmds.push(Command::Browse(DialogPurpose::OpenRecording));
+        }
+        if ui
+            .button("Browse frame folder…")
+            .on_hover_text(
+                "a folder of depth frames: 16-bit PNG in mm or .npy in metres, in name order",
+            )
+            .clicked()
+        {
+            cmds.push(Command::Browse(DialogPurpose::OpenRecordingFolder));
+        }
+    });
+}
+
+/// "0-7, 21-26, 28" for a sorted list of frames.
+fn short_list(frames: &[usize]) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    let mut i = 0;
+    while i < frames.len() {
+        let mut j = i;
+        while j + 1 < frames.len() && frames[j + 1] == frames[j] + 1 {
+            j += 1;
+        }
+        parts.push(if j > i {
+            format!("{}-{}", frames[i], frames[j])
+        } else {
+            frames[i].to_string()
+        });
+        i = j + 1;
+    }
+    parts.join(", ")
+}

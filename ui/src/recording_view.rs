@@ -1,0 +1,293 @@
+//! The **Recording** tab's live side: a real sensor recording (MCAP file or depth-frame folder) read and turned into
+//! one imprint per frame on a background thread ([`tactile_derender::recording::process`], with progress and
+//! cancel), the object poses of its pose topic per frame, and the textures of the frame under the timeline cursor.
+//! The saved side is [`RecordingSettings`] in the session.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::Sender;
+use std::sync::Arc;
+
+use anyhow::{anyhow, Result};
+use egui::{TextureHandle, TextureOptions};
+use serde::{Deserialize, Serialize};
+use tactile_derender::recording::{
+    self, FolderOptions, ProcessConfig, ProcessedRecording, Recording, ReferenceChoice, StreamInfo,
+    StreamKind,
+};
+use tactile_derender::sensor::Se2;
+use tactile_derender::sim::SimConfig;
+
+use crate::colormap::to_color_image;
+use crate::worker::{JobKind, WorkerMsg};
+
+/// Saved settings of the Recording tab.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct RecordingSettings {
+    /// The recording (`.mcap` file or frame folder); `None`: nothing open.
+    pub path: Option<PathBuf>,
+    /// Depth topic (`None`: the only one).
+    pub topic: Option<String>,
+    /// The no-contact reference frame.
+    pub reference: ReferenceChoice,
+    /// The frame under the timeline cursor.
+    pub frame: usize,
+}
+
+/// A loaded recording.
+pub struct LoadedRecording {
+    pub path: PathBuf,
+    /// Every stream of the file.
+    pub streams: Vec<StreamInfo>,
+    pub processed: Arc<ProcessedRecording>,
+    /// The object's pose per frame from the pose topic (nearest message within 50 ms), if there is one.
+    pub poses: Vec<Option<Se2>>,
+    /// The settings it was loaded with (a change of topic or reference reloads).
+    pub loaded_with: RecordingSettings,
+}
+
+/// The background thread's answer.
+pub enum RecordingMsg {
+    Loaded {
+        generation: u64,
+        recording: Box<LoadedRecording>,
+    },
+}
+
+/// Textures of one frame: imprint, signature, reference.
+pub struct FrameTextures {
+    pub frame: usize,
+    pub imprint: TextureHandle,
+    pub signature: TextureHandle,
+    pub reference: TextureHandle,
+}
+
+/// Live state of the tab.
+#[derive(Default)]
+pub struct RecordingView {
+    pub loaded: Option<LoadedRecording>,
+    pub generation: u64,
+    pub loading: bool,
+    pub progress: Option<(usize, usize)>,
+    pub cancel: Option<Arc<AtomicBool>>,
+    pub textures: Option<FrameTextures>,
+}
+
+/// Colour range of imprints, metres.
+pub const IMPRINT_RANGE: (f32, f32) = (-0.002, 0.012);
+
+impl RecordingView {
+    /// The textures of `frame` (made when the cursor moved).
+    pub fn textures_for(&mut self, ctx: &egui::Context, frame: usize) -> Option<&FrameTextures> {
+        let p = &self.loaded.as_ref()?.processed;
+        let frame = frame.min(p.len().checked_sub(1)?);
+        if self.textures.as_ref().is_none_or(|t| t.frame != frame) {
+            let s = &p.signatures[frame];
+            let depth = s
+                .range_where(|d| d > 0.0)
+                .map_or((0.07, 0.1), |(lo, hi)| (lo, hi.max(lo + 0.004)));
+            let tex = |name: &str, img, range, zim| {
+                ctx.load_texture(
+                    name,
+                    to_color_image(img, range, zim),
+                    TextureOptions::NEAREST,
+                )
+            };
+            self.textures = Some(FrameTextures {
+                frame,
+                imprint: tex("rec_imprint", &p.imprints[frame], IMPRINT_RANGE, false),
+                signature: tex("rec_signature", s, depth, true),
+                reference: tex("rec_reference", &p.reference, depth, true),
+            });
+        }
+        self.textures.as_ref()
+    }
+}
+
+/// Read and process the recording of `settings` on its own thread.
+pub fn spawn_load(
+    settings: RecordingSettings,
+    sim: SimConfig,
+    generation: u64,
+    cancel: Arc<AtomicBool>,
+    tx: Sender<WorkerMsg>,
+    ctx: egui::Context,
+) -> Result<()> {
+    std::thread::Builder::new()
+        .name("tnd-recording".into())
+        .spawn(move || {
+            let mut progress =
+                crate::worker::throttled_progress(JobKind::Recording, tx.clone(), ctx.clone());
+            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                load(&settings, &sim, &mut |done, total| {
+                    progress(done, total);
+                    !cancel.load(Ordering::Relaxed)
+                })
+            }));
+            let msg = match result {
+                Ok(Ok(r)) => WorkerMsg::Recording(RecordingMsg::Loaded {
+                    generation,
+                    recording: Box::new(r),
+                }),
+                Ok(Err(e)) => WorkerMsg::Error {
+                    job: JobKind::Recording,
+                    generation,
+                    message: format!("recording: {}", tactile_derender::error::render_anyhow(&e)),
+                },
+                Err(_) => WorkerMsg::Error {
+                    job: JobKind::Recording,
+                    generation,
+                    message: "recording: internal error while reading; please report it".into(),
+                },
+            };
+            let _ = tx.send(msg);
+            ctx.request_repaint();
+        })
+        .map(|_| ())
+        .map_err(|e| anyhow!("cannot start the recording thread: {e}"))
+}
+
+fn load(
+    settings: &RecordingSettings,
+    sim: &SimConfig,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+) -> Result<LoadedRecording> {
+    let path = settings
+        .path
+        .clone()
+        .ok_or_else(|| anyhow!("no recording chosen"))?;
+    let rec = Recording::open(&path, &FolderOptions::default())?;
+    let stream = rec.depth_stream(settings.topic.as_deref())?.clone();
+    let config = ProcessConfig {
+        reference: settings.reference,
+        ..ProcessConfig::default()
+    };
+    let processed = recording::process(&rec, &stream, &sim.camera, &config, progress)?;
+    let poses = match rec
+        .streams()
+        .iter()
+        .find(|s| s.kind == StreamKind::Pose)
+        .cloned()
+    {
+        Some(ps) => {
+            let mut poses = rec.poses(&ps)?;
+            poses.sort_by_key(|p| p.0);
+            processed
+                .stamps_ns
+                .iter()
+                .map(|&t| {
+                    poses
+                        .iter()
+                        .min_by_key(|p| p.0.abs_diff(t))
+                        .filter(|p| p.0.abs_diff(t) <= 50_000_000)
+                        .map(|p| Se2::new(p.1[0], p.1[1], p.1[2]))
+                })
+                .collect()
+        }
+        None => vec![None; processed.len()],
+    };
+    Ok(LoadedRecording {
+        path,
+        streams: rec.streams().to_vec(),
+        processed: Arc::new(processed),
+        poses,
+        loaded_with: RecordingSettings {
+            frame: 0,
+            ..settings.clone()
+        },
+    })
+}
+
+impl crate::app::WorkbenchApp {
+    /// (Re)load the recording of the saved settings on a background thread.
+    pub(crate) fn load_recording(&mut self) {
+        let Some(w) = self.worker.as_ref() else {
+            return; // started with the worker (a session opened before the first frame)
+        };
+        let (tx, ctx) = (w.sender(), w.context());
+        self.cancel_recording();
+        let view = &mut self.recording;
+        view.generation += 1;
+        view.loading = true;
+        view.progress = None;
+        view.textures = None;
+        let cancel = Arc::new(AtomicBool::new(false));
+        view.cancel = Some(cancel.clone());
+        let r = spawn_load(
+            self.state.recording.clone(),
+            self.state.sim.clone(),
+            view.generation,
+            cancel,
+            tx,
+            ctx,
+        );
+        if let Err(e) = r {
+            self.recording.loading = false;
+            self.error(format!("recording: {e}"));
+        }
+    }
+
+    pub(crate) fn cancel_recording(&mut self) {
+        crate::worker::raise_cancel(&mut self.recording.cancel);
+        self.recording.loading = false;
+    }
+
+    /// Apply new settings: another topic or reference reloads, another frame only moves the cursor.
+    pub(crate) fn set_recording(&mut self, settings: RecordingSettings) {
+        let old = std::mem::replace(&mut self.state.recording, settings);
+        let s = &self.state.recording;
+        let reload = s.path != old.path || s.topic != old.topic || s.reference != old.reference;
+        if reload && s.path.is_some() {
+            self.load_recording();
+        }
+    }
+
+    /// Take in a loaded recording.
+    pub(crate) fn recording_message(&mut self, msg: RecordingMsg) {
+        match msg {
+            RecordingMsg::Loaded {
+                generation,
+                recording,
+            } => {
+                if generation != self.recording.generation {
+                    return;
+                }
+                let n = recording.processed.len();
+                self.recording.loading = false;
+                self.recording.cancel = None;
+                self.recording.textures = None;
+                self.state.recording.frame = self.state.recording.frame.min(n.saturating_sub(1));
+                self.notice = Some(format!(
+                    "recording {}: {n} frames of {}",
+                    recording.path.display(),
+                    recording.processed.stream
+                ));
+                self.recording.loaded = Some(*recording);
+            }
+        }
+    }
+
+    /// De-render the frame under the cursor (then register it, with `pose`).
+    pub(crate) fn derender_frame(&mut self, pose: bool) -> Result<()> {
+        let loaded = self
+            .recording
+            .loaded
+            .as_ref()
+            .ok_or_else(|| anyhow!("open a recording first"))?;
+        let mut d = self.state.derender.clone();
+        d.input = crate::state::DerenderInput::RecordingFrame {
+            path: loaded.path.clone(),
+            frame: self.state.recording.frame,
+        };
+        self.state.derender = d;
+        self.state.view.tab = if pose {
+            crate::state::Tab::Pose
+        } else {
+            crate::state::Tab::Derender
+        };
+        self.run_derender()?;
+        self.auto_pose = pose;
+        Ok(())
+    }
+}
