@@ -113,6 +113,110 @@ fn pairs_csv() {
     });
 }
 
+#[test]
+fn mcap_recording() {
+    // The whole read path of a recording: open, every stream, every depth frame (images and projected clouds) and
+    // every pose.
+    fuzz(
+        "mcap",
+        &via_file("r.mcap", |p| {
+            use tactile_derender::recording::{FolderOptions, Recording, StreamKind};
+            let Ok(rec) = Recording::open(p, &FolderOptions::default()) else {
+                return false;
+            };
+            let k = tactile_derender::sensor::Intrinsics::pico_flexx();
+            rec.streams().iter().all(|s| match s.kind {
+                StreamKind::DepthImage | StreamKind::PointCloud => {
+                    (0..s.messages).all(|i| rec.depth_frame(s, i, &k).is_ok())
+                }
+                StreamKind::Pose => rec.poses(s).is_ok(),
+                StreamKind::Other => true,
+            })
+        }),
+    );
+}
+
+/// Regenerate the MCAP seeds: `cargo test --test fuzz_loaders -- --ignored write_mcap_corpus`. Two small recordings
+/// (chunked and zstd-compressed, and unchunked) with a 4 x 3 16UC1 depth image, a two-point cloud and a pose.
+#[test]
+#[ignore]
+fn write_mcap_corpus() {
+    use std::collections::BTreeMap;
+    use tactile_derender::recording::ros::{self, ImageMsg, PointCloudMsg, PointField};
+    for (name, chunked) in [("chunked_zstd.mcap", true), ("unchunked.mcap", false)] {
+        let mut w = mcap::WriteOptions::new()
+            .use_chunks(chunked)
+            .create(std::io::Cursor::new(Vec::new()))
+            .unwrap();
+        let meta = BTreeMap::new();
+        let img = w
+            .add_schema("sensor_msgs/msg/Image", "ros2msg", b"")
+            .unwrap();
+        let cloud = w
+            .add_schema("sensor_msgs/msg/PointCloud2", "ros2msg", b"")
+            .unwrap();
+        let pose = w
+            .add_schema("geometry_msgs/msg/PoseStamped", "ros2msg", b"")
+            .unwrap();
+        let c_img = w.add_channel(img, "/depth", "cdr", &meta).unwrap();
+        let c_cloud = w.add_channel(cloud, "/points", "cdr", &meta).unwrap();
+        let c_pose = w.add_channel(pose, "/pose", "cdr", &meta).unwrap();
+        for i in 0..2u32 {
+            let t = 1_000_000_000 + u64::from(i) * 33_000_000;
+            let header = |channel_id| mcap::records::MessageHeader {
+                channel_id,
+                sequence: i,
+                log_time: t,
+                publish_time: t,
+            };
+            let depth = ImageMsg {
+                stamp_ns: t,
+                height: 3,
+                width: 4,
+                encoding: "16UC1".into(),
+                is_bigendian: false,
+                step: 8,
+                data: (0..12u16).flat_map(|v| (85 + v).to_le_bytes()).collect(),
+            };
+            w.write_to_known_channel(&header(c_img), &ros::encode_image(&depth, "cam"))
+                .unwrap();
+            let fields = ["x", "y", "z"]
+                .iter()
+                .enumerate()
+                .map(|(j, n)| PointField {
+                    name: (*n).into(),
+                    offset: 4 * j as u32,
+                    datatype: 7,
+                    count: 1,
+                })
+                .collect();
+            let pts: Vec<u8> = [0.0f32, 0.0, 0.08, 0.01, -0.01, 0.09]
+                .iter()
+                .flat_map(|v| v.to_le_bytes())
+                .collect();
+            let pc = PointCloudMsg {
+                stamp_ns: t,
+                height: 1,
+                width: 2,
+                fields,
+                is_bigendian: false,
+                point_step: 12,
+                row_step: 24,
+                data: pts,
+            };
+            w.write_to_known_channel(&header(c_cloud), &ros::encode_point_cloud(&pc, "cam"))
+                .unwrap();
+            let p = ros::encode_pose_stamped(t, 0.001, 0.002, 0.3, "bubble");
+            w.write_to_known_channel(&header(c_pose), &p).unwrap();
+        }
+        w.finish().unwrap();
+        let bytes = w.into_inner().into_inner();
+        let dir = corpus_dir("mcap");
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join(name), bytes).unwrap();
+    }
+}
+
 /// Regenerate the seed corpus: `cargo test --test fuzz_loaders -- --ignored write_fuzz_corpus`.
 #[test]
 #[ignore]

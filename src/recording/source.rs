@@ -2,8 +2,8 @@
 //! files included) or a **folder of depth frames** (16-bit PNG in millimetres, `.npy`/`.npz` scaled to metres),
 //! listing its streams and decoding one depth frame at a time at the camera's own resolution.
 //!
-//! An MCAP file is read into memory once; only the messages of recognised schemas are kept (depth images, point
-//! clouds, poses), so a bag with other topics costs their size only while it is read.
+//! An MCAP file is streamed once; only the messages of recognised schemas are kept in memory (depth images, point
+//! clouds, poses), so other topics of a bag cost nothing.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -95,6 +95,9 @@ pub struct Recording {
     data: Data,
 }
 
+/// Largest MCAP record or decompressed chunk read, bytes (512 MiB: chunks of real bags are a few MB).
+const MAX_RECORD_BYTES: usize = 512 << 20;
+
 /// Frame file extensions of a folder recording.
 pub const FRAME_EXTENSIONS: [&str; 3] = ["png", "npy", "npz"];
 
@@ -119,16 +122,23 @@ impl Recording {
     }
 
     fn open_mcap(path: &Path) -> Result<Self, RecordingError> {
-        let bytes = std::fs::read(path).map_err(|e| RecordingError::io(path, e))?;
+        use std::io::Read;
         let bad = |message: String| RecordingError::Format {
             path: path.to_path_buf(),
             message,
         };
-        if !bytes.starts_with(b"\x89MCAP") {
+        let mut file = std::fs::File::open(path).map_err(|e| RecordingError::io(path, e))?;
+        let mut magic = [0u8; 5];
+        if file.read_exact(&mut magic).is_err() || &magic != b"\x89MCAP" {
             return Err(bad("not an MCAP file (no MCAP magic at the start)".into()));
         }
+        let file = std::fs::File::open(path).map_err(|e| RecordingError::io(path, e))?;
+        // A streaming reader with a bound on any one record or decompressed chunk: a corrupt length field is an
+        // error, not an allocation of its claimed size (mcap's in-memory MessageStream sets no such bound).
+        let options = mcap::sans_io::LinearReaderOptions::default()
+            .with_record_length_limit(MAX_RECORD_BYTES);
         let stream =
-            mcap::MessageStream::new(&bytes).map_err(|e| bad(format!("unreadable MCAP: {e}")))?;
+            mcap::io::MessageReader::new_with_options(std::io::BufReader::new(file), options);
         let mut topics: BTreeMap<String, Topic> = BTreeMap::new();
         let mut counts: BTreeMap<String, (String, usize)> = BTreeMap::new();
         for message in stream {

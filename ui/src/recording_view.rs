@@ -206,6 +206,9 @@ impl crate::app::WorkbenchApp {
             return; // started with the worker (a session opened before the first frame)
         };
         let (tx, ctx) = (w.sender(), w.context());
+        if let Some(p) = &self.state.recording.path {
+            self.inputs.recording_path = p.display().to_string();
+        }
         self.cancel_recording();
         let view = &mut self.recording;
         view.generation += 1;
