@@ -315,3 +315,70 @@ fn csv_poses_with_presses_and_bad_recordings_give_one_line_errors() {
         Err(RecordingError::Format { .. })
     ));
 }
+
+#[test]
+fn the_cli_records_imports_and_scores_a_press_sequence() {
+    // As a user would: tnd recording simulate -> tnd recording info -> tnd dataset import -> tnd eval.
+    let dir = tempfile::tempdir().unwrap();
+    let tnd = env!("CARGO_BIN_EXE_tnd");
+    let run = |args: &[&str]| -> serde_json::Value {
+        let out = std::process::Command::new(tnd)
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "tnd {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let stdout = String::from_utf8(out.stdout).unwrap();
+        serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+    };
+    let rec = run(&[
+        "recording",
+        "simulate",
+        "press.mcap",
+        "--object",
+        OBJECT,
+        "--pose",
+        "0.004,-0.003,0.5",
+        "--rest",
+        "3",
+        "--ramp",
+        "6",
+        "--encoding",
+        "cloud",
+    ]);
+    assert_eq!(rec["frames"], 3 + 6 + 5 + 3);
+    let info = run(&["recording", "info", "press.mcap"]);
+    assert_eq!(info["frames"], 17);
+    assert_eq!(info["peak_contact_frame"], 8);
+    let imported = run(&[
+        "dataset",
+        "import",
+        "--from",
+        "press.mcap",
+        "--out",
+        "ds",
+        "--object",
+        OBJECT,
+        "--split",
+        "unseen_objects",
+    ]);
+    let pairs = imported["pairs"].as_u64().unwrap();
+    assert!(pairs >= 6, "{imported}");
+    let eval = run(&[
+        "eval",
+        "--data",
+        "ds",
+        "--split",
+        "unseen_objects",
+        "--model",
+        "ground-truth",
+    ]);
+    assert_eq!(eval["split"], "unseen_objects");
+    assert_eq!(eval["pairs"].as_u64(), Some(pairs));
+    assert!(eval["failed"].as_array().unwrap().is_empty());
+    assert!(eval["model"]["position_mm"]["median"].as_f64().unwrap() < 0.05);
+}
