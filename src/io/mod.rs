@@ -6,5 +6,6 @@ pub mod figure;
 pub mod npy;
 pub mod ply;
 pub mod preview;
+pub mod rrd;
 
 pub use atomic::write_atomic;

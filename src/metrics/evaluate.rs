@@ -416,6 +416,7 @@ impl Evaluator {
         generator: &dyn Generator,
         i: usize,
         pair_seed: u64,
+        observe: &mut dyn FnMut(usize, &EvalPair, &Image),
     ) -> Result<PairRecord, FailedPair> {
         let pair = source.pair(i).map_err(|e| FailedPair {
             name: format!("#{i}"),
@@ -434,6 +435,7 @@ impl Evaluator {
         let first = samples
             .first()
             .ok_or_else(|| fail(EvalError::Generator("returned no sample".into())))?;
+        observe(i, &pair, first);
         let model = self.score(&pair, first, ctx, pair_seed).map_err(fail)?;
         let model_multi = if samples.len() > 1 {
             let consensus =
@@ -473,13 +475,26 @@ impl Evaluator {
         seed: u64,
         progress: &mut dyn FnMut(usize, usize) -> bool,
     ) -> Result<EvalReport, EvalError> {
+        self.evaluate_observed(source, generator, seed, progress, &mut |_, _, _| {})
+    }
+
+    /// [`Self::evaluate`], showing `observe(i, pair, first_sample)` every pair the generator produced a sample for
+    /// (e.g. to log it).
+    pub fn evaluate_observed(
+        &self,
+        source: &dyn PairSource,
+        generator: &dyn Generator,
+        seed: u64,
+        progress: &mut dyn FnMut(usize, usize) -> bool,
+        observe: &mut dyn FnMut(usize, &EvalPair, &Image),
+    ) -> Result<EvalReport, EvalError> {
         let mut records = Vec::with_capacity(source.len());
         let mut failed = Vec::new();
         for i in 0..source.len() {
             let pair_seed = seed
                 .wrapping_mul(0x9E37_79B9_7F4A_7C15)
                 .wrapping_add(i as u64);
-            match self.evaluate_pair(source, generator, i, pair_seed) {
+            match self.evaluate_pair(source, generator, i, pair_seed, observe) {
                 Ok(r) => records.push(r),
                 Err(f) => failed.push(f),
             }

@@ -65,6 +65,10 @@ pub struct EvalArgs {
     /// Also write every pair's scores (both methods, estimated and true pose) as JSON lines to this file.
     #[arg(long)]
     pub records: Option<PathBuf>,
+    /// The rerun recording has one step per pair on the "pair" timeline: the imprint, the true and generated X0 under
+    /// the camera, the generated contact points, and the object at its true and estimated poses.
+    #[command(flatten)]
+    pub rerun: crate::rerun_out::RerunArgs,
 }
 
 /// The generator named by `--model`.
@@ -94,6 +98,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
         pose_samples: a.pose_samples.max(1),
         ..EvalConfig::default()
     });
+    let rrd = a.rerun.open("tnd eval")?;
+    let mut logged = 0usize;
     let mut markdown = String::new();
     let mut records = String::new();
     let mut failed = 0;
@@ -108,12 +114,32 @@ pub fn run(a: EvalArgs) -> Result<()> {
             " pairs",
             source.len(),
         ));
-        let report = evaluator.evaluate(&source, gen.as_ref(), a.seed, &mut |done, _| {
-            if let Ok(mut b) = bar.lock() {
-                let _ = b.update_to(done);
-            }
-            true
-        })?;
+        let first_step = logged;
+        let mut log_error = None;
+        let report = evaluator.evaluate_observed(
+            &source,
+            gen.as_ref(),
+            a.seed,
+            &mut |done, _| {
+                if let Ok(mut b) = bar.lock() {
+                    let _ = b.update_to(done);
+                }
+                true
+            },
+            &mut |i, pair, sample| {
+                if let (Some(log), None) = (&rrd, &log_error) {
+                    let r = log_pair(log, source.context(), first_step + i, pair, sample);
+                    log_error = r.err();
+                }
+            },
+        )?;
+        if let Some(e) = log_error {
+            return Err(e);
+        }
+        if let Some(log) = &rrd {
+            log_estimates(log, source.context(), first_step, &source, &report)?;
+        }
+        logged += source.len();
         if let Ok(mut b) = bar.lock() {
             super::progress::finish(&mut b);
         }
@@ -173,6 +199,9 @@ pub fn run(a: EvalArgs) -> Result<()> {
         tactile_derender::io::write_atomic(&path, text.as_bytes())
             .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
         eprintln!("report: {}", path.display());
+    }
+    if let Some(path) = crate::rerun_out::finish(rrd)? {
+        eprintln!("rerun: {}", path.display());
     }
     if failed > 0 {
         bail!("{failed} pair(s) could not be scored (listed above and in --records); the tables cover the others");
@@ -314,6 +343,62 @@ fn uncertainty_plots(
             r.init.y,
             r.init.theta
         );
+    }
+    Ok(())
+}
+
+/// One evaluated pair on the rerun timeline "pair": imprint, true and generated X0, the generated contact points and
+/// the object at its true pose.
+fn log_pair(
+    log: &tactile_derender::io::rrd::RrdLog,
+    ctx: &tactile_derender::metrics::evaluate::EvalContext,
+    step: usize,
+    pair: &tactile_derender::metrics::evaluate::EvalPair,
+    sample: &tactile_derender::image::Image,
+) -> Result<()> {
+    use crate::rerun_out::{camera_views, object_at, TRUTH_RGB};
+    log.set_step("pair", step);
+    let images = [
+        ("imprint", &pair.imprint),
+        ("target", &pair.target),
+        ("generated", sample),
+    ];
+    camera_views(
+        log,
+        &ctx.intrinsics,
+        &pair.t_world_camera,
+        &images,
+        Some(("generated", sample)),
+    )?;
+    let mesh = ctx.objects.mesh(&pair.object)?;
+    object_at(log, "world/object", &mesh, pair.object_pose, TRUTH_RGB)?;
+    Ok(())
+}
+
+/// The model's estimated pose of every scored pair, at its step.
+fn log_estimates(
+    log: &tactile_derender::io::rrd::RrdLog,
+    ctx: &tactile_derender::metrics::evaluate::EvalContext,
+    first_step: usize,
+    source: &DatasetSource<'_>,
+    report: &tactile_derender::metrics::evaluate::EvalReport,
+) -> Result<()> {
+    use crate::rerun_out::{object_at, ESTIMATE_RGB};
+    for i in 0..source.len() {
+        let pair = source.pair(i)?;
+        let Some(r) = report.records.iter().find(|r| r.name == pair.name) else {
+            continue;
+        };
+        if let Some(est) = r.model.estimate {
+            log.set_step("pair", first_step + i);
+            object_at(
+                log,
+                "world/estimate",
+                &ctx.objects.mesh(&r.object)?,
+                est,
+                ESTIMATE_RGB,
+            )?;
+        }
     }
     Ok(())
 }

@@ -9,6 +9,7 @@ mod objects_cmd;
 mod pose_cmd;
 mod progress;
 mod recording_cmd;
+mod rerun_out;
 mod sample_cmd;
 mod sim_cmd;
 mod train_cmd;

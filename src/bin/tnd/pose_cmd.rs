@@ -61,6 +61,8 @@ pub struct PoseArgs {
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub rerun: crate::rerun_out::RerunArgs,
 }
 
 fn read(path: &Path, want: (usize, usize)) -> Result<Image> {
@@ -80,6 +82,7 @@ fn read(path: &Path, want: (usize, usize)) -> Result<Image> {
 
 pub fn run(a: PoseArgs) -> Result<()> {
     let sim = Simulator::new(a.sensor.sim_config()?)?;
+    let rrd = a.rerun.open("tnd pose")?;
     let res = (sim.intrinsics().width, sim.intrinsics().height);
     let imprint = read(&a.imprint, res)?;
     let object = a.object.load()?;
@@ -166,7 +169,57 @@ pub fn run(a: PoseArgs) -> Result<()> {
         a.derender.seed,
         a.ply,
     )?;
-    let summary = json!({"object": object.name, "generator": generator, "samples": report.samples.len(),
+    if let Some(log) = &rrd {
+        use crate::rerun_out::{camera_views, object_at, ESTIMATE_RGB, TRUTH_RGB};
+        let t_world_camera = input.t_world_camera;
+        log.set_step("sample", 0);
+        if let Some(t) = truth {
+            object_at(log, "world/object", &object.mesh, t, TRUTH_RGB)?;
+        }
+        if let Some(best) = estimate.best() {
+            object_at(log, "world/estimate/best", &object.mesh, best, ESTIMATE_RGB)?;
+        }
+        if let Some(m) = &report.multi_sample {
+            object_at(
+                log,
+                "world/estimate/multi_sample",
+                &object.mesh,
+                m.pose,
+                ESTIMATE_RGB,
+            )?;
+        }
+        camera_views(
+            log,
+            sim.intrinsics(),
+            &t_world_camera,
+            &[("imprint", &imprint)],
+            None,
+        )?;
+        // One step per sample: its depth and its registered pose.
+        for (k, s) in samples.iter().enumerate() {
+            log.set_step("sample", k);
+            camera_views(
+                log,
+                sim.intrinsics(),
+                &t_world_camera,
+                &[("sample", s)],
+                Some(("sample", s)),
+            )?;
+        }
+        // The registered samples' poses, one step each (samples that failed to register have none).
+        for (j, fit) in report.samples.iter().enumerate() {
+            log.set_step("fit", j);
+            object_at(
+                log,
+                "world/estimate/fit",
+                &object.mesh,
+                fit.pose,
+                ESTIMATE_RGB,
+            )?;
+        }
+    }
+    let rerun = crate::rerun_out::finish(rrd)?;
+    let summary = json!({"object": object.name, "generator": generator, "rerun": rerun, "samples": report.samples.len(),
         "seed": a.derender.seed, "estimate": estimate.best(),
         "estimate_multi_sample": report.multi_sample.map(|m| m.pose),
         "truth": truth, "baseline": report.baseline, "multi_sample": report.multi_sample,

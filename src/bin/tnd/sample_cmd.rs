@@ -32,12 +32,16 @@ pub struct SampleArgs {
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
+    /// The rerun recording shows the images in the frame of the default sensor's camera (`tnd sample` has no scene).
+    #[command(flatten)]
+    pub rerun: crate::rerun_out::RerunArgs,
 }
 
 pub fn run(a: SampleArgs) -> Result<()> {
     let device = tactile_derender::model::device::open_device(&a.derender.device)?;
     let model = DiffusionModel::load_on(&a.model, &device)?;
     let imprint = npy::read_metres_image(&a.imprint)?;
+    let rrd = a.rerun.open("tnd sample")?;
     let mut bar = super::progress::bar("sampling", " steps", 0);
     let out = pipeline::derender(
         &model,
@@ -66,11 +70,32 @@ pub fn run(a: SampleArgs) -> Result<()> {
     )?;
     let figure = grid(&imprint, &out, a.derender.seed);
     write_figure(&a.out, "grid", &a.figure_size, &figure)?;
+    if let Some(log) = &rrd {
+        use crate::rerun_out::camera_views;
+        let k = tactile_derender::sim::SimConfig::default()
+            .camera
+            .intrinsics()
+            .resized(w, h);
+        let at = glam::DAffine3::IDENTITY;
+        log.set_step("sample", 0);
+        let fixed = [
+            ("imprint", &imprint),
+            ("mean", &out.mean),
+            ("std", &out.std),
+            ("contact_probability", &out.contact_probability),
+        ];
+        camera_views(log, &k, &at, &fixed, None)?;
+        for (i, s) in samples.iter().enumerate() {
+            log.set_step("sample", i);
+            camera_views(log, &k, &at, &[("sample", s)], Some(("sample", s)))?;
+        }
+    }
+    let rerun = crate::rerun_out::finish(rrd)?;
     let kind = a.derender.sampler.sampler_kind();
     println!(
         "{}",
         json!({"samples": samples.len(), "sampler": format!("{kind:?}"), "seed": a.derender.seed, "out": a.out,
-            "seconds": out.seconds,
+            "seconds": out.seconds, "rerun": rerun,
             "mean_std_m": out.std.data.iter().map(|&v| f64::from(v)).sum::<f64>() / out.std.data.len() as f64})
     );
     Ok(())

@@ -34,6 +34,8 @@ pub struct SimArgs {
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub rerun: crate::rerun_out::RerunArgs,
 }
 
 /// The arrays written by `tnd sim` (and their preview titles).
@@ -70,6 +72,7 @@ pub fn run(a: SimArgs) -> Result<()> {
         ));
     }
     let config = a.sensor.sim_config()?;
+    let rrd = a.rerun.open("tnd sim")?;
     let loaded = a.object.load()?;
     for w in &loaded.warnings {
         eprintln!("warning: {w}");
@@ -110,6 +113,29 @@ pub fn run(a: SimArgs) -> Result<()> {
         &preview::side_by_side(&panels, &caption),
     )?;
 
+    if let Some(log) = &rrd {
+        use crate::rerun_out::{camera_views, object_at, TRUTH_RGB};
+        log.set_step("frame", 0);
+        object_at(log, "world/object", &object.mesh, pose, TRUTH_RGB)?;
+        log.mesh(
+            "world/membrane",
+            sim.elastomer_mesh(),
+            &scene.sensor.t_world_sensor(),
+            [200, 200, 200],
+        )?;
+        let images: Vec<(&str, &Image)> = OUTPUTS
+            .iter()
+            .map(|(f, _)| (*f, image_of(&out, f)))
+            .collect();
+        camera_views(
+            log,
+            sim.intrinsics(),
+            &sim.t_world_camera(&scene.sensor),
+            &images,
+            Some(("contact", &out.target)),
+        )?;
+    }
+    let rerun = crate::rerun_out::finish(rrd)?;
     let range = |img: &Image, nonzero: bool| {
         img.range_where(|x| !nonzero || x != 0.0)
             .map(|(lo, hi)| json!([lo, hi]))
@@ -130,6 +156,7 @@ pub fn run(a: SimArgs) -> Result<()> {
         "sensor_position_m": scene.sensor.position,
         "elapsed_s": elapsed_s,
         "out": a.out,
+        "rerun": rerun,
     });
     println!("{summary}");
     Ok(())
