@@ -334,6 +334,72 @@ fn pairs_match_an_independent_resimulation_and_batches_cover_the_split() {
     ));
 }
 
+#[test]
+fn inflation_variation_uses_one_membrane_per_pair_and_leaves_the_rest_alone() {
+    use tactile_derender::dataset::config::InflationVariation;
+    let tmp = tempfile::tempdir().unwrap();
+    let set = small_set(&tmp.path().join("set"));
+    let variation = InflationVariation {
+        range: [0.026, 0.034],
+        levels: 3,
+    };
+    let varied = GenConfig {
+        inflation: Some(variation),
+        ..gen_config(30)
+    };
+    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    run(&a, &set, &varied, 2);
+    run(&b, &set, &gen_config(30), 2);
+    let (da, db) = (Dataset::open(&a).unwrap(), Dataset::open(&b).unwrap());
+    let objects = da.object_set().unwrap();
+    // One simulator per height, built independently of the generator.
+    let sims: Vec<Simulator> = variation
+        .heights()
+        .iter()
+        .map(|&h| {
+            let mut c = sim_config();
+            c.elastomer.inflation = h;
+            Simulator::new(c).unwrap()
+        })
+        .collect();
+    let mut used = BTreeSet::new();
+    for split in SplitName::ALL {
+        assert_eq!(da.len(split), db.len(split));
+        for i in 0..da.len(split) {
+            let (p, q) = (da.pair(split, i).unwrap(), db.pair(split, i).unwrap());
+            // The same objects and splits as without variation (the pair's random stream is untouched; positions
+            // differ because the view at the apex height changes with the inflation).
+            assert_eq!(p.meta.object, q.meta.object);
+            // The membrane of the pair's level made its contact and X0.
+            let level = variation.level(p.meta.seed);
+            used.insert(level);
+            let sim = &sims[level];
+            let object = PreparedObject::new(objects.mesh(&p.meta.object).unwrap()).unwrap();
+            assert_eq!(
+                p.meta.sensor,
+                sim.pressing_pose(&object, 0.0, 0.0, 0.0, p.meta.press)
+            );
+            let scene = Scene {
+                object: p.meta.object_pose,
+                sensor: p.meta.sensor,
+            };
+            let (mask, target) = sim.contact(&sim.render_depth(&object, &scene));
+            assert_eq!((&p.mask, &p.target), (&mask, &target), "{split} {i}");
+        }
+    }
+    assert_eq!(used.len(), 3, "every height is used");
+    // Bad ranges are refused with the flag's meaning.
+    let bad = GenConfig {
+        inflation: Some(InflationVariation {
+            range: [0.03, 0.02],
+            levels: 3,
+        }),
+        ..gen_config(4)
+    };
+    let e = generate(&tmp.path().join("c"), &sim_config(), &set, &bad, &|_| {}).unwrap_err();
+    assert!(e.to_string().contains("inflation range"), "{e}");
+}
+
 /// A finished small dataset to damage.
 fn damaged_copy(name: &str) -> (tempfile::TempDir, PathBuf) {
     let tmp = tempfile::tempdir().unwrap();
@@ -520,7 +586,7 @@ fn the_stored_seed_reproduces_the_pair_with_noise() {
         .map(|n| PreparedObject::new(set.mesh(n).unwrap()).unwrap())
         .collect();
     let draw = ObjectDraw::uniform(names.len());
-    let sampler = Sampler::new(&sim, &objects, &names, &draw, &cfg);
+    let sampler = Sampler::new(std::slice::from_ref(&sim), &objects, &names, &draw, &cfg);
     for (split, i) in [(SplitName::Train, 0), (SplitName::UnseenObjects, 1)] {
         let p = ds.pair(split, i).unwrap();
         let (_, object) = pair_stream(p.meta.seed, &draw);

@@ -30,6 +30,41 @@ pub struct GenConfig {
     pub shard_pairs: usize,
     /// One pair in every `holdout_every` of each seen object goes to `unseen_poses` (default 10: the paper's 9:1).
     pub holdout_every: usize,
+    /// Elastomer inflation drawn per pair (`None`, the default: every pair uses the sensor's inflation).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inflation: Option<InflationVariation>,
+}
+
+/// Per-pair variation of the membrane's inflation height, as a real Soft Bubble's drifts with its air pressure and
+/// temperature: pair `i` uses one of `levels` evenly spaced heights in `range`, chosen by a hash of its seed (so the
+/// pair's own random stream, and a dataset without variation, stay as they are).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InflationVariation {
+    /// Lowest and highest inflation height, metres.
+    pub range: [f64; 2],
+    /// Number of heights (>= 2; each is one prepared membrane).
+    pub levels: usize,
+}
+
+impl InflationVariation {
+    /// The inflation heights, metres.
+    pub fn heights(&self) -> Vec<f64> {
+        let [lo, hi] = self.range;
+        let n = self.levels.max(2);
+        (0..n)
+            .map(|k| lo + (hi - lo) * k as f64 / (n - 1) as f64)
+            .collect()
+    }
+
+    /// The level pair `pair_seed` uses.
+    pub fn level(&self, pair_seed: u64) -> usize {
+        // SplitMix64 finaliser of the seed: independent of the ChaCha stream the pair draws its contact from.
+        let mut z = pair_seed ^ 0x1F0E_5A7C_9D3B_2468;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z % self.levels.max(2) as u64) as usize
+    }
 }
 
 impl Default for GenConfig {
@@ -43,6 +78,7 @@ impl Default for GenConfig {
             max_attempts: 200,
             shard_pairs: 1000,
             holdout_every: 10,
+            inflation: None,
         }
     }
 }
@@ -83,6 +119,21 @@ impl GenConfig {
         }
         if self.pairs == 0 {
             return bad("the number of pairs must be at least 1".into());
+        }
+        if let Some(v) = &self.inflation {
+            let [lo, hi] = v.range;
+            if !(lo.is_finite()
+                && hi.is_finite()
+                && lo > 0.0
+                && hi >= lo
+                && v.levels >= 2
+                && v.levels <= 64)
+            {
+                return bad(format!(
+                    "inflation range [{lo}, {hi}] in {} levels: need 0 < min <= max (metres) and 2..=64 levels",
+                    v.levels
+                ));
+            }
         }
         Ok(())
     }

@@ -69,7 +69,25 @@ pub fn generate(
     if set.entries().is_empty() {
         return Err(DatasetError::Config("the object set is empty".into()));
     }
-    let sim = Simulator::new(sim_config.clone())?;
+    // The sensor, or one per inflation level (a parametric membrane rebuilt at each height).
+    let sims: Vec<Simulator> = match &config.inflation {
+        None => vec![Simulator::new(sim_config.clone())?],
+        Some(_) if sim_config.elastomer.mesh_file.is_some() => {
+            return Err(DatasetError::Config(
+                "an inflation range needs the parametric membrane; the elastomer is a mesh file"
+                    .into(),
+            ))
+        }
+        Some(v) => v
+            .heights()
+            .par_iter()
+            .map(|&h| {
+                let mut c = sim_config.clone();
+                c.elastomer.inflation = h;
+                Simulator::new(c)
+            })
+            .collect::<Result<_, _>>()?,
+    };
     let object_splits: Vec<_> = set.entries().iter().map(|e| e.split).collect();
     let weights: Vec<f64> = set.entries().iter().map(|e| e.weight).collect();
     let draw = split::ObjectDraw::new(&weights);
@@ -110,7 +128,7 @@ pub fn generate(
         .par_iter()
         .map(|n| Ok(PreparedObject::new(set.mesh(n)?)?))
         .collect::<Result<_, DatasetError>>()?;
-    let sampler = Sampler::new(&sim, &objects, &names, &draw, config);
+    let sampler = Sampler::new(&sims, &objects, &names, &draw, config);
     let state = simulate_and_write(out, &plan, &todo, &sampler, state, &mut report, progress)?;
 
     let manifest_path = out.join(MANIFEST_FILE);

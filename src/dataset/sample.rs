@@ -71,32 +71,40 @@ impl OffsetBox {
 
 /// Draws contacts for planned pairs.
 pub struct Sampler<'a> {
-    pub sim: &'a Simulator,
+    /// The sensor; with an inflation variation, one per inflation level ([`GenConfig::inflation`]).
+    pub sims: &'a [Simulator],
     pub objects: &'a [PreparedObject],
     pub names: &'a [String],
     /// How pairs draw their object (the same draw the plan used).
     pub draw: &'a ObjectDraw,
     pub config: &'a GenConfig,
-    pub offsets: OffsetBox,
+    /// Where object positions are drawn, per simulator.
+    pub offsets: Vec<OffsetBox>,
     pub min_pixels: usize,
 }
 
 impl<'a> Sampler<'a> {
+    /// `sims`: the sensor, or one per inflation level of `config.inflation` (at least one).
     pub fn new(
-        sim: &'a Simulator,
+        sims: &'a [Simulator],
         objects: &'a [PreparedObject],
         names: &'a [String],
         draw: &'a ObjectDraw,
         config: &'a GenConfig,
     ) -> Self {
-        let (w, h) = sim.config().camera.resolution;
+        let (w, h) = sims
+            .first()
+            .map_or((1, 1), |s| s.config().camera.resolution);
         Self {
-            sim,
+            sims,
             objects,
             names,
             draw,
             config,
-            offsets: OffsetBox::new(sim, config.offset_fraction),
+            offsets: sims
+                .iter()
+                .map(|s| OffsetBox::new(s, config.offset_fraction))
+                .collect(),
             min_pixels: config.min_contact_pixels(w, h),
         }
     }
@@ -110,34 +118,45 @@ impl<'a> Sampler<'a> {
             .get(object_index)
             .ok_or_else(|| DatasetError::Config("the object set is empty".into()))?;
         let [p0, p1] = self.config.press_range;
-        let sim_cfg = self.sim.config();
-        let spacing = self.sim.intrinsics().pixel_size_in(&sim_cfg.camera.native);
+        let level = match (&self.config.inflation, self.sims.len()) {
+            (Some(v), n) if n > 1 => v.level(plan.seed).min(n - 1),
+            _ => 0,
+        };
+        let (sim, b) = match (self.sims.get(level), self.offsets.get(level)) {
+            (Some(s), Some(b)) => (s, b),
+            _ => {
+                return Err(DatasetError::Config(
+                    "no simulator for the pair's sensor".into(),
+                ))
+            }
+        };
+        let sim_cfg = sim.config();
+        let spacing = sim.intrinsics().pixel_size_in(&sim_cfg.camera.native);
         for attempt in 1..=self.config.max_attempts {
             let u: f64 = rng.random();
             let v: f64 = rng.random();
             let theta = rng.random::<f64>() * std::f64::consts::TAU;
             let press = p0 + (p1 - p0) * rng.random::<f64>();
             let noise_seed: u64 = rng.random();
-            let b = &self.offsets;
             let pose = Se2::new(
                 b.x[0] + (b.x[1] - b.x[0]) * u,
                 b.y[0] + (b.y[1] - b.y[0]) * v,
                 theta,
             );
-            let sensor = self.sim.pressing_pose(object, 0.0, 0.0, 0.0, press);
+            let sensor = sim.pressing_pose(object, 0.0, 0.0, 0.0, press);
             let scene = Scene {
                 object: pose,
                 sensor,
             };
-            let depth = self.sim.render_depth(object, &scene);
-            let (mask, target) = self.sim.contact(&depth);
+            let depth = sim.render_depth(object, &scene);
+            let (mask, target) = sim.contact(&depth);
             let contact_pixels = mask.count_nonzero();
             if contact_pixels < self.min_pixels {
                 continue;
             }
             let sig = signature::synthesize(
                 &depth,
-                self.sim.nominal_depth(),
+                sim.nominal_depth(),
                 &mask,
                 &sim_cfg.signature,
                 spacing,

@@ -90,6 +90,13 @@ pub struct GenArgs {
     /// Worker threads (default: all cores). The output does not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Vary the membrane's inflation per pair: MIN,MAX height in metres (e.g. 0.027,0.033 around a calibrated 0.030);
+    /// each pair uses one of --inflation-levels evenly spaced heights. Default: the sensor's inflation for every pair.
+    #[arg(long)]
+    pub inflation_range: Option<String>,
+    /// Number of inflation heights of --inflation-range (2..=64).
+    #[arg(long, default_value_t = 5)]
+    pub inflation_levels: usize,
 }
 
 #[derive(Args, Debug)]
@@ -162,13 +169,24 @@ fn finish(b: &Mutex<kdam::Bar>) {
 }
 
 fn gen(a: GenArgs) -> Result<()> {
+    let pair = |flag: &str, s: &str, example: &str| {
+        s.split_once(',')
+            .and_then(|(x, y)| Some([x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?]))
+            .ok_or_else(|| anyhow!("--{flag} '{s}' must be MIN,MAX in metres, e.g. {example}"))
+    };
     let press_range = match &a.press {
         None => GenConfig::default().press_range,
-        Some(p) => p
-            .split_once(',')
-            .and_then(|(x, y)| Some([x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?]))
-            .ok_or_else(|| anyhow!("--press '{p}' must be MIN,MAX in metres, e.g. 0.003,0.015"))?,
+        Some(p) => pair("press", p, "0.003,0.015")?,
     };
+    let inflation = a
+        .inflation_range
+        .as_deref()
+        .map(|s| pair("inflation-range", s, "0.027,0.033"))
+        .transpose()?
+        .map(|range| dataset::config::InflationVariation {
+            range,
+            levels: a.inflation_levels,
+        });
     let config = GenConfig {
         pairs: a.pairs,
         seed: a.seed,
@@ -177,6 +195,7 @@ fn gen(a: GenArgs) -> Result<()> {
         min_contact_fraction: a.min_contact,
         max_attempts: a.max_attempts,
         shard_pairs: a.shard_pairs,
+        inflation,
         ..GenConfig::default()
     };
     let sim = a.sensor.sim_config()?;
