@@ -122,8 +122,13 @@ impl WorkbenchApp {
             }
             Command::SetSim(sim) => {
                 if sim != self.state.sim {
+                    // A recording's imprints are cropped and resampled with the camera: a new camera re-reads it.
+                    let camera_changed = sim.camera != self.state.sim.camera;
                     self.state.sim = sim;
                     self.request_simulation();
+                    if camera_changed && self.state.recording.path.is_some() {
+                        self.load_recording();
+                    }
                 }
             }
             Command::SetSeed(seed) => {
