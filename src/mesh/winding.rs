@@ -274,4 +274,51 @@ mod tests {
         assert!((w.winding_number(DVec3::new(-0.015, 0.0, 0.0)) - 1.0).abs() < 0.05);
         assert!(w.winding_number(DVec3::new(0.05, 0.0, 0.0)).abs() < 0.05);
     }
+
+    #[test]
+    fn duplicated_faces_and_a_self_intersecting_fold() {
+        // Every face twice (a common export bug): w = 2 inside, 0 outside.
+        let mesh = unit_sphere();
+        let doubled = Mesh::merged(&[mesh.clone(), mesh.clone()]);
+        let w = FastWinding::new(&doubled);
+        assert_eq!(doubled.triangles().len(), 2 * mesh.triangles().len());
+        // The tree's far-field approximation errs by a few per cent of |w| (the exact sum is 2.000 here).
+        let w0 = w.winding_number(DVec3::ZERO);
+        assert!((w0 - 2.0).abs() < 0.08, "{w0}");
+        assert!(w.inside(DVec3::new(0.0, 0.015, 0.0)));
+        assert!(w.winding_number(DVec3::new(0.0, 0.03, 0.0)).abs() < 0.05);
+        // One shell whose cap is folded through the opposite side (vertices of the top cap mirrored below the
+        // equator): a single self-intersecting surface. Points inside the untouched lower body still have |w| >= 1/2
+        // and points far away 0, as the exact solid-angle sum says.
+        let folded: Vec<glam::Vec3> = mesh
+            .vertices()
+            .iter()
+            .map(|v| {
+                if v.z > 0.015 {
+                    glam::Vec3::new(v.x, v.y, -v.z * 0.5)
+                } else {
+                    *v
+                }
+            })
+            .collect();
+        let fold = Mesh::from_raw(folded, mesh.triangles().to_vec(), "folded sphere").unwrap();
+        let w = FastWinding::new(&fold);
+        for p in [
+            DVec3::new(0.0, 0.0, -0.015),
+            DVec3::new(0.03, 0.0, 0.0),
+            DVec3::new(0.0, 0.0, 0.05),
+        ] {
+            let exact = winding_number_of(
+                (0..fold.triangles().len()).map(|i| fold.triangle(i).map(|v| v.as_dvec3())),
+                p,
+            );
+            assert!(
+                (w.winding_number(p) - exact).abs() < 0.05,
+                "{p}: {} vs {exact}",
+                w.winding_number(p)
+            );
+        }
+        assert!(w.inside(DVec3::new(0.0, 0.0, -0.015)));
+        assert!(!w.inside(DVec3::new(0.0, 0.0, 0.05)));
+    }
 }
