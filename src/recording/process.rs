@@ -100,7 +100,7 @@ impl ProcessedRecording {
         let t0 = self.stamps_ns.first().copied().unwrap_or(0);
         self.stamps_ns
             .iter()
-            .map(|&t| t.saturating_sub(t0) as f64 * 1e-9)
+            .map(|&t| t.saturating_sub(t0) as f64 / 1e9)
             .collect()
     }
 }
