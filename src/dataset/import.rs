@@ -325,7 +325,7 @@ impl RowReader<'_> {
         let s = to_model(&signature, "signature")?;
         let r = to_model(&reference, "reference")?;
         let target = to_model(&target, "target")?;
-        let imprint = r.zip_map(&s, |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 });
+        let imprint = crate::sim::signature::imprint(&r, &s);
         let mask = Image {
             width: w,
             height: h,

@@ -24,9 +24,13 @@ use super::shard::Record;
 use super::{DatasetError, SplitName};
 use crate::image::Image;
 use crate::objects::ObjectSet;
+use crate::recording::source::{nearest_stamp, DEFAULT_MAX_POSE_GAP_S};
 use crate::recording::{self, FolderOptions, ProcessConfig, Recording};
 use crate::sensor::{Scene, Se2};
-use crate::sim::{PreparedObject, SimConfig, Simulator};
+use crate::sim::{PreparedObject, SimConfig, SimError, Simulator};
+
+/// Default deepest press the press estimate considers, metres.
+pub const DEFAULT_MAX_PRESS_M: f64 = 0.03;
 
 /// Where the object's pose per frame comes from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -73,8 +77,8 @@ impl RecordingImportConfig {
             poses,
             every: 1,
             min_contact_px: 10,
-            max_pose_gap_s: 0.05,
-            max_press_m: 0.03,
+            max_pose_gap_s: DEFAULT_MAX_POSE_GAP_S,
+            max_press_m: DEFAULT_MAX_PRESS_M,
             split: None,
             seed: 0,
         }
@@ -133,10 +137,7 @@ pub fn import_recording(
         recording::process(&rec, &stream, &sim_config.camera, &config.process, progress)?;
     let poses = frame_poses(&rec, &processed.stamps_ns, config)?;
 
-    // Noise-free simulator: X0 and the press estimate do not depend on the measurement noise.
-    let mut quiet = sim_config.clone();
-    quiet.signature.noise_std = 0.0;
-    let sim = Simulator::new(quiet)?;
+    let sim = noise_free_simulator(sim_config)?;
     let object = PreparedObject::new(set.mesh(&config.object)?)?;
 
     let mut skipped_no_contact = 0;
@@ -155,35 +156,23 @@ pub fn import_recording(
         .par_iter()
         .map(|&(i, fp)| {
             let y = &processed.imprints[i];
-            let (press, residual) = match fp.press {
-                Some(p) => (p, None),
-                None => {
-                    let (p, r) = estimate_press(&sim, &object, fp.pose, y, config.max_press_m);
-                    (p, Some(r))
-                }
-            };
-            let scene = Scene {
-                object: fp.pose,
-                sensor: sim.pressing_pose(&object, 0.0, 0.0, 0.0, press),
-            };
-            let depth = sim.render_depth(&object, &scene);
-            let (mask, target) = sim.contact(&depth);
+            let t = frame_truth(&sim, &object, fp.pose, y, fp.press, config.max_press_m);
             let record = Record {
                 index: i,
                 seed: 0,
                 object: object_index,
                 split: SplitName::Train,
                 pose: fp.pose,
-                sensor: scene.sensor,
-                press,
-                contact_pixels: mask.count_nonzero(),
+                sensor: t.scene.sensor,
+                press: t.press,
+                contact_pixels: t.mask.count_nonzero(),
                 imprint: y.clone(),
-                target,
+                target: t.target,
                 signature: processed.signatures[i].clone(),
                 reference: processed.reference.clone(),
-                mask,
+                mask: t.mask,
             };
-            (record, residual)
+            (record, t.press_fit_residual_m)
         })
         .collect();
     let residuals: Vec<f64> = made.iter().filter_map(|(_, r)| *r).collect();
@@ -240,24 +229,10 @@ fn frame_poses(
     match &config.poses {
         PoseSource::Topic(name) => {
             let stream = rec.pose_stream(name.as_deref())?.clone();
-            let mut poses = rec.poses(&stream)?;
-            poses.sort_by_key(|p| p.0);
-            let gap = (config.max_pose_gap_s * 1e9) as u64;
-            Ok(stamps_ns
-                .iter()
-                .map(|&t| {
-                    let k = poses.partition_point(|p| p.0 < t);
-                    [k.checked_sub(1), Some(k)]
-                        .into_iter()
-                        .flatten()
-                        .filter_map(|j| poses.get(j))
-                        .min_by_key(|p| p.0.abs_diff(t))
-                        .filter(|p| p.0.abs_diff(t) <= gap)
-                        .map(|p| FramePose {
-                            pose: Se2::new(p.1[0], p.1[1], p.1[2]),
-                            press: None,
-                        })
-                })
+            Ok(rec
+                .poses_at(&stream, stamps_ns, config.max_pose_gap_s)?
+                .into_iter()
+                .map(|p| p.map(|pose| FramePose { pose, press: None }))
                 .collect())
         }
         PoseSource::Csv(path) => csv_poses(path, stamps_ns, config.max_pose_gap_s),
@@ -276,6 +251,10 @@ fn csv_poses(
     };
     let rows = parse_csv(&text).map_err(bad)?;
     let mut out = vec![None; stamps_ns.len()];
+    // Frames by time, for rows that name a stamp.
+    let mut order: Vec<usize> = (0..stamps_ns.len()).collect();
+    order.sort_by_key(|&k| stamps_ns[k]);
+    let sorted: Vec<u64> = order.iter().map(|&k| stamps_ns[k]).collect();
     for (i, row) in rows.iter().enumerate() {
         let at = |m: String| bad(format!("row {}: {m}", i + 1));
         let num = |key: &str| -> Result<Option<f64>, DatasetError> {
@@ -298,12 +277,8 @@ fn csv_poses(
                 let t: u64 = s
                     .parse()
                     .map_err(|_| at(format!("stamp_ns '{s}' is not an integer")))?;
-                let gap = (max_gap_s * 1e9) as u64;
-                match (0..stamps_ns.len())
-                    .min_by_key(|&k| stamps_ns[k].abs_diff(t))
-                    .filter(|&k| stamps_ns[k].abs_diff(t) <= gap)
-                {
-                    Some(k) => k,
+                match nearest_stamp(&sorted, t, (max_gap_s * 1e9) as u64) {
+                    Some(k) => order[k],
                     None => continue,
                 }
             }
@@ -321,6 +296,58 @@ fn csv_poses(
         });
     }
     Ok(out)
+}
+
+/// The sensor of `sim_config` without measurement noise: X0 and the press estimate do not depend on it.
+pub fn noise_free_simulator(sim_config: &SimConfig) -> Result<Simulator, SimError> {
+    let mut quiet = sim_config.clone();
+    quiet.signature.noise_std = 0.0;
+    Simulator::new(quiet)
+}
+
+/// What the simulator says about a real frame whose object pose is known.
+#[derive(Clone, Debug)]
+pub struct FrameTruth {
+    /// Press depth, metres: the given one, or estimated from the imprint.
+    pub press: f64,
+    /// Mean absolute imprint difference at an estimated press, metres (`None` when the press was given).
+    pub press_fit_residual_m: Option<f64>,
+    /// Object and sensor poses.
+    pub scene: Scene,
+    /// Contact mask M and in-contact depth X0.
+    pub mask: Image,
+    pub target: Image,
+}
+
+/// The true contact of a frame with the object at `pose` (relative to the sensor axis): at `press`, or at the press
+/// [`estimate_press`] finds for the measured `imprint`. `sim` should be noise-free ([`noise_free_simulator`]).
+pub fn frame_truth(
+    sim: &Simulator,
+    object: &PreparedObject,
+    pose: Se2,
+    imprint: &Image,
+    press: Option<f64>,
+    max_press: f64,
+) -> FrameTruth {
+    let (press, press_fit_residual_m) = match press {
+        Some(p) => (p, None),
+        None => {
+            let (p, r) = estimate_press(sim, object, pose, imprint, max_press);
+            (p, Some(r))
+        }
+    };
+    let scene = Scene {
+        object: pose,
+        sensor: sim.pressing_pose(object, 0.0, 0.0, 0.0, press),
+    };
+    let (mask, target) = sim.contact(&sim.render_depth(object, &scene));
+    FrameTruth {
+        press,
+        press_fit_residual_m,
+        scene,
+        mask,
+        target,
+    }
 }
 
 /// The press depth whose simulated noise-free imprint best matches `measured` (mean absolute difference over the

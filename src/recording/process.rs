@@ -14,6 +14,7 @@ use super::RecordingError;
 use crate::dataset::resample;
 use crate::image::Image;
 use crate::sensor::CameraConfig;
+use crate::sim::signature::imprint;
 
 /// Which frame is the no-contact reference R.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -103,14 +104,6 @@ impl ProcessedRecording {
             .map(|&t| t.saturating_sub(t0) as f64 / 1e9)
             .collect()
     }
-}
-
-/// The imprint `R − S` where both are measured, else 0.
-pub fn imprint(reference: &Image, signature: &Image) -> Image {
-    reference.zip_map(
-        signature,
-        |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 },
-    )
 }
 
 fn contact_pixels(y: &Image, threshold: f64) -> usize {

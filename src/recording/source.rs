@@ -14,7 +14,7 @@ use super::ros::{self, Encoding};
 use super::RecordingError;
 use crate::dataset::import::{load_image, ImportConfig};
 use crate::image::Image;
-use crate::sensor::Intrinsics;
+use crate::sensor::{Intrinsics, Se2};
 
 /// What a stream holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -95,6 +95,20 @@ pub struct Recording {
     data: Data,
 }
 
+/// Default largest time between a frame and the pose message matched to it, seconds.
+pub const DEFAULT_MAX_POSE_GAP_S: f64 = 0.05;
+
+/// Index into `sorted` (ascending) of the stamp nearest to `t`, if it is within `max_gap_ns` (the earlier on a tie).
+pub fn nearest_stamp(sorted: &[u64], t: u64, max_gap_ns: u64) -> Option<usize> {
+    let k = sorted.partition_point(|&s| s < t);
+    [k.checked_sub(1), Some(k)]
+        .into_iter()
+        .flatten()
+        .filter(|&j| j < sorted.len())
+        .min_by_key(|&j| sorted[j].abs_diff(t))
+        .filter(|&j| sorted[j].abs_diff(t) <= max_gap_ns)
+}
+
 /// Largest MCAP record or decompressed chunk read, bytes (512 MiB: chunks of real bags are a few MB).
 const MAX_RECORD_BYTES: usize = 512 << 20;
 
@@ -122,7 +136,7 @@ impl Recording {
     }
 
     fn open_mcap(path: &Path) -> Result<Self, RecordingError> {
-        use std::io::Read;
+        use std::io::{Read, Seek};
         let bad = |message: String| RecordingError::Format {
             path: path.to_path_buf(),
             message,
@@ -132,7 +146,7 @@ impl Recording {
         if file.read_exact(&mut magic).is_err() || &magic != b"\x89MCAP" {
             return Err(bad("not an MCAP file (no MCAP magic at the start)".into()));
         }
-        let file = std::fs::File::open(path).map_err(|e| RecordingError::io(path, e))?;
+        file.rewind().map_err(|e| RecordingError::io(path, e))?;
         // A streaming reader with a bound on any one record or decompressed chunk: a corrupt length field is an
         // error, not an allocation of its claimed size (mcap's in-memory MessageStream sets no such bound).
         let options = mcap::sans_io::LinearReaderOptions::default()
@@ -379,6 +393,29 @@ impl Recording {
             .collect()
     }
 
+    /// The object's pose at each of `stamps_ns` from the pose stream `stream`: the message nearest in time, if it is
+    /// within `max_gap_s`.
+    pub fn poses_at(
+        &self,
+        stream: &StreamInfo,
+        stamps_ns: &[u64],
+        max_gap_s: f64,
+    ) -> Result<Vec<Option<Se2>>, RecordingError> {
+        let mut poses = self.poses(stream)?;
+        poses.sort_by_key(|p| p.0);
+        let sorted: Vec<u64> = poses.iter().map(|p| p.0).collect();
+        let gap = (max_gap_s * 1e9) as u64;
+        Ok(stamps_ns
+            .iter()
+            .map(|&t| {
+                nearest_stamp(&sorted, t, gap).map(|j| {
+                    let [x, y, theta] = poses[j].1;
+                    Se2::new(x, y, theta)
+                })
+            })
+            .collect())
+    }
+
     fn no_frame(&self, stream: &StreamInfo, index: usize) -> RecordingError {
         RecordingError::Topic {
             path: self.path.clone(),
@@ -425,6 +462,17 @@ fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nearest_stamp_within_the_gap() {
+        let s = [10, 20, 40];
+        assert_eq!(nearest_stamp(&s, 14, 5), Some(0));
+        assert_eq!(nearest_stamp(&s, 15, 5), Some(0)); // a tie goes to the earlier
+        assert_eq!(nearest_stamp(&s, 33, 10), Some(2));
+        assert_eq!(nearest_stamp(&s, 29, 5), None);
+        assert_eq!(nearest_stamp(&s, 100, 1000), Some(2));
+        assert_eq!(nearest_stamp(&[], 1, 1000), None);
+    }
 
     #[test]
     fn natural_order_compares_numbers_as_numbers() {

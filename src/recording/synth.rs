@@ -118,39 +118,30 @@ pub fn write_press_recording(
         let out = sim.simulate(object, &scene, seq.seed.wrapping_add(i as u64));
         let s = &out.signature;
         let data = match seq.encoding {
-            DepthEncoding::Mm16 => {
-                let m = ImageMsg {
-                    stamp_ns: stamp,
-                    height: k.height as u32,
-                    width: k.width as u32,
-                    encoding: "16UC1".into(),
-                    is_bigendian: false,
-                    step: 2 * k.width as u32,
-                    data: s
-                        .data
-                        .iter()
-                        .flat_map(|&d| {
-                            let mm = (f64::from(d) * 1000.0).round();
-                            let v = if d.is_finite() && d > 0.0 && mm < 65535.0 {
-                                mm as u16
-                            } else {
-                                0
-                            };
-                            v.to_le_bytes()
-                        })
-                        .collect(),
+            DepthEncoding::Mm16 | DepthEncoding::F32 => {
+                let (encoding, bytes_per_px, data): (&str, u32, Vec<u8>) = match seq.encoding {
+                    DepthEncoding::Mm16 => (
+                        "16UC1",
+                        2,
+                        s.data
+                            .iter()
+                            .flat_map(|&d| millimetres(d).to_le_bytes())
+                            .collect(),
+                    ),
+                    _ => (
+                        "32FC1",
+                        4,
+                        s.data.iter().flat_map(|d| d.to_le_bytes()).collect(),
+                    ),
                 };
-                ros::encode_image(&m, "bubble_camera")
-            }
-            DepthEncoding::F32 => {
                 let m = ImageMsg {
                     stamp_ns: stamp,
                     height: k.height as u32,
                     width: k.width as u32,
-                    encoding: "32FC1".into(),
+                    encoding: encoding.into(),
                     is_bigendian: false,
-                    step: 4 * k.width as u32,
-                    data: s.data.iter().flat_map(|d| d.to_le_bytes()).collect(),
+                    step: bytes_per_px * k.width as u32,
+                    data,
                 };
                 ros::encode_image(&m, "bubble_camera")
             }
@@ -211,6 +202,16 @@ pub fn write_press_recording(
     let bytes = w.into_inner().into_inner();
     crate::io::atomic::write_atomic(path, &bytes).map_err(|e| RecordingError::io(path, e))?;
     Ok(seq.presses.len())
+}
+
+/// A depth in metres as a 16UC1 value: millimetres, 0 where unmeasured or beyond 65.534 m.
+fn millimetres(d: f32) -> u16 {
+    let mm = (f64::from(d) * 1000.0).round();
+    if d.is_finite() && d > 0.0 && mm < 65535.0 {
+        mm as u16
+    } else {
+        0
+    }
 }
 
 const IMAGE_SCHEMA: &str = "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n";

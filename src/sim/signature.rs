@@ -59,6 +59,15 @@ pub struct Signature {
     pub imprint: Image,
 }
 
+/// The imprint Y = R − S where both depths are measured (> 0), else 0: simulated signatures, imported pairs and
+/// recordings all use this rule.
+pub fn imprint(reference: &Image, signature: &Image) -> Image {
+    reference.zip_map(
+        signature,
+        |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 },
+    )
+}
+
 /// Build S, R and Y from the object depth D, the nominal elastomer depth E and the contact mask M. `spacing` is the
 /// size of one image pixel in native sensor pixels (see [`crate::sensor::Intrinsics::pixel_size_in`]).
 pub fn synthesize(
@@ -89,10 +98,7 @@ pub fn synthesize(
             }
         }
     }
-    let imprint = reference.zip_map(
-        &signature,
-        |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 },
-    );
+    let imprint = imprint(&reference, &signature);
     Signature {
         signature,
         reference,

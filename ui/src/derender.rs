@@ -123,8 +123,10 @@ impl RecordingFrameInput {
     /// The run input: with a recorded pose, the press is estimated from the imprint (as `tnd dataset import`) and X0
     /// simulated there; without one, the sensor stands where the Scene panel places it and nothing is known.
     fn resolve(self) -> Result<RunInput> {
-        use tactile_derender::dataset::import_recording::estimate_press;
-        use tactile_derender::sim::{PreparedObject, Simulator};
+        use tactile_derender::dataset::import_recording::{
+            frame_truth, noise_free_simulator, DEFAULT_MAX_PRESS_M,
+        };
+        use tactile_derender::sim::PreparedObject;
         let p = &self.recording;
         let k = self.frame;
         let imprint = p
@@ -133,25 +135,18 @@ impl RecordingFrameInput {
             .ok_or_else(|| anyhow!("the recording has no frame {k}"))?
             .clone();
         let signature = p.signatures[k].clone();
-        let mut quiet = self.sim.clone();
-        quiet.signature.noise_std = 0.0;
-        let sim = Simulator::new(quiet)?;
+        let sim = noise_free_simulator(&self.sim)?;
         let object = PreparedObject::new(self.object.spec().load()?.mesh)?;
         let t = p.times_s().get(k).copied().unwrap_or(0.0);
         let (scene, truth, label) = match self.pose {
             Some(pose) => {
-                let (press, _) = estimate_press(&sim, &object, pose, &imprint, 0.03);
-                let scene = tactile_derender::sensor::Scene {
-                    object: pose,
-                    sensor: sim.pressing_pose(&object, 0.0, 0.0, 0.0, press),
-                };
-                let (_, x0) = sim.contact(&sim.render_depth(&object, &scene));
+                let ft = frame_truth(&sim, &object, pose, &imprint, None, DEFAULT_MAX_PRESS_M);
                 let label = format!(
                     "{} frame {k} (t = {t:.2} s); X0 simulated at the recorded pose, press {:.1} mm (estimated)",
                     self.name,
-                    press * 1e3
+                    ft.press * 1e3
                 );
-                (scene, Some(x0), label)
+                (ft.scene, Some(ft.target), label)
             }
             None => {
                 let scene = crate::worker::scene_of(&self.scene, &sim, &object);
@@ -300,31 +295,9 @@ pub fn spawn(
     ctx: egui::Context,
 ) -> Result<()> {
     let generation = req.generation;
-    std::thread::Builder::new()
-        .name("tnd-derender".into())
-        .spawn(move || {
-            let mut progress =
-                crate::worker::throttled_progress(JobKind::Derender, tx.clone(), ctx.clone());
-            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                run(req, &cancel, &mut progress)
-            }));
-            let msg = match result {
-                Ok(Ok(r)) => WorkerMsg::Derendered(Box::new(r)),
-                Ok(Err(e)) => WorkerMsg::Error {
-                    job: JobKind::Derender,
-                    generation,
-                    message: format!("de-render: {}", tactile_derender::error::render_anyhow(&e)),
-                },
-                Err(_) => WorkerMsg::Error {
-                    job: JobKind::Derender,
-                    generation,
-                    message: "de-render: internal error (the sampler panicked); please report it"
-                        .into(),
-                },
-            };
-            let _ = tx.send(msg);
-            ctx.request_repaint();
-        })
-        .map(|_| ())
-        .map_err(|e| anyhow!("cannot start the de-rendering thread: {e}"))
+    crate::worker::spawn_job(JobKind::Derender, generation, tx, ctx, move |progress| {
+        Ok(WorkerMsg::Derendered(Box::new(run(
+            req, &cancel, progress,
+        )?)))
+    })
 }

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Sender;
 use std::sync::Arc;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{Context, Result};
 use tactile_derender::image::Image;
 use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::pipeline::{self, PoseInput};
@@ -82,35 +82,11 @@ pub fn spawn(
     tx: Sender<WorkerMsg>,
     ctx: egui::Context,
 ) -> Result<()> {
-    std::thread::Builder::new()
-        .name("tnd-pose".into())
-        .spawn(move || {
-            let generation = req.generation;
-            let mut progress =
-                crate::worker::throttled_progress(JobKind::Pose, tx.clone(), ctx.clone());
-            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                run(&req, &cancel, &mut progress)
-            }));
-            let msg = match result {
-                Ok(Ok(a)) => WorkerMsg::Posed {
-                    generation,
-                    analysis: Box::new(a),
-                },
-                Ok(Err(e)) => WorkerMsg::Error {
-                    job: JobKind::Pose,
-                    generation,
-                    message: format!("pose: {}", tactile_derender::error::render_anyhow(&e)),
-                },
-                Err(_) => WorkerMsg::Error {
-                    job: JobKind::Pose,
-                    generation,
-                    message: "pose: internal error (registration panicked); please report it"
-                        .into(),
-                },
-            };
-            let _ = tx.send(msg);
-            ctx.request_repaint();
+    let generation = req.generation;
+    crate::worker::spawn_job(JobKind::Pose, generation, tx, ctx, move |progress| {
+        Ok(WorkerMsg::Posed {
+            generation,
+            analysis: Box::new(run(&req, &cancel, progress)?),
         })
-        .map(|_| ())
-        .map_err(|e| anyhow!("cannot start the pose thread: {e}"))
+    })
 }

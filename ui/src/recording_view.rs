@@ -11,6 +11,7 @@ use std::sync::Arc;
 use anyhow::{anyhow, Result};
 use egui::{TextureHandle, TextureOptions};
 use serde::{Deserialize, Serialize};
+use tactile_derender::recording::source::DEFAULT_MAX_POSE_GAP_S;
 use tactile_derender::recording::{
     self, FolderOptions, ProcessConfig, ProcessedRecording, Recording, ReferenceChoice, StreamInfo,
     StreamKind,
@@ -58,6 +59,8 @@ pub enum RecordingMsg {
 /// Textures of one frame: imprint, signature, reference.
 pub struct FrameTextures {
     pub frame: usize,
+    /// Colour range of the signature and reference, metres (the frame's measured depths).
+    pub depth_range: (f32, f32),
     pub imprint: TextureHandle,
     pub signature: TextureHandle,
     pub reference: TextureHandle,
@@ -96,6 +99,7 @@ impl RecordingView {
             };
             self.textures = Some(FrameTextures {
                 frame,
+                depth_range: depth,
                 imprint: tex("rec_imprint", &p.imprints[frame], IMPRINT_RANGE, false),
                 signature: tex("rec_signature", s, depth, true),
                 reference: tex("rec_reference", &p.reference, depth, true),
@@ -114,38 +118,16 @@ pub fn spawn_load(
     tx: Sender<WorkerMsg>,
     ctx: egui::Context,
 ) -> Result<()> {
-    std::thread::Builder::new()
-        .name("tnd-recording".into())
-        .spawn(move || {
-            let mut progress =
-                crate::worker::throttled_progress(JobKind::Recording, tx.clone(), ctx.clone());
-            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                load(&settings, &sim, &mut |done, total| {
-                    progress(done, total);
-                    !cancel.load(Ordering::Relaxed)
-                })
-            }));
-            let msg = match result {
-                Ok(Ok(r)) => WorkerMsg::Recording(RecordingMsg::Loaded {
-                    generation,
-                    recording: Box::new(r),
-                }),
-                Ok(Err(e)) => WorkerMsg::Error {
-                    job: JobKind::Recording,
-                    generation,
-                    message: format!("recording: {}", tactile_derender::error::render_anyhow(&e)),
-                },
-                Err(_) => WorkerMsg::Error {
-                    job: JobKind::Recording,
-                    generation,
-                    message: "recording: internal error while reading; please report it".into(),
-                },
-            };
-            let _ = tx.send(msg);
-            ctx.request_repaint();
-        })
-        .map(|_| ())
-        .map_err(|e| anyhow!("cannot start the recording thread: {e}"))
+    crate::worker::spawn_job(JobKind::Recording, generation, tx, ctx, move |progress| {
+        let recording = load(&settings, &sim, &mut |done, total| {
+            progress(done, total);
+            !cancel.load(Ordering::Relaxed)
+        })?;
+        Ok(WorkerMsg::Recording(RecordingMsg::Loaded {
+            generation,
+            recording: Box::new(recording),
+        }))
+    })
 }
 
 fn load(
@@ -164,27 +146,8 @@ fn load(
         ..ProcessConfig::default()
     };
     let processed = recording::process(&rec, &stream, &sim.camera, &config, progress)?;
-    let poses = match rec
-        .streams()
-        .iter()
-        .find(|s| s.kind == StreamKind::Pose)
-        .cloned()
-    {
-        Some(ps) => {
-            let mut poses = rec.poses(&ps)?;
-            poses.sort_by_key(|p| p.0);
-            processed
-                .stamps_ns
-                .iter()
-                .map(|&t| {
-                    poses
-                        .iter()
-                        .min_by_key(|p| p.0.abs_diff(t))
-                        .filter(|p| p.0.abs_diff(t) <= 50_000_000)
-                        .map(|p| Se2::new(p.1[0], p.1[1], p.1[2]))
-                })
-                .collect()
-        }
+    let poses = match rec.streams().iter().find(|s| s.kind == StreamKind::Pose) {
+        Some(ps) => rec.poses_at(ps, &processed.stamps_ns, DEFAULT_MAX_POSE_GAP_S)?,
         None => vec![None; processed.len()],
     };
     Ok(LoadedRecording {

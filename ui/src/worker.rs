@@ -371,6 +371,57 @@ pub fn throttled_progress(
     }
 }
 
+impl JobKind {
+    /// How the job names itself in its error lines, its thread's name, and what panicking means for it.
+    fn names(self) -> (&'static str, &'static str, &'static str) {
+        match self {
+            JobKind::Simulation => ("simulation", "tnd-simulation", "the simulator panicked"),
+            JobKind::Calibration => ("calibration", "tnd-calibration", "the sweep panicked"),
+            JobKind::Dialog => ("file dialog", "tnd-dialog", "the dialog panicked"),
+            JobKind::Dataset => ("dataset", "tnd-dataset", "the loader panicked"),
+            JobKind::Derender => ("de-render", "tnd-derender", "the sampler panicked"),
+            JobKind::Pose => ("pose", "tnd-pose", "registration panicked"),
+            JobKind::Recording => ("recording", "tnd-recording", "reading panicked"),
+        }
+    }
+}
+
+/// Run `work` on its own thread as one run (`generation`) of background job `job`: `work` gets a throttled
+/// progress callback and returns the message to send; an error or a panic becomes one [`WorkerMsg::Error`] line.
+pub fn spawn_job(
+    job: JobKind,
+    generation: u64,
+    tx: Sender<WorkerMsg>,
+    ctx: egui::Context,
+    work: impl FnOnce(&mut dyn FnMut(usize, usize)) -> Result<WorkerMsg> + Send + 'static,
+) -> Result<()> {
+    let (label, thread, panicked) = job.names();
+    std::thread::Builder::new()
+        .name(thread.into())
+        .spawn(move || {
+            let mut progress = throttled_progress(job, tx.clone(), ctx.clone());
+            let result =
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(&mut progress)));
+            let msg = match result {
+                Ok(Ok(msg)) => msg,
+                Ok(Err(e)) => WorkerMsg::Error {
+                    job,
+                    generation,
+                    message: format!("{label}: {}", tactile_derender::error::render_anyhow(&e)),
+                },
+                Err(_) => WorkerMsg::Error {
+                    job,
+                    generation,
+                    message: format!("{label}: internal error ({panicked}); please report it"),
+                },
+            };
+            let _ = tx.send(msg);
+            ctx.request_repaint();
+        })
+        .map(|_| ())
+        .map_err(|e| anyhow!("cannot start the {label} thread: {e}"))
+}
+
 /// Stop the job behind `flag`, if any: set its cancel flag and forget it.
 pub fn raise_cancel(flag: &mut Option<Arc<AtomicBool>>) {
     if let Some(f) = flag.take() {

@@ -10,36 +10,13 @@ use egui::accesskit::Role;
 use egui_kittest::kittest::Queryable;
 use egui_kittest::Harness;
 use tactile_derender::dataset::{generate, Dataset, GenConfig, SplitName};
-use tactile_derender::model::checkpoint::{build, save_model};
-use tactile_derender::model::init::init_params;
-use tactile_derender::model::{DiffusionModel, SamplerKind, UNet2DConfig};
+use tactile_derender::model::{DiffusionModel, SamplerKind};
 use tactile_derender::objects::ObjectSet;
 use tnd_workbench::app::WorkbenchApp;
 use tnd_workbench::state::{State, Tab};
 
-fn harness(app: WorkbenchApp) -> Harness<'static, WorkbenchApp> {
-    Harness::builder()
-        .with_size([1500.0, 950.0])
-        .build_ui_state(|ui, app: &mut WorkbenchApp| app.show(ui), app)
-}
-
-/// Step until `done` holds (60 s at most).
-fn wait_for(h: &mut Harness<'_, WorkbenchApp>, what: &str, done: impl Fn(&WorkbenchApp) -> bool) {
-    let t0 = Instant::now();
-    loop {
-        h.step();
-        if done(h.state()) {
-            break;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(60),
-            "timed out waiting for {what}: {:?}",
-            h.state().errors
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    h.run_ok();
-}
+mod support;
+use support::{harness, tiny_model, wait_for};
 
 /// A small noiseless dataset (64 x 64, 8 pairs) in `dir`.
 fn small_dataset(dir: &Path) -> PathBuf {
@@ -54,25 +31,6 @@ fn small_dataset(dir: &Path) -> PathBuf {
     };
     generate(&data, &sim, &ObjectSet::builtin(), &cfg, &|_| {}).unwrap();
     data
-}
-
-/// A tiny randomly initialised model at 64 x 64 saved as a checkpoint.
-fn tiny_model(dir: &Path) -> PathBuf {
-    let cfg = UNet2DConfig {
-        sample_size: 64,
-        block_out_channels: vec![4, 8],
-        down_block_types: vec!["DownBlock2D".into(), "DownBlock2D".into()],
-        up_block_types: vec!["UpBlock2D".into(), "UpBlock2D".into()],
-        layers_per_block: 1,
-        norm_num_groups: 2,
-        attention_head_dim: Some(4),
-        ..UNet2DConfig::default()
-    };
-    let vars = build(&cfg, &candle_core::Device::Cpu).unwrap();
-    init_params(&vars.varmap, 11).unwrap();
-    let path = dir.join("tiny.safetensors");
-    save_model(&path, &vars.varmap, &cfg, Default::default()).unwrap();
-    path
 }
 
 fn type_into(h: &mut Harness<'_, WorkbenchApp>, field: &str, text: &str) {

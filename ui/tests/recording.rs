@@ -5,15 +5,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::time::{Duration, Instant};
 
 use egui::accesskit::Role;
 use egui_kittest::kittest::Queryable;
-use egui_kittest::Harness;
-use tactile_derender::model::checkpoint::{build, save_model};
-use tactile_derender::model::init::init_params;
-use tactile_derender::model::UNet2DConfig;
 use tactile_derender::objects::ObjectSet;
 use tactile_derender::recording::synth::{write_press_recording, PressSequence};
 use tactile_derender::sensor::Se2;
@@ -21,28 +15,8 @@ use tactile_derender::sim::PreparedObject;
 use tnd_workbench::app::WorkbenchApp;
 use tnd_workbench::state::{ObjectSource, State, Tab};
 
-fn harness(app: WorkbenchApp) -> Harness<'static, WorkbenchApp> {
-    Harness::builder()
-        .with_size([1500.0, 950.0])
-        .build_ui_state(|ui, app: &mut WorkbenchApp| app.show(ui), app)
-}
-
-fn wait_for(h: &mut Harness<'_, WorkbenchApp>, what: &str, done: impl Fn(&WorkbenchApp) -> bool) {
-    let t0 = Instant::now();
-    loop {
-        h.step();
-        if done(h.state()) {
-            break;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(90),
-            "timed out waiting for {what}: {:?}",
-            h.state().errors
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    h.run_ok();
-}
+mod support;
+use support::{drop_file, harness, tiny_model, wait_for};
 
 const OBJECT: &str = "cylinder_r12";
 
@@ -56,36 +30,6 @@ fn recording(dir: &Path) -> PathBuf {
     let object = PreparedObject::new(mesh).unwrap();
     write_press_recording(&path, &State::default().sim, &object, &sequence()).unwrap();
     path
-}
-
-fn tiny_model(dir: &Path) -> PathBuf {
-    let cfg = UNet2DConfig {
-        sample_size: 64,
-        block_out_channels: vec![4, 8],
-        down_block_types: vec!["DownBlock2D".into(), "DownBlock2D".into()],
-        up_block_types: vec!["UpBlock2D".into(), "UpBlock2D".into()],
-        layers_per_block: 1,
-        norm_num_groups: 2,
-        attention_head_dim: Some(4),
-        ..UNet2DConfig::default()
-    };
-    let vars = build(&cfg, &candle_core::Device::Cpu).unwrap();
-    init_params(&vars.varmap, 11).unwrap();
-    let path = dir.join("tiny.safetensors");
-    save_model(&path, &vars.varmap, &cfg, Default::default()).unwrap();
-    path
-}
-
-#[derive(Debug)]
-struct Dropped(PathBuf);
-
-impl egui::DroppedFile for Dropped {
-    fn path(&self) -> &Path {
-        &self.0
-    }
-    fn bytes(&self) -> Result<Vec<u8>, String> {
-        std::fs::read(&self.0).map_err(|e| e.to_string())
-    }
 }
 
 #[test]
@@ -172,10 +116,7 @@ fn a_recording_opens_scrubs_and_de_renders_the_frame_under_the_cursor() {
     state.view.tab = Tab::Scene;
     let mut h = harness(WorkbenchApp::with_state(state));
     h.run_ok();
-    h.input_mut()
-        .dropped_files
-        .push(Arc::new(Dropped(rec.clone())));
-    h.run_ok();
+    drop_file(&mut h, &rec);
     wait_for(&mut h, "the dropped recording", |a| {
         a.recording.loaded.is_some()
     });

@@ -8,11 +8,8 @@ use egui_kittest::Harness;
 use tnd_workbench::app::WorkbenchApp;
 use tnd_workbench::state::State;
 
-fn harness(app: WorkbenchApp) -> Harness<'static, WorkbenchApp> {
-    Harness::builder()
-        .with_size([1500.0, 950.0])
-        .build_ui_state(|ui, app: &mut WorkbenchApp| app.show(ui), app)
-}
+mod support;
+use support::harness;
 
 /// Step until the background simulation has answered the latest request.
 fn settle(h: &mut Harness<'_, WorkbenchApp>) {

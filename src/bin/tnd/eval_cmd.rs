@@ -99,7 +99,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         ..EvalConfig::default()
     });
     let rrd = a.rerun.open("tnd eval")?;
-    let mut logged = 0usize;
+    let mut pair_log = rrd.as_ref().map(PairLog::new);
     let mut markdown = String::new();
     let mut records = String::new();
     let mut failed = 0;
@@ -114,7 +114,6 @@ pub fn run(a: EvalArgs) -> Result<()> {
             " pairs",
             source.len(),
         ));
-        let first_step = logged;
         let mut log_error = None;
         let report = evaluator.evaluate_observed(
             &source,
@@ -127,19 +126,18 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 true
             },
             &mut |i, pair, sample| {
-                if let (Some(log), None) = (&rrd, &log_error) {
-                    let r = log_pair(log, source.context(), first_step + i, pair, sample);
-                    log_error = r.err();
+                if let (Some(log), None) = (&mut pair_log, &log_error) {
+                    log_error = log.pair(source.context(), i, pair, sample).err();
                 }
             },
         )?;
         if let Some(e) = log_error {
             return Err(e);
         }
-        if let Some(log) = &rrd {
-            log_estimates(log, source.context(), first_step, &source, &report)?;
+        if let Some(log) = &mut pair_log {
+            log.estimates(source.context(), &report)?;
+            log.next_split(source.len());
         }
-        logged += source.len();
         if let Ok(mut b) = bar.lock() {
             super::progress::finish(&mut b);
         }
@@ -347,58 +345,92 @@ fn uncertainty_plots(
     Ok(())
 }
 
-/// One evaluated pair on the rerun timeline "pair": imprint, true and generated X0, the generated contact points and
-/// the object at its true pose.
-fn log_pair(
-    log: &tactile_derender::io::rrd::RrdLog,
-    ctx: &tactile_derender::metrics::evaluate::EvalContext,
-    step: usize,
-    pair: &tactile_derender::metrics::evaluate::EvalPair,
-    sample: &tactile_derender::image::Image,
-) -> Result<()> {
-    use crate::rerun_out::{camera_views, object_at, TRUTH_RGB};
-    log.set_step("pair", step);
-    let images = [
-        ("imprint", &pair.imprint),
-        ("target", &pair.target),
-        ("generated", sample),
-    ];
-    camera_views(
-        log,
-        &ctx.intrinsics,
-        &pair.t_world_camera,
-        &images,
-        Some(("generated", sample)),
-    )?;
-    let mesh = ctx.objects.mesh(&pair.object)?;
-    object_at(log, "world/object", &mesh, pair.object_pose, TRUTH_RGB)?;
-    Ok(())
+/// The rerun recording of `tnd eval`: one step per evaluated pair on the timeline "pair", numbered across splits.
+struct PairLog<'a> {
+    log: &'a tactile_derender::io::rrd::RrdLog,
+    /// Step of the current split's pair 0.
+    first_step: usize,
+    /// Step of each pair logged in the current split, by name (the records name their pairs).
+    steps: std::collections::HashMap<String, usize>,
+    /// Meshes already read, by object name.
+    meshes: std::collections::HashMap<String, tactile_derender::mesh::Mesh>,
 }
 
-/// The model's estimated pose of every scored pair, at its step.
-fn log_estimates(
-    log: &tactile_derender::io::rrd::RrdLog,
-    ctx: &tactile_derender::metrics::evaluate::EvalContext,
-    first_step: usize,
-    source: &DatasetSource<'_>,
-    report: &tactile_derender::metrics::evaluate::EvalReport,
-) -> Result<()> {
-    use crate::rerun_out::{object_at, ESTIMATE_RGB};
-    for i in 0..source.len() {
-        let pair = source.pair(i)?;
-        let Some(r) = report.records.iter().find(|r| r.name == pair.name) else {
-            continue;
-        };
-        if let Some(est) = r.model.estimate {
-            log.set_step("pair", first_step + i);
-            object_at(
-                log,
-                "world/estimate",
-                &ctx.objects.mesh(&r.object)?,
-                est,
-                ESTIMATE_RGB,
-            )?;
+impl<'a> PairLog<'a> {
+    fn new(log: &'a tactile_derender::io::rrd::RrdLog) -> Self {
+        Self {
+            log,
+            first_step: 0,
+            steps: Default::default(),
+            meshes: Default::default(),
         }
     }
-    Ok(())
+
+    fn mesh(
+        &mut self,
+        ctx: &tactile_derender::metrics::evaluate::EvalContext,
+        name: &str,
+    ) -> Result<&tactile_derender::mesh::Mesh> {
+        if !self.meshes.contains_key(name) {
+            self.meshes
+                .insert(name.to_string(), ctx.objects.mesh(name)?);
+        }
+        self.meshes
+            .get(name)
+            .ok_or_else(|| anyhow!("object {name}: mesh not loaded"))
+    }
+
+    /// Pair `i` of the split: imprint, true and generated X0, the generated contact points and the object at its true
+    /// pose.
+    fn pair(
+        &mut self,
+        ctx: &tactile_derender::metrics::evaluate::EvalContext,
+        i: usize,
+        pair: &tactile_derender::metrics::evaluate::EvalPair,
+        sample: &tactile_derender::image::Image,
+    ) -> Result<()> {
+        use crate::rerun_out::{camera_views, object_at, TRUTH_RGB};
+        let step = self.first_step + i;
+        self.steps.insert(pair.name.clone(), step);
+        let log = self.log;
+        log.set_step("pair", step);
+        let images = [
+            ("imprint", &pair.imprint),
+            ("target", &pair.target),
+            ("generated", sample),
+        ];
+        camera_views(
+            log,
+            &ctx.intrinsics,
+            &pair.t_world_camera,
+            &images,
+            Some(("generated", sample)),
+        )?;
+        let mesh = self.mesh(ctx, &pair.object)?;
+        object_at(log, "world/object", mesh, pair.object_pose, TRUTH_RGB)
+    }
+
+    /// The model's estimated pose of every scored pair of the split, at its pair's step.
+    fn estimates(
+        &mut self,
+        ctx: &tactile_derender::metrics::evaluate::EvalContext,
+        report: &tactile_derender::metrics::evaluate::EvalReport,
+    ) -> Result<()> {
+        use crate::rerun_out::{object_at, ESTIMATE_RGB};
+        for r in &report.records {
+            if let (Some(&step), Some(est)) = (self.steps.get(&r.name), r.model.estimate) {
+                let log = self.log;
+                log.set_step("pair", step);
+                let mesh = self.mesh(ctx, &r.object)?;
+                object_at(log, "world/estimate", mesh, est, ESTIMATE_RGB)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The next split's pairs follow this one's `len`.
+    fn next_split(&mut self, len: usize) {
+        self.first_step += len;
+        self.steps.clear();
+    }
 }

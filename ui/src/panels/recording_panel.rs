@@ -182,9 +182,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     let side = ((ui.available_width() - 3.0 * 90.0) / 3.0).clamp(96.0, 420.0);
     let ctx = ui.ctx().clone();
     if let Some(tex) = app.recording.textures_for(&ctx, k) {
-        let depth = p.signatures[k]
-            .range_where(|d| d > 0.0)
-            .map_or((0.07, 0.1), |(lo, hi)| (lo, hi.max(lo + 0.004)));
+        let depth = tex.depth_range;
         ui.horizontal(|ui| {
             let imprint = Scale {
                 range: IMPRINT_RANGE,

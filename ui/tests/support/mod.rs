@@ -1,0 +1,83 @@
+//! Helpers the workbench's egui_kittest tests share (`mod support;` in each test file): the harness at the window
+//! size the tests lay out for, waiting for background jobs, a tiny random model checkpoint, and dropped files.
+
+#![allow(dead_code, clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use egui_kittest::Harness;
+use tactile_derender::model::checkpoint::{build, save_model};
+use tactile_derender::model::init::init_params;
+use tactile_derender::model::UNet2DConfig;
+use tnd_workbench::app::WorkbenchApp;
+
+/// The app in a 1500 x 950 window.
+pub fn harness(app: WorkbenchApp) -> Harness<'static, WorkbenchApp> {
+    Harness::builder()
+        .with_size([1500.0, 950.0])
+        .build_ui_state(|ui, app: &mut WorkbenchApp| app.show(ui), app)
+}
+
+/// Step until `done` holds (90 s at most), then let the UI settle.
+pub fn wait_for(
+    h: &mut Harness<'_, WorkbenchApp>,
+    what: &str,
+    done: impl Fn(&WorkbenchApp) -> bool,
+) {
+    let t0 = Instant::now();
+    loop {
+        h.step();
+        if done(h.state()) {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(90),
+            "timed out waiting for {what}: {:?}",
+            h.state().errors
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    h.run_ok();
+}
+
+/// A tiny randomly initialised model at 64 x 64 saved as `dir/tiny.safetensors`.
+pub fn tiny_model(dir: &Path) -> PathBuf {
+    let cfg = UNet2DConfig {
+        sample_size: 64,
+        block_out_channels: vec![4, 8],
+        down_block_types: vec!["DownBlock2D".into(), "DownBlock2D".into()],
+        up_block_types: vec!["UpBlock2D".into(), "UpBlock2D".into()],
+        layers_per_block: 1,
+        norm_num_groups: 2,
+        attention_head_dim: Some(4),
+        ..UNet2DConfig::default()
+    };
+    let vars = build(&cfg, &candle_core::Device::Cpu).unwrap();
+    init_params(&vars.varmap, 11).unwrap();
+    let path = dir.join("tiny.safetensors");
+    save_model(&path, &vars.varmap, &cfg, Default::default()).unwrap();
+    path
+}
+
+/// A file dropped on the window.
+#[derive(Debug)]
+pub struct Dropped(pub PathBuf);
+
+impl egui::DroppedFile for Dropped {
+    fn path(&self) -> &Path {
+        &self.0
+    }
+    fn bytes(&self) -> Result<Vec<u8>, String> {
+        std::fs::read(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+/// Drop `path` on the window and run the frame that handles it.
+pub fn drop_file(h: &mut Harness<'_, WorkbenchApp>, path: &Path) {
+    h.input_mut()
+        .dropped_files
+        .push(Arc::new(Dropped(path.to_path_buf())));
+    h.run_ok();
+}
