@@ -2,7 +2,7 @@
 //!
 //! What makes the paper's model fast on a laptop CPU, kept apart from the model's paper files
 //! ([`super::unet`], [`super::resnet`], …): single-precision GEMMs with our AVX-512 micro-kernels ([`sgemm`]), the
-//! direct (implicit-GEMM) and cache-tiled im2col convolutions (`conv_direct`, `conv_tiled`, chosen per model
+//! direct (implicit-GEMM) and cache-tiled im2col convolutions, fused multi-head attention ([`attention`]) (`conv_direct`, `conv_tiled`, chosen per model
 //! by [`super::conv::ConvBackend`]), uninitialised output buffers for ops that write every element (`alloc`), and
 //! the two half-batches of a step run side by side ([`parallel_batch`]). Each kernel is tested against candle's
 //! own op (values and gradients); a test on a CPU without AVX-512 says that it tested the portable path only.
@@ -11,6 +11,7 @@
 //! applies the same way at start-up; library code never sets environment variables.
 
 pub(crate) mod alloc;
+pub mod attention;
 pub(crate) mod conv_direct;
 pub(crate) mod conv_tiled;
 pub mod parallel_batch;
@@ -22,7 +23,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Kernels {
-    /// Our fused CPU kernels (convolutions, GroupNorm + SiLU, attention softmax, up-sampling).
+    /// Our fused CPU kernels (convolutions, GroupNorm + SiLU, attention, up-sampling).
     #[default]
     Fast,
     /// candle's own tensor ops, which run on every candle device (CUDA, Metal) and differentiate through autograd;

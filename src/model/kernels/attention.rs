@@ -1,0 +1,610 @@
+//! Fused multi-head self-attention on the CPU: `o = softmax(q kᵀ / √d) v` for every head, read straight from the
+//! token-major `[B, N, 3C]` output of one q/k/v projection and written token-major `[B, N, C]` for `to_out`, so the
+//! `[B, heads, N, N]` scores and the head transposes are never materialised (FlashAttention's recompute idea, on one
+//! row of scores at a time). The backward recomputes each row's probabilities from q and k instead of storing them.
+//!
+//! Each task is one (sample, head): its q `[N, d]`, `kᵀ` and `vᵀ` `[d, N]` are packed once, so every inner loop runs
+//! over N contiguous floats (16-lane vectors; head widths of 8 would waste most of a GEMM's register tile).
+
+use candle_core::{CpuStorage, CustomOp1, CustomOp3, Layout, Result, Shape, Tensor};
+use rayon::prelude::*;
+
+use crate::model::contiguous_f32;
+use crate::model::group_norm::{exp_f32, simd_level};
+
+/// `softmax(q kᵀ · scale) v` per head of `qkv` `[B, N, 3C]` (q, k, v side by side on the last axis, head `h` at
+/// channels `h·d .. (h+1)·d` of each) → `[B, N, C]`, differentiable.
+pub fn fused_attention(qkv: &Tensor, heads: usize, scale: f32) -> Result<Tensor> {
+    qkv.contiguous()?.apply_op1(FusedAttention { heads, scale })
+}
+
+#[derive(Clone, Copy, Debug)]
+struct FusedAttention {
+    heads: usize,
+    scale: f32,
+}
+
+/// Backward of [`FusedAttention`] on `(qkv, o, do)` → `d qkv`.
+#[derive(Clone, Copy, Debug)]
+struct FusedAttentionBackward(FusedAttention);
+
+/// The sizes of one call: batch, tokens, channels (C, not 3C), heads and head width.
+#[derive(Clone, Copy, Debug)]
+struct Dims {
+    b: usize,
+    n: usize,
+    c: usize,
+    heads: usize,
+    d: usize,
+}
+
+impl FusedAttention {
+    fn dims(&self, shape: &Shape) -> Result<Dims> {
+        let (b, n, c3) = shape.dims3()?;
+        let heads = self.heads.max(1);
+        if c3 % 3 != 0 || (c3 / 3) % heads != 0 {
+            candle_core::bail!("attention: {c3} channels are not q, k, v of {heads} equal heads");
+        }
+        let c = c3 / 3;
+        Ok(Dims {
+            b,
+            n,
+            c,
+            heads,
+            d: c / heads,
+        })
+    }
+}
+
+impl CustomOp1 for FusedAttention {
+    fn name(&self) -> &'static str {
+        "fused-attention"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
+        let qkv = contiguous_f32(s, l, "attention: qkv")?;
+        let dm = self.dims(l.shape())?;
+        let Dims { b, n, c, d, .. } = dm;
+        // One head's output [N, d] per task, then scattered token-major.
+        // SAFETY: every task writes its whole block (head_forward).
+        let mut per_head = unsafe { super::alloc::output_vec(b * c * n) };
+        let (scale, level) = (self.scale, simd_level());
+        per_head
+            .par_chunks_mut(n * d)
+            .enumerate()
+            .for_each(|(task, out)| {
+                let packed = Packed::of(qkv, dm, task);
+                match level {
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: the CPU has these features (simd_level).
+                    2 => unsafe { simd::head_forward_avx512(&packed, scale, out) },
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: as above.
+                    1 => unsafe { simd::head_forward_avx2(&packed, scale, out) },
+                    _ => head_forward(&packed, scale, out),
+                }
+            });
+        // SAFETY: scatter_heads writes every element.
+        let mut o = unsafe { super::alloc::output_vec(b * n * c) };
+        scatter_heads(&per_head, dm, &mut o);
+        Ok((CpuStorage::F32(o), Shape::from((b, n, c))))
+    }
+
+    fn bwd(&self, qkv: &Tensor, o: &Tensor, d_o: &Tensor) -> Result<Option<Tensor>> {
+        let d_qkv = qkv.apply_op3_no_bwd(o, &d_o.contiguous()?, &FusedAttentionBackward(*self))?;
+        Ok(Some(d_qkv))
+    }
+}
+
+impl CustomOp3 for FusedAttentionBackward {
+    fn name(&self) -> &'static str {
+        "fused-attention-backward"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let qkv = contiguous_f32(s1, l1, "attention backward: qkv")?;
+        let o = contiguous_f32(s2, l2, "attention backward: output")?;
+        let d_o = contiguous_f32(s3, l3, "attention backward: output gradient")?;
+        let dm = self.0.dims(l1.shape())?;
+        let Dims { b, n, c, d, heads } = dm;
+        if o.len() != b * n * c || d_o.len() != o.len() {
+            candle_core::bail!(
+                "attention backward: output shapes do not match qkv {:?}",
+                l1.dims()
+            );
+        }
+        // Per task: dq [N, d], dkᵀ [d, N], dvᵀ [d, N].
+        // SAFETY: every task writes its whole block (head_backward).
+        let mut per_head = unsafe { super::alloc::output_vec(b * heads * 3 * n * d) };
+        let (scale, level) = (self.0.scale, simd_level());
+        per_head
+            .par_chunks_mut(3 * n * d)
+            .enumerate()
+            .for_each(|(task, grads)| {
+                let packed = Packed::of(qkv, dm, task);
+                let (go, gdo) = (gather_head(o, dm, task, c), gather_head(d_o, dm, task, c));
+                match level {
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: the CPU has these features (simd_level).
+                    2 => unsafe { simd::head_backward_avx512(&packed, &go, &gdo, scale, grads) },
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: as above.
+                    1 => unsafe { simd::head_backward_avx2(&packed, &go, &gdo, scale, grads) },
+                    _ => head_backward(&packed, &go, &gdo, scale, grads),
+                }
+            });
+        // SAFETY: the three scatters write every element (q, k and v thirds of each token).
+        let mut d_qkv = unsafe { super::alloc::output_vec(b * n * 3 * c) };
+        scatter_grads(&per_head, dm, &mut d_qkv);
+        Ok((CpuStorage::F32(d_qkv), l1.shape().clone()))
+    }
+}
+
+/// One (sample, head) task's inputs: q `[N, d]`, `kᵀ` and `vᵀ` `[d, N]`.
+struct Packed {
+    n: usize,
+    d: usize,
+    q: Vec<f32>,
+    kt: Vec<f32>,
+    vt: Vec<f32>,
+}
+
+impl Packed {
+    fn of(qkv: &[f32], dm: Dims, task: usize) -> Self {
+        let Dims { n, c, d, .. } = dm;
+        let (bi, h) = (task / dm.heads, task % dm.heads);
+        let (mut kt, mut vt) = (vec![0f32; d * n], vec![0f32; d * n]);
+        for (i, tok) in qkv[bi * n * 3 * c..(bi + 1) * n * 3 * c]
+            .chunks_exact(3 * c)
+            .enumerate()
+        {
+            for e in 0..d {
+                kt[e * n + i] = tok[c + h * d + e];
+                vt[e * n + i] = tok[2 * c + h * d + e];
+            }
+        }
+        Self {
+            n,
+            d,
+            q: gather_head(qkv, dm, task, 3 * c),
+            kt,
+            vt,
+        }
+    }
+}
+
+/// Head `task % heads` of sample `task / heads` as `[N, d]`, from token rows of `width` floats (the head's channels
+/// at `h·d .. (h+1)·d`).
+fn gather_head(x: &[f32], dm: Dims, task: usize, width: usize) -> Vec<f32> {
+    let Dims { n, d, .. } = dm;
+    let (bi, h) = (task / dm.heads, task % dm.heads);
+    let mut out = Vec::with_capacity(n * d);
+    for tok in x[bi * n * width..(bi + 1) * n * width].chunks_exact(width) {
+        out.extend_from_slice(&tok[h * d..(h + 1) * d]);
+    }
+    out
+}
+
+/// Per-head `[N, d]` blocks (task order) into `[B, N, C]`, in parallel over samples.
+fn scatter_heads(per_head: &[f32], dm: Dims, out: &mut [f32]) {
+    let Dims { n, c, d, heads, .. } = dm;
+    out.par_chunks_mut(n * c)
+        .enumerate()
+        .for_each(|(bi, sample)| {
+            for h in 0..heads {
+                let block = &per_head[(bi * heads + h) * n * d..][..n * d];
+                for (tok, row) in sample.chunks_exact_mut(c).zip(block.chunks_exact(d)) {
+                    tok[h * d..(h + 1) * d].copy_from_slice(row);
+                }
+            }
+        });
+}
+
+/// Per-task `(dq [N, d], dkᵀ [d, N], dvᵀ [d, N])` into `[B, N, 3C]`.
+fn scatter_grads(per_head: &[f32], dm: Dims, d_qkv: &mut [f32]) {
+    let Dims { n, c, d, heads, .. } = dm;
+    d_qkv
+        .par_chunks_mut(n * 3 * c)
+        .enumerate()
+        .for_each(|(bi, sample)| {
+            for h in 0..heads {
+                let g = &per_head[(bi * heads + h) * 3 * n * d..][..3 * n * d];
+                let (dq, rest) = g.split_at(n * d);
+                let (dkt, dvt) = rest.split_at(n * d);
+                for (i, tok) in sample.chunks_exact_mut(3 * c).enumerate() {
+                    for e in 0..d {
+                        tok[h * d + e] = dq[i * d + e];
+                        tok[c + h * d + e] = dkt[e * n + i];
+                        tok[2 * c + h * d + e] = dvt[e * n + i];
+                    }
+                }
+            }
+        });
+}
+
+/// `s_j = Σ_e a_e · bt[e][j]` for every j: a row of `a` (length d) against `bt` `[d, N]`. Blocks of [`LANES`]
+/// columns are summed in registers and stored once (an e-outer loop would load and store all of `s` d times).
+#[inline(always)]
+fn row_times_transposed(a: &[f32], bt: &[f32], n: usize, s: &mut [f32]) {
+    let blocks = n / LANES;
+    for jb in 0..blocks {
+        let j0 = jb * LANES;
+        let mut acc = V16::ZERO;
+        for (e, &ae) in a.iter().enumerate() {
+            acc = acc.mul_add(ae, V16::load(&bt[e * n + j0..]));
+        }
+        acc.store(&mut s[j0..]);
+    }
+    for j in blocks * LANES..n {
+        s[j] = a
+            .iter()
+            .enumerate()
+            .fold(0.0, |acc, (e, &ae)| acc + ae * bt[e * n + j]);
+    }
+}
+
+/// `out_e = Σ_j p_j · bt[e][j]` for every e < d (`bt` `[d, N]`): groups of [`GROUP`] outputs keep one
+/// [`LANES`]-wide partial sum each in registers while `p` is read once per group.
+#[inline(always)]
+fn row_dots(p: &[f32], bt: &[f32], n: usize, out: &mut [f32]) {
+    let blocks = n / LANES;
+    for (g, og) in out.chunks_mut(GROUP).enumerate() {
+        let e0 = g * GROUP;
+        if og.len() < GROUP {
+            for (k, o) in og.iter_mut().enumerate() {
+                *o = dot_lanes(p, &bt[(e0 + k) * n..(e0 + k + 1) * n]);
+            }
+            continue;
+        }
+        let rows: [&[f32]; GROUP] = std::array::from_fn(|k| &bt[(e0 + k) * n..(e0 + k + 1) * n]);
+        let mut acc = [V16::ZERO; GROUP];
+        for jb in 0..blocks {
+            let j0 = jb * LANES;
+            let pv = V16::load(&p[j0..]);
+            acc[0] = acc[0].mul_add_v(pv, V16::load(&rows[0][j0..]));
+            acc[1] = acc[1].mul_add_v(pv, V16::load(&rows[1][j0..]));
+            acc[2] = acc[2].mul_add_v(pv, V16::load(&rows[2][j0..]));
+            acc[3] = acc[3].mul_add_v(pv, V16::load(&rows[3][j0..]));
+            acc[4] = acc[4].mul_add_v(pv, V16::load(&rows[4][j0..]));
+            acc[5] = acc[5].mul_add_v(pv, V16::load(&rows[5][j0..]));
+            acc[6] = acc[6].mul_add_v(pv, V16::load(&rows[6][j0..]));
+            acc[7] = acc[7].mul_add_v(pv, V16::load(&rows[7][j0..]));
+        }
+        for ((o, a), row) in og.iter_mut().zip(&acc).zip(&rows) {
+            let tail: f32 = (blocks * LANES..n).map(|j| p[j] * row[j]).sum();
+            *o = a.sum() + tail;
+        }
+    }
+}
+
+/// Outputs per register group of [`row_dots`] (a head width of 8 is one group).
+const GROUP: usize = 8;
+
+/// Row `i`'s probabilities `softmax(q_i kᵀ · scale)` into `p` (`s` is scratch of N).
+#[inline(always)]
+fn row_probabilities(x: &Packed, i: usize, scale: f32, s: &mut [f32], p: &mut [f32]) {
+    row_times_transposed(&x.q[i * x.d..(i + 1) * x.d], &x.kt, x.n, s);
+    softmax_rows(s, p, x.n, scale);
+}
+
+/// Query rows per block: their scores share every load of `kᵀ` (a block's [`LANES`] × [`ROWS`] partial sums fit
+/// in registers).
+const ROWS: usize = 4;
+
+/// Scores of a block of [`ROWS`] rows of `a` (`[ROWS, d]`) against `bt` (`[d, N]`) into `s` (`[ROWS, N]`).
+#[inline(always)]
+fn block_times_transposed(a: &[f32], d: usize, bt: &[f32], n: usize, s: &mut [f32]) {
+    let blocks = n / LANES;
+    let (a0, a1, a2, a3) = (&a[..d], &a[d..2 * d], &a[2 * d..3 * d], &a[3 * d..4 * d]);
+    for jb in 0..blocks {
+        let j0 = jb * LANES;
+        let (mut s0, mut s1, mut s2, mut s3) = (V16::ZERO, V16::ZERO, V16::ZERO, V16::ZERO);
+        for e in 0..d {
+            let b = V16::load(&bt[e * n + j0..]);
+            s0 = s0.mul_add(a0[e], b);
+            s1 = s1.mul_add(a1[e], b);
+            s2 = s2.mul_add(a2[e], b);
+            s3 = s3.mul_add(a3[e], b);
+        }
+        s0.store(&mut s[j0..]);
+        s1.store(&mut s[n + j0..]);
+        s2.store(&mut s[2 * n + j0..]);
+        s3.store(&mut s[3 * n + j0..]);
+    }
+    for r in 0..ROWS {
+        for j in blocks * LANES..n {
+            s[r * n + j] = (0..d).fold(0.0, |acc, e| acc + a[r * d + e] * bt[e * n + j]);
+        }
+    }
+}
+
+/// Probabilities of query rows `i0 .. i0 + rows` into `p` (`[rows, N]`; `s` is scratch of the same size).
+#[inline(always)]
+fn block_probabilities(
+    x: &Packed,
+    i0: usize,
+    rows: usize,
+    scale: f32,
+    s: &mut [f32],
+    p: &mut [f32],
+) {
+    let (n, d) = (x.n, x.d);
+    if rows == ROWS {
+        block_times_transposed(&x.q[i0 * d..(i0 + ROWS) * d], d, &x.kt, n, s);
+        softmax_rows(&s[..ROWS * n], &mut p[..ROWS * n], n, scale);
+    } else {
+        for r in 0..rows {
+            row_probabilities(
+                x,
+                i0 + r,
+                scale,
+                &mut s[r * n..(r + 1) * n],
+                &mut p[r * n..(r + 1) * n],
+            );
+        }
+    }
+}
+
+/// One head's output `[N, d]`.
+#[inline(always)]
+fn head_forward(x: &Packed, scale: f32, out: &mut [f32]) {
+    let (n, d) = (x.n, x.d);
+    let (mut s, mut p) = (vec![0f32; ROWS * n], vec![0f32; ROWS * n]);
+    for (blk, ob) in out.chunks_mut(ROWS * d).enumerate() {
+        let rows = ob.len() / d;
+        block_probabilities(x, blk * ROWS, rows, scale, &mut s, &mut p);
+        for (pr, or) in p.chunks_exact(n).zip(ob.chunks_exact_mut(d)) {
+            row_dots(pr, &x.vt, n, or);
+        }
+    }
+}
+
+/// One head's gradients `(dq [N, d], dkᵀ [d, N], dvᵀ [d, N])` into `grads`, from its output `o` and output
+/// gradient `d_o` (`[N, d]` each). With `P = softmax(S · scale)`: `dV = Pᵀ dO`, `dP = dO Vᵀ`,
+/// `dS = scale · P ⊙ (dP − rowsum(dO ⊙ O))`, `dQ = dS K`, `dK = dSᵀ Q`. Rows go in blocks of [`ROWS`], so each
+/// `dkᵀ`/`dvᵀ` chunk is loaded and stored once per block.
+#[inline(always)]
+fn head_backward(x: &Packed, o: &[f32], d_o: &[f32], scale: f32, grads: &mut [f32]) {
+    let (n, d) = (x.n, x.d);
+    let (dq, rest) = grads.split_at_mut(n * d);
+    let (dkt, dvt) = rest.split_at_mut(n * d);
+    dkt.fill(0.0);
+    dvt.fill(0.0);
+    let (mut s, mut p, mut ds) = (
+        vec![0f32; ROWS * n],
+        vec![0f32; ROWS * n],
+        vec![0f32; ROWS * n],
+    );
+    for i0 in (0..n).step_by(ROWS) {
+        let rows = ROWS.min(n - i0);
+        block_probabilities(x, i0, rows, scale, &mut s, &mut p);
+        let (ob, dob) = (&o[i0 * d..(i0 + rows) * d], &d_o[i0 * d..(i0 + rows) * d]);
+        // dP_ij = dO_i · v_j, then dS (scaled) in place.
+        if rows == ROWS {
+            block_times_transposed(dob, d, &x.vt, n, &mut ds);
+        } else {
+            for r in 0..rows {
+                row_times_transposed(
+                    &dob[r * d..(r + 1) * d],
+                    &x.vt,
+                    n,
+                    &mut ds[r * n..(r + 1) * n],
+                );
+            }
+        }
+        for r in 0..rows {
+            let (oi, doi) = (&ob[r * d..(r + 1) * d], &dob[r * d..(r + 1) * d]);
+            let delta: f32 = oi.iter().zip(doi).map(|(a, b)| a * b).sum();
+            for (dsj, &pj) in ds[r * n..(r + 1) * n]
+                .iter_mut()
+                .zip(&p[r * n..(r + 1) * n])
+            {
+                *dsj = scale * pj * (*dsj - delta);
+            }
+            row_dots(
+                &ds[r * n..(r + 1) * n],
+                &x.kt,
+                n,
+                &mut dq[(i0 + r) * d..(i0 + r + 1) * d],
+            );
+        }
+        // dkᵀ[e] += Σ_r q_re · dS_r and dvᵀ[e] += Σ_r dO_re · P_r, a chunk of LANES at a time held in registers.
+        let qb = &x.q[i0 * d..(i0 + rows) * d];
+        let blocks = n / LANES;
+        for e in 0..d {
+            let (dk_row, dv_row) = (&mut dkt[e * n..(e + 1) * n], &mut dvt[e * n..(e + 1) * n]);
+            for jb in 0..blocks {
+                let j0 = jb * LANES;
+                let (mut dk, mut dv) = (V16::load(&dk_row[j0..]), V16::load(&dv_row[j0..]));
+                for r in 0..rows {
+                    dk = dk.mul_add(qb[r * d + e], V16::load(&ds[r * n + j0..]));
+                    dv = dv.mul_add(dob[r * d + e], V16::load(&p[r * n + j0..]));
+                }
+                dk.store(&mut dk_row[j0..]);
+                dv.store(&mut dv_row[j0..]);
+            }
+            for j in blocks * LANES..n {
+                for r in 0..rows {
+                    dk_row[j] += qb[r * d + e] * ds[r * n + j];
+                    dv_row[j] += dob[r * d + e] * p[r * n + j];
+                }
+            }
+        }
+    }
+}
+
+/// Lanes of the row loops: 16 independent maxima and partial sums, so the loops vectorise (a single running
+/// `max`/`sum` is a serial dependency LLVM must keep scalar, and with it the `exp` of every score).
+const LANES: usize = 16;
+
+/// `softmax(scale · x)` of every row of `n` values of `xr` into `yr`.
+#[inline(always)]
+fn softmax_rows(xr: &[f32], yr: &mut [f32], n: usize, scale: f32) {
+    let blocks = n / LANES;
+    for (yrow, xrow) in yr.chunks_mut(n).zip(xr.chunks(n)) {
+        let mut m = V16([f32::NEG_INFINITY; LANES]);
+        for jb in 0..blocks {
+            m = m.max(V16::load(&xrow[jb * LANES..]));
+        }
+        let max = xrow[blocks * LANES..]
+            .iter()
+            .fold(m.max_lane(), |a, &b| if b > a { b } else { a });
+        let mut sum = V16::ZERO;
+        for jb in 0..blocks {
+            let e = V16::load(&xrow[jb * LANES..]).scaled_exp(max, scale);
+            e.store(&mut yrow[jb * LANES..]);
+            sum = sum.add(e);
+        }
+        let mut tail = 0f32;
+        for (o, &v) in yrow[blocks * LANES..]
+            .iter_mut()
+            .zip(&xrow[blocks * LANES..])
+        {
+            *o = exp_f32((v - max) * scale);
+            tail += *o;
+        }
+        let inv = 1.0 / (sum.sum() + tail);
+        yrow.iter_mut().for_each(|o| *o *= inv);
+    }
+}
+
+/// `Σ a·b` over [`LANES`] interleaved partial sums.
+#[inline(always)]
+fn dot_lanes(a: &[f32], b: &[f32]) -> f32 {
+    let n = a.len().min(b.len());
+    let blocks = n / LANES;
+    let mut acc = V16::ZERO;
+    for jb in 0..blocks {
+        acc = acc.mul_add_v(V16::load(&a[jb * LANES..]), V16::load(&b[jb * LANES..]));
+    }
+    acc.sum() + (blocks * LANES..n).map(|j| a[j] * b[j]).sum::<f32>()
+}
+
+/// [`LANES`] floats that LLVM keeps in one vector register (AVX-512) or two (AVX2): named values of this type
+/// vectorise reliably where arrays of partial sums indexed in loops fell back to scalar code on the stack.
+#[derive(Clone, Copy)]
+struct V16([f32; LANES]);
+
+impl V16 {
+    const ZERO: Self = Self([0.0; LANES]);
+
+    /// The first [`LANES`] values of `s` (panics if shorter: callers pass whole blocks).
+    #[inline(always)]
+    fn load(s: &[f32]) -> Self {
+        let mut v = [0f32; LANES];
+        v.copy_from_slice(&s[..LANES]);
+        Self(v)
+    }
+
+    #[inline(always)]
+    fn store(self, s: &mut [f32]) {
+        s[..LANES].copy_from_slice(&self.0);
+    }
+
+    /// `self + a · b` (a broadcast).
+    #[inline(always)]
+    fn mul_add(self, a: f32, b: Self) -> Self {
+        let mut v = self.0;
+        for (x, &y) in v.iter_mut().zip(&b.0) {
+            *x += a * y;
+        }
+        Self(v)
+    }
+
+    /// `self + a ⊙ b`.
+    #[inline(always)]
+    fn mul_add_v(self, a: Self, b: Self) -> Self {
+        let mut v = self.0;
+        for ((x, &y), &z) in v.iter_mut().zip(&a.0).zip(&b.0) {
+            *x += y * z;
+        }
+        Self(v)
+    }
+
+    #[inline(always)]
+    fn add(self, b: Self) -> Self {
+        let mut v = self.0;
+        for (x, &y) in v.iter_mut().zip(&b.0) {
+            *x += y;
+        }
+        Self(v)
+    }
+
+    /// Lane-wise maximum (NaN-free inputs; a NaN in `b` is skipped).
+    #[inline(always)]
+    fn max(self, b: Self) -> Self {
+        let mut v = self.0;
+        for (x, &y) in v.iter_mut().zip(&b.0) {
+            *x = if y > *x { y } else { *x };
+        }
+        Self(v)
+    }
+
+    #[inline(always)]
+    fn max_lane(self) -> f32 {
+        self.0
+            .iter()
+            .fold(f32::NEG_INFINITY, |a, &b| if b > a { b } else { a })
+    }
+
+    /// `exp((self − max) · scale)` lane-wise.
+    #[inline(always)]
+    fn scaled_exp(self, max: f32, scale: f32) -> Self {
+        let mut v = self.0;
+        for x in &mut v {
+            *x = exp_f32((*x - max) * scale);
+        }
+        Self(v)
+    }
+
+    #[inline(always)]
+    fn sum(self) -> f32 {
+        self.0.iter().sum()
+    }
+}
+
+/// The row kernels compiled for AVX-512 and for AVX2 + FMA, chosen at run time.
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    use super::Packed;
+
+    #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+    pub(super) unsafe fn head_forward_avx512(x: &Packed, scale: f32, out: &mut [f32]) {
+        super::head_forward(x, scale, out)
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn head_forward_avx2(x: &Packed, scale: f32, out: &mut [f32]) {
+        super::head_forward(x, scale, out)
+    }
+
+    #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+    pub(super) unsafe fn head_backward_avx512(
+        x: &Packed,
+        o: &[f32],
+        d_o: &[f32],
+        scale: f32,
+        grads: &mut [f32],
+    ) {
+        super::head_backward(x, o, d_o, scale, grads)
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn head_backward_avx2(
+        x: &Packed,
+        o: &[f32],
+        d_o: &[f32],
+        scale: f32,
+        grads: &mut [f32],
+    ) {
+        super::head_backward(x, o, d_o, scale, grads)
+    }
+}
