@@ -456,6 +456,13 @@ fn fused_attention_matches_candle_ops() {
     // Channels that do not split into q, k, v of equal heads are refused.
     let bad = rand_t(&[1, 4, 3 * 10], 43);
     assert!(fused_attention(&bad, 3, 1.0).is_err());
+    let empty = Tensor::zeros(
+        (2, 0, 12),
+        candle_core::DType::F32,
+        &candle_core::Device::Cpu,
+    )
+    .unwrap();
+    assert!(fused_attention(&empty, 2, 1.0).is_err());
 }
 
 #[test]

@@ -1,7 +1,8 @@
 //! Fused multi-head self-attention on the CPU: `o = softmax(q kᵀ / √d) v` for every head, read straight from the
 //! token-major `[B, N, 3C]` output of one q/k/v projection and written token-major `[B, N, C]` for `to_out`, so the
-//! `[B, heads, N, N]` scores and the head transposes are never materialised (FlashAttention's recompute idea, on one
-//! row of scores at a time). The backward recomputes each row's probabilities from q and k instead of storing them.
+//! `[B, heads, N, N]` scores and the head transposes are never materialised (FlashAttention's recompute idea, on
+//! blocks of [`ROWS`] rows of scores at a time). The backward recomputes each block's probabilities from q and k
+//! instead of storing them.
 //!
 //! Each task is one (sample, head): its q `[N, d]`, `kᵀ` and `vᵀ` `[d, N]` are packed once, so every inner loop runs
 //! over N contiguous floats (16-lane vectors; head widths of 8 would waste most of a GEMM's register tile).
@@ -42,6 +43,9 @@ impl FusedAttention {
     fn dims(&self, shape: &Shape) -> Result<Dims> {
         let (b, n, c3) = shape.dims3()?;
         let heads = self.heads.max(1);
+        if n == 0 || c3 == 0 {
+            candle_core::bail!("attention: no tokens or no channels (shape {shape:?})");
+        }
         if c3 % 3 != 0 || (c3 / 3) % heads != 0 {
             candle_core::bail!("attention: {c3} channels are not q, k, v of {heads} equal heads");
         }
