@@ -72,17 +72,13 @@ impl Module for Attention {
             attn.matmul(&v)?.transpose(1, 2)?.reshape((b, n, c))? // [B, N, C]
         } else {
             // One projection to [B, N, 3C] (q, k, v side by side), then the fused op.
-            let cat = |f: fn(&Linear) -> Option<&Tensor>| -> Result<Option<Tensor>> {
-                let parts: Option<Vec<&Tensor>> = [&self.to_q, &self.to_k, &self.to_v]
-                    .into_iter()
-                    .map(f)
-                    .collect();
-                parts.map(|p| Tensor::cat(&p, 0)).transpose()
+            let (q, k, v) = (&self.to_q, &self.to_k, &self.to_v);
+            let w_qkv = Tensor::cat(&[q.weight(), k.weight(), v.weight()], 0)?;
+            let b_qkv = match (q.bias(), k.bias(), v.bias()) {
+                (Some(bq), Some(bk), Some(bv)) => Tensor::cat(&[bq, bk, bv], 0)?,
+                _ => candle_core::bail!("attention: the q, k and v projections need biases"),
             };
-            let w_qkv = cat(|l| Some(l.weight()))?.ok_or_else(|| {
-                candle_core::Error::Msg("attention: no projection weights".into())
-            })?;
-            let qkv = Linear::new(w_qkv, cat(Linear::bias)?).forward(&tokens)?;
+            let qkv = Linear::new(w_qkv, Some(b_qkv)).forward(&tokens)?;
             fused_attention(&qkv, heads, scale)?
         };
         let o = self

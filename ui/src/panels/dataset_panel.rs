@@ -9,20 +9,19 @@ use tactile_derender::dataset::SplitName;
 use crate::app::WorkbenchApp;
 use crate::command::Command;
 use crate::panels::image_card::{self, Scale};
-use crate::panels::widgets::path_field;
+use crate::panels::widgets::path_submit;
 use crate::worker::DialogPurpose;
 
 pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     ui.horizontal(|ui| {
-        let r = path_field(
+        if let Some(path) = path_submit(
             ui,
             "Dataset",
             &mut app.inputs.dataset_path,
             "directory made by tnd dataset gen / import",
-        );
-        let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-        if (ui.button("Open dataset").clicked() || enter) && !app.inputs.dataset_path.is_empty() {
-            cmds.push(Command::OpenDataset(app.inputs.dataset_path.trim().into()));
+            "Open dataset",
+        ) {
+            cmds.push(Command::OpenDataset(path.into()));
         }
         if ui.button("Browse…").clicked() {
             cmds.push(Command::Browse(DialogPurpose::OpenDataset));

@@ -8,7 +8,7 @@ use crate::app::WorkbenchApp;
 use crate::command::Command;
 use crate::derender;
 use crate::panels::image_card::{self, Scale};
-use crate::panels::widgets::path_field;
+use crate::panels::widgets::path_submit;
 use crate::state::{DerenderInput, ModelSettings, SamplerName};
 use crate::worker::DialogPurpose;
 use tactile_derender::model::{PredictionType, TimestepSpacing};
@@ -83,18 +83,14 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
                     );
             }
         }
-        let r = path_field(
+        if let Some(path) = path_submit(
             ui,
             "measurement",
             &mut app.inputs.imprint_path,
             ".npy imprint (m)",
-        );
-        let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-        if (ui.button("Use measurement").clicked() || enter) && !app.inputs.imprint_path.is_empty()
-        {
-            d.input = DerenderInput::Measurement {
-                path: app.inputs.imprint_path.trim().into(),
-            };
+            "Use measurement",
+        ) {
+            d.input = DerenderInput::Measurement { path: path.into() };
         }
         if ui.button("Browse…").clicked() {
             cmds.push(Command::Browse(DialogPurpose::OpenDerenderImprint));
@@ -115,16 +111,15 @@ fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>)
         if ui.radio(bundled, "bundled default").clicked() && !bundled {
             cmds.push(Command::SetModel(ModelSettings { path: None }));
         }
-        let r = path_field(
+        if let Some(path) = path_submit(
             ui,
             "checkpoint",
             &mut app.inputs.model_path,
             "model .safetensors",
-        );
-        let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-        if (ui.button("Use checkpoint").clicked() || enter) && !app.inputs.model_path.is_empty() {
+            "Use checkpoint",
+        ) {
             cmds.push(Command::SetModel(ModelSettings {
-                path: Some(app.inputs.model_path.trim().into()),
+                path: Some(path.into()),
             }));
         }
         if ui.button("Open…").clicked() {

@@ -6,7 +6,7 @@ use egui_plot::{Line, Plot, PlotPoints, VLine};
 use tactile_derender::recording::{ReferenceChoice, StreamKind};
 
 use super::image_card::{self, Scale};
-use super::widgets::path_field;
+use super::widgets::path_submit;
 use crate::app::WorkbenchApp;
 use crate::command::Command;
 use crate::recording_view::IMPRINT_RANGE;
@@ -227,19 +227,14 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
 
 fn open_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     ui.horizontal(|ui| {
-        let r = path_field(
+        if let Some(path) = path_submit(
             ui,
             "recording",
             &mut app.inputs.recording_path,
             ".mcap file or frame folder",
-        );
-        let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-        if (ui.button("Open recording").clicked() || enter)
-            && !app.inputs.recording_path.trim().is_empty()
-        {
-            cmds.push(Command::OpenRecording(
-                app.inputs.recording_path.trim().into(),
-            ));
+            "Open recording",
+        ) {
+            cmds.push(Command::OpenRecording(path.into()));
         }
         if ui
             .button("Browse MCAP…")

@@ -67,6 +67,21 @@ pub fn path_field(ui: &mut egui::Ui, label: &str, text: &mut String, hint: &str)
     .inner
 }
 
+/// A [`path_field`] followed by `button`: the trimmed path when the button is clicked or Enter is pressed in the
+/// field, `None` otherwise or when the field is blank.
+pub fn path_submit(
+    ui: &mut egui::Ui,
+    label: &str,
+    text: &mut String,
+    hint: &str,
+    button: &str,
+) -> Option<String> {
+    let r = path_field(ui, label, text, hint);
+    let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+    let submit = ui.button(button).clicked() || enter;
+    (submit && !text.trim().is_empty()).then(|| text.trim().to_owned())
+}
+
 /// A units chooser (m, cm, mm), labelled on its right.
 pub fn units_combo(ui: &mut egui::Ui, id: &str, units: &mut tactile_derender::mesh::Units) -> bool {
     use tactile_derender::mesh::Units;
