@@ -4,9 +4,11 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod support;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use egui_kittest::kittest::Queryable;
 use egui_kittest::Harness;
@@ -27,18 +29,9 @@ fn tnd_binary() -> PathBuf {
     tnd
 }
 
+/// Waits for the workbench's jobs: longer than the other UI tests allow, the debug-build sampler is slow.
 fn wait_for(h: &mut Harness<'_, WorkbenchApp>, what: &str, done: impl Fn(&WorkbenchApp) -> bool) {
-    let t0 = Instant::now();
-    while !done(h.state()) {
-        h.step();
-        assert!(
-            t0.elapsed() < Duration::from_secs(300),
-            "timed out waiting for {what}: {:?}",
-            h.state().errors
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    h.run_ok();
+    support::wait_for_within(h, what, Duration::from_secs(300), done);
 }
 
 fn tnd(args: &[&str]) -> serde_json::Value {
@@ -69,12 +62,7 @@ fn workbench_jobs_and_cli_commands_give_bit_identical_samples_and_poses() {
     );
 
     // The workbench: simulate the default scene, de-render it, register the samples.
-    let mut h = Harness::builder()
-        .with_size([1500.0, 950.0])
-        .build_ui_state(
-            |ui, app: &mut WorkbenchApp| app.show(ui),
-            WorkbenchApp::with_state(state),
-        );
+    let mut h = support::harness(WorkbenchApp::with_state(state));
     wait_for(&mut h, "the simulation", |a| a.sim.is_some());
     h.get_by_label("Run de-rendering").click();
     h.run_ok();

@@ -26,6 +26,16 @@ pub fn wait_for(
     what: &str,
     done: impl Fn(&WorkbenchApp) -> bool,
 ) {
+    wait_for_within(h, what, Duration::from_secs(90), done);
+}
+
+/// [`wait_for`] with another time limit.
+pub fn wait_for_within(
+    h: &mut Harness<'_, WorkbenchApp>,
+    what: &str,
+    limit: Duration,
+    done: impl Fn(&WorkbenchApp) -> bool,
+) {
     let t0 = Instant::now();
     loop {
         h.step();
@@ -33,7 +43,7 @@ pub fn wait_for(
             break;
         }
         assert!(
-            t0.elapsed() < Duration::from_secs(90),
+            t0.elapsed() < limit,
             "timed out waiting for {what}: {:?}",
             h.state().errors
         );
