@@ -197,6 +197,7 @@ fn im2col_conv_matches_candle_forward_and_backward() {
                 Some(bias.as_tensor()),
                 geom,
                 backend,
+                None,
             )
             .unwrap();
             // A non-uniform upstream gradient: loss = sum(y * r).
@@ -639,6 +640,35 @@ fn portable_candle_ops_match_the_fast_kernels() {
                 "{fixture} grad {:?}: {err} (scale {scale})",
                 v.dims()
             );
+        }
+    }
+}
+
+/// A loaded model packs its convolution weights once (`UNet2DModel::freeze`); its output is bit-identical to the
+/// same model packing per call, on both reference configurations and at batch 1 (channel ranges) and 3.
+#[test]
+fn frozen_weights_give_the_per_call_output() {
+    for fixture in ["unet_small", "unet_variant"] {
+        let path = format!("tests/fixtures/{fixture}/unet_ref.safetensors");
+        let model = DiffusionModel::load(Path::new(&path)).unwrap();
+        assert!(
+            model.unet().is_frozen(),
+            "{fixture}: a loaded model is frozen"
+        );
+        let mut per_call = model.unet().clone();
+        per_call.thaw();
+        assert!(!per_call.is_frozen());
+        let cfg = model.config();
+        for (b, seed) in [(1, 41), (3, 42)] {
+            let x = rand_t(
+                &[b, cfg.in_channels, cfg.sample_size, cfg.sample_size],
+                seed,
+            );
+            let t: Vec<f32> = (0..b).map(|i| 10.0 + 90.0 * i as f32).collect();
+            let flat = |y: Tensor| y.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+            let a = flat(model.unet().forward(&x, &t).unwrap());
+            let c = flat(per_call.forward(&x, &t).unwrap());
+            assert_eq!(a, c, "{fixture} batch {b}");
         }
     }
 }

@@ -12,7 +12,9 @@
 use candle_core::{CpuStorage, CustomOp1, Layout, Module, Result, Shape, Tensor};
 use candle_nn::VarBuilder;
 
-use super::kernels::sgemm::GemmBackend;
+use std::sync::Arc;
+
+use super::kernels::sgemm::{GemmBackend, PackedA};
 use rayon::prelude::*;
 
 /// Which convolution implementation a model uses (per model: [`super::UNet2DModel::set_conv_backend`]).
@@ -53,6 +55,8 @@ pub struct Conv2d {
     pub geom: ConvGeom,
     /// The implementation (default: [`ConvBackend::Direct`]).
     pub backend: ConvBackend,
+    /// The weight packed once for inference by [`Conv2d::freeze`] (our CPU paths; `None`: packed per call).
+    pub frozen: Option<Arc<PackedA>>,
 }
 
 impl Conv2d {
@@ -76,6 +80,7 @@ impl Conv2d {
             weight,
             bias,
             backend: ConvBackend::default(),
+            frozen: None,
             geom: ConvGeom {
                 kernel,
                 stride,
@@ -86,19 +91,51 @@ impl Conv2d {
     }
 }
 
-impl Module for Conv2d {
-    fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        conv2d(x, &self.weight, self.bias.as_ref(), self.geom, self.backend)
+impl Conv2d {
+    /// Packs the weight once for the CPU GEMM, for inference: our convolutions otherwise re-pack it on every call,
+    /// which at batch 1 was an eighth of a forward pass, on one thread. Later changes of the weight's values are
+    /// not seen until [`Conv2d::thaw`] (or another `freeze`): freeze a model whose weights are final (a loaded
+    /// checkpoint), never one being trained. Nothing happens off the CPU.
+    pub fn freeze(&mut self) -> Result<()> {
+        self.frozen = None;
+        if !self.weight.device().is_cpu() {
+            return Ok(());
+        }
+        let co = self.weight.dim(0)?;
+        let w = self.weight.flatten_all()?.to_vec1::<f32>()?;
+        let k = w.len() / co.max(1);
+        self.frozen = Some(Arc::new(PackedA::new(co, k, &w, k, 1)?));
+        Ok(())
+    }
+
+    /// Drops the weight packed by [`Conv2d::freeze`]: every call packs the current weight again.
+    pub fn thaw(&mut self) {
+        self.frozen = None;
     }
 }
 
-/// Convolution of `x` `[B, Cin, H, W]` with `w` `[Cout, Cin, k, k]` plus `bias`, by the chosen backend.
+impl Module for Conv2d {
+    fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        conv2d(
+            x,
+            &self.weight,
+            self.bias.as_ref(),
+            self.geom,
+            self.backend,
+            self.frozen.as_ref(),
+        )
+    }
+}
+
+/// Convolution of `x` `[B, Cin, H, W]` with `w` `[Cout, Cin, k, k]` plus `bias`, by the chosen backend; `frozen`
+/// is `w` packed for our CPU paths ([`Conv2d::freeze`]), used where it fits.
 pub fn conv2d(
     x: &Tensor,
     w: &Tensor,
     bias: Option<&Tensor>,
     geom: ConvGeom,
     backend: ConvBackend,
+    frozen: Option<&Arc<PackedA>>,
 ) -> Result<Tensor> {
     let (b, _c_in, h, wd) = x.dims4()?;
     let c_out = w.dim(0)?;
@@ -116,9 +153,9 @@ pub fn conv2d(
                 && super::kernels::conv_direct::supports(geom)
                 && GemmBackend::detect() == GemmBackend::Avx512;
             if direct {
-                super::kernels::conv_direct::conv2d_direct(x, w, bias, geom)?
+                super::kernels::conv_direct::conv2d_direct(x, w, bias, geom, frozen)?
             } else {
-                super::kernels::conv_tiled::conv2d_tiled(x, w, bias, geom)?
+                super::kernels::conv_tiled::conv2d_tiled(x, w, bias, geom, frozen)?
             }
         }
         ConvBackend::Candle => {

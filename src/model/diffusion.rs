@@ -33,12 +33,15 @@ impl DiffusionModel {
     }
 
     /// [`Self::load`] onto `device` ([`super::device::open_device`]); devices other than the CPU run candle's own
-    /// tensor ops ([`super::kernels::Kernels::Portable`]).
+    /// tensor ops ([`super::kernels::Kernels::Portable`]). On the CPU the convolution weights are packed once
+    /// ([`UNet2DModel::freeze`]): a loaded model's weights do not change.
     pub fn load_on(path: &Path, device: &Device) -> Result<Self, ModelError> {
         let (file, config) = locate(path)?;
         let mut vars = build(&config, device)?;
         assign(&vars.varmap, &file, "")?;
-        if !device.is_cpu() {
+        if device.is_cpu() {
+            vars.unet.freeze()?;
+        } else {
             vars.unet.set_kernels(super::kernels::Kernels::Portable);
         }
         Ok(Self::from_vars(vars, config, path))

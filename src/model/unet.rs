@@ -64,6 +64,29 @@ impl UNet2DModel {
 
     /// Run every convolution with `backend` (benchmarks compare them; the default is the fastest).
     pub fn set_conv_backend(&mut self, backend: super::conv::ConvBackend) {
+        for c in self.convs_mut() {
+            c.backend = backend;
+        }
+    }
+
+    /// Packs every convolution's weight once for inference ([`Conv2d::freeze`]): for a model whose weights are
+    /// final (a loaded checkpoint); changes to them afterwards are not seen by the convolutions until
+    /// [`UNet2DModel::thaw`]. Only our CPU convolutions use it.
+    pub fn freeze(&mut self) -> Result<()> {
+        self.convs_mut().into_iter().try_for_each(Conv2d::freeze)
+    }
+
+    /// Undoes [`UNet2DModel::freeze`] (before training a frozen model).
+    pub fn thaw(&mut self) {
+        self.convs_mut().into_iter().for_each(Conv2d::thaw);
+    }
+
+    /// Whether [`UNet2DModel::freeze`] holds packed weights.
+    pub fn is_frozen(&self) -> bool {
+        self.conv_in.frozen.is_some()
+    }
+
+    fn convs_mut(&mut self) -> Vec<&mut Conv2d> {
         let mut convs: Vec<&mut Conv2d> = vec![&mut self.conv_in, &mut self.conv_out];
         for b in &mut self.down_blocks {
             convs.extend(b.resnets.iter_mut().flat_map(|r| r.convs_mut()));
@@ -76,9 +99,7 @@ impl UNet2DModel {
             convs.extend(b.resnets.iter_mut().flat_map(|r| r.convs_mut()));
             convs.extend(b.upsamplers.as_mut().map(|u| &mut u.conv));
         }
-        for c in convs {
-            c.backend = backend;
-        }
+        convs
     }
 
     /// Build from `vb` (names as in diffusers); `config` must have passed [`UNet2DConfig::validate`].

@@ -8,16 +8,20 @@
 //! tile's block to accumulate `dWᵀ += cols·dYᵀ` and scatters `Wᵀ·dY` back (col2im). Work is split by
 //! sample (and by tile for a single-sample forward) with a fixed summation order, so results are deterministic.
 
+use std::sync::Arc;
+
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
 
-use super::sgemm::{matmul_nt, Init, PackedA};
+use super::sgemm::{matmul_nt, GemmBackend, Init, PackedA};
 use crate::model::conv::ConvGeom;
 
 /// Forward op on `(x [B,Cin,H,W], w [Cout,Cin,k,k], bias [Cout])`.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct TiledConv {
     pub geom: ConvGeom,
+    /// `w` packed once for inference (used when it fits, else `w` is packed per call).
+    pub frozen: Option<Arc<PackedA>>,
 }
 
 /// Backward op on `(x, w, dy)` returning `[dx…, dw…, db…]` flat.
@@ -27,9 +31,19 @@ struct TiledConvBackward {
 }
 
 /// Convolution by the tiled path (differentiable).
-pub fn conv2d_tiled(x: &Tensor, w: &Tensor, bias: &Tensor, geom: ConvGeom) -> Result<Tensor> {
+pub fn conv2d_tiled(
+    x: &Tensor,
+    w: &Tensor,
+    bias: &Tensor,
+    geom: ConvGeom,
+    frozen: Option<&Arc<PackedA>>,
+) -> Result<Tensor> {
+    let op = TiledConv {
+        geom,
+        frozen: frozen.cloned(),
+    };
     x.contiguous()?
-        .apply_op3(&w.contiguous()?, &bias.contiguous()?, TiledConv { geom })
+        .apply_op3(&w.contiguous()?, &bias.contiguous()?, op)
 }
 
 struct Dims {
@@ -209,7 +223,8 @@ impl CustomOp3 for TiledConv {
         // SAFETY: every (sample, tile) item writes all co rows of its columns.
         let mut y = unsafe { super::alloc::output_vec(d.b * co * hw) };
         let yp = SendPtr(y.as_mut_ptr());
-        let w_packed = PackedA::new(co, d.k, w, d.k, 1)?;
+        let w_packed =
+            PackedA::frozen_or_pack(self.frozen.as_deref(), GemmBackend::detect(), co, d.k, w)?;
         let items: Vec<(usize, usize)> = (0..d.b)
             .flat_map(|b| (0..d.tiles()).map(move |t| (b, t)))
             .collect();

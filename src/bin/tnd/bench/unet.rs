@@ -51,6 +51,10 @@ pub struct UnetBenchArgs {
     /// Parts to skip: forward, train.
     #[arg(long, value_delimiter = ',')]
     pub skip: Vec<String>,
+    /// Time the forward passes with the convolution weights packed on every call, as training does, instead of
+    /// once, as a loaded model does (`tnd sample`, `tnd eval`, the workbench).
+    #[arg(long)]
+    pub pack_per_call: bool,
 }
 
 /// The peer script's `DEFAULT_CONFIG` (diffusers defaults elsewhere, e.g. `attention_head_dim` 8).
@@ -122,6 +126,9 @@ pub fn run(a: &UnetBenchArgs) -> Result<()> {
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let t_max = cfg.tactile_derender.num_train_timesteps;
     if !a.skip.iter().any(|x| x == "forward") {
+        if !a.pack_per_call {
+            vars.unet.freeze()?;
+        }
         for &b in &a.batches {
             let x = randn(&mut rng, (b, cin, s, s))?;
             let t: Vec<f32> = (0..b).map(|_| rng.random_range(0..t_max) as f32).collect();
@@ -137,11 +144,14 @@ pub fn run(a: &UnetBenchArgs) -> Result<()> {
             println!(
                 "{}",
                 json!({"bench": "unet_forward", "batch": b, "median_s": median_s,
+                    "weights_packed": if a.pack_per_call { "per call" } else { "once" },
                     "samples_per_s": b as f64 / median_s, "runs": a.runs})
             );
         }
     }
     if !a.skip.iter().any(|x| x == "train") {
+        // The weights change every step.
+        vars.unet.thaw();
         let b = a.train_batch;
         let schedule = NoiseSchedule::cosine(t_max);
         let mut adam = Adam::new(named_vars(&vars.varmap).into_iter().collect(), 1e-4)?;

@@ -13,6 +13,7 @@
 #[cfg(target_arch = "x86_64")]
 pub mod avx512;
 
+use std::ops::Range;
 use std::sync::OnceLock;
 
 use candle_core::Result;
@@ -115,13 +116,7 @@ impl PackedA {
                 a.len()
             );
         }
-        // Our register blocks are 8 rows and 16 columns wide: a dimension below 8 (the 1-channel output layer) runs
-        // as fast or faster on the gemm crate (19 against 17 GFLOP/s for Wᵀ·dY with one channel).
-        let backend = if m.min(k) < SMALL_DIM {
-            GemmBackend::GemmCrate
-        } else {
-            backend.usable()
-        };
+        let backend = Self::resolve_backend(backend, m, k);
         let data = match backend {
             #[cfg(target_arch = "x86_64")]
             GemmBackend::Avx512 => avx512::pack_a(m, k, a, rs, cs),
@@ -141,9 +136,44 @@ impl PackedA {
         })
     }
 
+    /// The backend [`PackedA::with_backend`] packs an `m × k` operand for when asked for `backend`.
+    pub fn resolve_backend(backend: GemmBackend, m: usize, k: usize) -> GemmBackend {
+        // Our register blocks are 8 rows and 16 columns wide: a dimension below 8 (the 1-channel output layer) runs
+        // as fast or faster on the gemm crate (19 against 17 GFLOP/s for Wᵀ·dY with one channel).
+        if m.min(k) < SMALL_DIM {
+            GemmBackend::GemmCrate
+        } else {
+            backend.usable()
+        }
+    }
+
     /// The backend this operand was packed for.
     pub fn backend(&self) -> GemmBackend {
         self.backend
+    }
+
+    /// `(m, k)`: rows and inner size.
+    pub fn dims(&self) -> (usize, usize) {
+        (self.m, self.k)
+    }
+
+    /// The row-major `m × k` matrix `a` packed for `backend`: `frozen` where it was packed for exactly that (a
+    /// model's weights packed once for inference, [`crate::model::conv::Conv2d::freeze`]), else packed now.
+    pub fn frozen_or_pack<'a>(
+        frozen: Option<&'a PackedA>,
+        backend: GemmBackend,
+        m: usize,
+        k: usize,
+        a: &[f32],
+    ) -> Result<std::borrow::Cow<'a, PackedA>> {
+        match frozen {
+            Some(p) if p.dims() == (m, k) && p.backend == Self::resolve_backend(backend, m, k) => {
+                Ok(std::borrow::Cow::Borrowed(p))
+            }
+            _ => Ok(std::borrow::Cow::Owned(Self::with_backend(
+                backend, m, k, a, k, 1,
+            )?)),
+        }
     }
 
     /// `C[m, n] = init + A · B[k, n]`, B and C row-major at row strides `ldb` and `ldc`; every element is summed
@@ -214,6 +244,16 @@ impl PackedA {
 }
 
 impl PackedA {
+    /// Rows of A that [`PackedA::matmul_offsets_rows_raw`] can start a row range at a multiple of (the panel
+    /// height of the AVX-512 packing, 1 for the row-major one).
+    pub fn row_align(&self) -> usize {
+        match self.backend {
+            #[cfg(target_arch = "x86_64")]
+            GemmBackend::Avx512 => avx512::MR,
+            _ => 1,
+        }
+    }
+
     /// `C[m, n] = init + A · B` where row `p` of B is `b[offs[p]..offs[p] + n]` (`offs` has `k` entries): the
     /// shifted rows of a padded image, so a convolution needs no im2col copy. Summation order as
     /// [`PackedA::matmul`]. The `gemm` crate cannot read such rows: that backend runs a portable loop.
@@ -229,21 +269,56 @@ impl PackedA {
         ldc: usize,
         init: Init,
     ) -> Result<()> {
-        let (m, k) = (self.m, self.k);
-        check_bias(init, m)?;
+        self.matmul_offsets_rows_raw(0..self.m, n, b, offs, c, ldc, init)
+    }
+
+    /// Rows `rows` of [`PackedA::matmul_offsets_raw`]'s product: `c` points to row `rows.start` of C and holds
+    /// `rows.len()` rows; an `Init::RowBias` still holds one value per row of the whole of A. `rows.start` must be
+    /// a multiple of [`PackedA::row_align`]. Each element is summed exactly as in the whole product, so threads
+    /// that split the rows of one product between them give the same bits as one thread.
+    ///
+    /// # Safety
+    /// As [`PackedA::matmul_raw`] for the `rows.len()` rows of C at `c`.
+    #[allow(clippy::too_many_arguments)]
+    pub unsafe fn matmul_offsets_rows_raw(
+        &self,
+        rows: Range<usize>,
+        n: usize,
+        b: &[f32],
+        offs: &[usize],
+        c: *mut f32,
+        ldc: usize,
+        init: Init,
+    ) -> Result<()> {
+        let k = self.k;
+        check_bias(init, self.m)?;
         check_offsets(offs, k, n, b.len(), "B")?;
+        if rows.end > self.m || rows.start > rows.end || !rows.start.is_multiple_of(self.row_align()) {
+            candle_core::bail!(
+                "sgemm: rows {rows:?} of a {}-row A (starts at multiples of {})",
+                self.m,
+                self.row_align()
+            );
+        }
+        let m = rows.len();
         if m == 0 || n == 0 {
             return Ok(());
         }
+        let init = match init {
+            Init::RowBias(bias) => Init::RowBias(&bias[rows.clone()]),
+            other => other,
+        };
         match self.backend {
             #[cfg(target_arch = "x86_64")]
-            // SAFETY: the backend is usable (checked when packing); every row of B checked above, C by the caller.
+            // SAFETY: the backend is usable (checked when packing); every row of B checked above, C by the caller;
+            // the panels from `rows.start / MR` on hold rows `rows` (rows.start is a panel boundary).
             GemmBackend::Avx512 => {
-                let rows = avx512::Offsets {
+                let b_rows = avx512::Offsets {
                     base: b.as_ptr(),
                     offs: offs.as_ptr(),
                 };
-                avx512::gemm_packed(m, n, k, &self.data, rows, c, ldc, init);
+                let panels = &self.data[rows.start * k..];
+                avx512::gemm_packed(m, n, k, panels, b_rows, c, ldc, init);
             }
             _ => {
                 for i in 0..m {
@@ -254,7 +329,8 @@ impl PackedA {
                         Init::Accumulate => {}
                         Init::RowBias(bias) => row.fill(bias[i]),
                     }
-                    for (&a, &o) in self.data[i * k..(i + 1) * k].iter().zip(offs) {
+                    let a = &self.data[(rows.start + i) * k..(rows.start + i + 1) * k];
+                    for (&a, &o) in a.iter().zip(offs) {
                         for (y, &v) in row.iter_mut().zip(&b[o..o + n]) {
                             *y += a * v;
                         }

@@ -319,3 +319,56 @@ fn offset_rows_match_gathered_rows_and_check_bounds(backend: GemmBackend) {
         );
     }
 }
+
+// A product computed in row ranges (as threads split a convolution's output channels) gives the whole product's
+// bits, bias included; a range not starting on a panel boundary, or past A's rows, is an error.
+on_both_backends!(
+    row_ranges_give_the_whole_product,
+    row_ranges_give_the_whole_product_gemm_crate,
+    row_ranges_give_the_whole_product_avx512
+);
+
+fn row_ranges_give_the_whole_product(backend: GemmBackend) {
+    let (m, k, n) = (37, 20, 53);
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let a = random(&mut rng, m * k);
+    let bias = random(&mut rng, m);
+    let img = random(&mut rng, 300);
+    let offs: Vec<usize> = (0..k).map(|p| (p * 11) % 240).collect();
+    let pa = PackedA::with_backend(backend, m, k, &a, k, 1).unwrap();
+    let mut want = vec![0f32; m * n];
+    // SAFETY: want holds m rows of n floats.
+    unsafe { pa.matmul_offsets_raw(n, &img, &offs, want.as_mut_ptr(), n, Init::RowBias(&bias)) }
+        .unwrap();
+    let align = pa.row_align();
+    let mut got = vec![0f32; m * n];
+    let cuts = [0, 2 * align, 3 * align, m];
+    for r in cuts.windows(2) {
+        // SAFETY: rows r[0]..r[1] of got, n floats each.
+        unsafe {
+            pa.matmul_offsets_rows_raw(
+                r[0]..r[1],
+                n,
+                &img,
+                &offs,
+                got.as_mut_ptr().add(r[0] * n),
+                n,
+                Init::RowBias(&bias),
+            )
+        }
+        .unwrap();
+    }
+    assert_eq!(got, want, "{backend:?}");
+    let mut c = vec![0f32; m * n];
+    // SAFETY: c holds m rows of n floats; the calls are refused before writing.
+    unsafe {
+        assert!(pa
+            .matmul_offsets_rows_raw(30..m + 1, n, &img, &offs, c.as_mut_ptr(), n, Init::Zero)
+            .is_err());
+        if align > 1 {
+            assert!(pa
+                .matmul_offsets_rows_raw(3..9, n, &img, &offs, c.as_mut_ptr(), n, Init::Zero)
+                .is_err());
+        }
+    }
+}
