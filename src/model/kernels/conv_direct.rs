@@ -501,7 +501,9 @@ mod tests {
         assert_eq!(channel_chunk(1, 1, 1, 2), 1);
         for (items, co, align) in [(1, 40, 8), (3, 9, 1), (5, 200, 8), (1, 8, 8)] {
             let chunk = channel_chunk(items, co, align, 2);
-            assert!(chunk.is_multiple_of(align) && chunk > 0 && chunk <= co.next_multiple_of(align));
+            assert!(
+                chunk.is_multiple_of(align) && chunk > 0 && chunk <= co.next_multiple_of(align)
+            );
         }
     }
 

@@ -293,7 +293,10 @@ impl PackedA {
         let k = self.k;
         check_bias(init, self.m)?;
         check_offsets(offs, k, n, b.len(), "B")?;
-        if rows.end > self.m || rows.start > rows.end || !rows.start.is_multiple_of(self.row_align()) {
+        if rows.end > self.m
+            || rows.start > rows.end
+            || !rows.start.is_multiple_of(self.row_align())
+        {
             candle_core::bail!(
                 "sgemm: rows {rows:?} of a {}-row A (starts at multiples of {})",
                 self.m,
