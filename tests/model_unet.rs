@@ -404,39 +404,40 @@ fn upsample_op_matches_broadcast_reshape() {
 #[test]
 fn fused_attention_matches_candle_ops() {
     use tactile_derender::model::kernels::attention::fused_attention;
-    // Reference: the heads split out, softmax(q kᵀ · scale) v with candle's matmul and softmax, heads merged.
+    // Reference: the heads split out of the channel-major [B, 3C, N] input, softmax(q kᵀ · scale) v with candle's
+    // matmul and softmax, heads merged back channel-major [B, C, N].
     let reference = |qkv: &Tensor, heads: usize, scale: f32| -> Tensor {
-        let (b, n, c3) = qkv.dims3().unwrap();
+        let (b, c3, n) = qkv.dims3().unwrap();
         let (c, d) = (c3 / 3, c3 / 3 / heads);
         let part = |i: usize| {
-            qkv.narrow(2, i * c, c)
+            qkv.narrow(1, i * c, c)
                 .unwrap()
-                .reshape((b, n, heads, d))
+                .reshape((b, heads, d, n))
                 .unwrap()
-                .transpose(1, 2)
+                .transpose(2, 3)
                 .unwrap()
                 .contiguous()
-                .unwrap()
+                .unwrap() // [B, heads, N, d]
         };
         let (q, k, v) = (part(0), part(1), part(2));
         let s = (q.matmul(&k.t().unwrap()).unwrap() * f64::from(scale)).unwrap();
         let p = candle_nn::ops::softmax(&s, candle_core::D::Minus1).unwrap();
         p.matmul(&v)
             .unwrap()
-            .transpose(1, 2)
+            .transpose(2, 3)
             .unwrap()
-            .reshape((b, n, c))
+            .reshape((b, c, n))
             .unwrap()
     };
     // (batch, tokens, heads, head width): rows of 37 (two 16-lane blocks and a tail), one head over all channels,
     // the peer config's 16 heads of 8 at 16 × 16, and a 3-token edge case.
     for (b, n, heads, d) in [(2, 37, 3, 5), (1, 64, 1, 12), (2, 256, 16, 8), (3, 3, 2, 4)] {
         let c = heads * d;
-        let qkv = Var::from_tensor(&(rand_t(&[b, n, 3 * c], 41) * 3.0).unwrap()).unwrap();
+        let qkv = Var::from_tensor(&(rand_t(&[b, 3 * c, n], 41) * 3.0).unwrap()).unwrap();
         let scale = 1.0 / (d as f32).sqrt();
         let y1 = fused_attention(qkv.as_tensor(), heads, scale).unwrap();
         let y2 = reference(qkv.as_tensor(), heads, scale);
-        assert_eq!(y1.dims(), &[b, n, c]);
+        assert_eq!(y1.dims(), &[b, c, n]);
         let scale_y = max_abs(&y2, &y2.zeros_like().unwrap());
         assert!(
             max_abs(&y1, &y2) < 1e-5 * scale_y.max(1.0),
@@ -455,10 +456,10 @@ fn fused_attention_matches_candle_ops() {
         );
     }
     // Channels that do not split into q, k, v of equal heads are refused.
-    let bad = rand_t(&[1, 4, 3 * 10], 43);
+    let bad = rand_t(&[1, 3 * 10, 4], 43);
     assert!(fused_attention(&bad, 3, 1.0).is_err());
     let empty = Tensor::zeros(
-        (2, 0, 12),
+        (2, 12, 0),
         candle_core::DType::F32,
         &candle_core::Device::Cpu,
     )

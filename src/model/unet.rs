@@ -36,26 +36,22 @@ impl UNet2DModel {
         } else {
             super::conv::ConvBackend::default()
         });
+        for a in self.attentions_mut() {
+            a.portable = portable;
+            a.group_norm.portable = portable;
+        }
         let mut norms = vec![&mut self.conv_norm_out];
-        let mut attentions = Vec::new();
         for b in &mut self.down_blocks {
             norms.extend(b.resnets.iter_mut().flat_map(|r| r.norms_mut()));
-            attentions.extend(b.attentions.iter_mut());
         }
         if let Some(m) = &mut self.mid_block {
             norms.extend(m.resnets.iter_mut().flat_map(|r| r.norms_mut()));
-            attentions.extend(m.attentions.iter_mut());
         }
         for b in &mut self.up_blocks {
             norms.extend(b.resnets.iter_mut().flat_map(|r| r.norms_mut()));
-            attentions.extend(b.attentions.iter_mut());
             if let Some(u) = &mut b.upsamplers {
                 u.portable = portable;
             }
-        }
-        for a in attentions {
-            a.portable = portable;
-            a.group_norm.portable = portable;
         }
         for n in norms {
             n.portable = portable;
@@ -73,12 +69,32 @@ impl UNet2DModel {
     /// final (a loaded checkpoint); changes to them afterwards are not seen by the convolutions until
     /// [`UNet2DModel::thaw`]. Only our CPU convolutions use it.
     pub fn freeze(&mut self) -> Result<()> {
-        self.convs_mut().into_iter().try_for_each(Conv2d::freeze)
+        self.convs_mut().into_iter().try_for_each(Conv2d::freeze)?;
+        self.attentions_mut()
+            .into_iter()
+            .try_for_each(super::attention::Attention::freeze)
     }
 
     /// Undoes [`UNet2DModel::freeze`] (before training a frozen model).
     pub fn thaw(&mut self) {
         self.convs_mut().into_iter().for_each(Conv2d::thaw);
+        self.attentions_mut()
+            .into_iter()
+            .for_each(super::attention::Attention::thaw);
+    }
+
+    fn attentions_mut(&mut self) -> Vec<&mut super::attention::Attention> {
+        let mut attentions = Vec::new();
+        for b in &mut self.down_blocks {
+            attentions.extend(b.attentions.iter_mut());
+        }
+        if let Some(m) = &mut self.mid_block {
+            attentions.extend(m.attentions.iter_mut());
+        }
+        for b in &mut self.up_blocks {
+            attentions.extend(b.attentions.iter_mut());
+        }
+        attentions
     }
 
     /// Whether [`UNet2DModel::freeze`] holds packed weights.

@@ -1,11 +1,13 @@
 //! Fused multi-head self-attention on the CPU: `o = softmax(q kᵀ / √d) v` for every head, read straight from the
-//! token-major `[B, N, 3C]` output of one q/k/v projection and written token-major `[B, N, C]` for `to_out`, so the
+//! channel-major `[B, 3C, N]` output of one q/k/v projection (a 1 × 1 convolution of the image: no token-major
+//! transpose) and written channel-major `[B, C, N]` for `to_out` (another 1 × 1 convolution), so the
 //! `[B, heads, N, N]` scores and the head transposes are never materialised (FlashAttention's recompute idea, on
 //! blocks of [`ROWS`] rows of scores at a time). The backward recomputes each block's probabilities from q and k
 //! instead of storing them.
 //!
-//! Each task is one (sample, head): its q `[N, d]`, `kᵀ` and `vᵀ` `[d, N]` are packed once, so every inner loop runs
-//! over N contiguous floats (16-lane vectors; head widths of 8 would waste most of a GEMM's register tile).
+//! Each task is one (sample, head): its q `[N, d]`, `kᵀ` and `vᵀ` `[d, N]` (the latter two are the layout's own
+//! rows) are packed once, so every inner loop runs over N contiguous floats (16-lane vectors; head widths of 8
+//! would waste most of a GEMM's register tile).
 
 use candle_core::{CpuStorage, CustomOp1, CustomOp3, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
@@ -13,8 +15,9 @@ use rayon::prelude::*;
 use crate::model::contiguous_f32;
 use crate::model::group_norm::{exp_f32, simd_level};
 
-/// `softmax(q kᵀ · scale) v` per head of `qkv` `[B, N, 3C]` (q, k, v side by side on the last axis, head `h` at
-/// channels `h·d .. (h+1)·d` of each) → `[B, N, C]`, differentiable.
+/// `softmax(q kᵀ · scale) v` per head of `qkv` `[B, 3C, N]` (channel-major: q, k, v one after the other on the
+/// channel axis, head `h` at channels `h·d .. (h+1)·d` of each, N tokens per channel) → `[B, C, N]`,
+/// differentiable.
 pub fn fused_attention(qkv: &Tensor, heads: usize, scale: f32) -> Result<Tensor> {
     qkv.contiguous()?.apply_op1(FusedAttention { heads, scale })
 }
@@ -41,7 +44,7 @@ struct Dims {
 
 impl FusedAttention {
     fn dims(&self, shape: &Shape) -> Result<Dims> {
-        let (b, n, c3) = shape.dims3()?;
+        let (b, c3, n) = shape.dims3()?;
         let heads = self.heads.max(1);
         if n == 0 || c3 == 0 {
             candle_core::bail!("attention: no tokens or no channels (shape {shape:?})");
@@ -91,7 +94,7 @@ impl CustomOp1 for FusedAttention {
         // SAFETY: scatter_heads writes every element.
         let mut o = unsafe { super::alloc::output_vec(b * n * c) };
         scatter_heads(&per_head, dm, &mut o);
-        Ok((CpuStorage::F32(o), Shape::from((b, n, c))))
+        Ok((CpuStorage::F32(o), Shape::from((b, c, n))))
     }
 
     fn bwd(&self, qkv: &Tensor, o: &Tensor, d_o: &Tensor) -> Result<Option<Tensor>> {
@@ -165,71 +168,65 @@ impl Packed {
     fn of(qkv: &[f32], dm: Dims, task: usize) -> Self {
         let Dims { n, c, d, .. } = dm;
         let (bi, h) = (task / dm.heads, task % dm.heads);
-        let (mut kt, mut vt) = (vec![0f32; d * n], vec![0f32; d * n]);
-        for (i, tok) in qkv[bi * n * 3 * c..(bi + 1) * n * 3 * c]
-            .chunks_exact(3 * c)
-            .enumerate()
-        {
-            for e in 0..d {
-                kt[e * n + i] = tok[c + h * d + e];
-                vt[e * n + i] = tok[2 * c + h * d + e];
-            }
-        }
+        let sample = &qkv[bi * 3 * c * n..(bi + 1) * 3 * c * n];
+        // kᵀ and vᵀ are d consecutive channel rows of the layout.
+        let rows = |first: usize| sample[(first + h * d) * n..(first + (h + 1) * d) * n].to_vec();
         Self {
             n,
             d,
             q: gather_head(qkv, dm, task, 3 * c),
-            kt,
-            vt,
+            kt: rows(c),
+            vt: rows(2 * c),
         }
     }
 }
 
-/// Head `task % heads` of sample `task / heads` as `[N, d]`, from token rows of `width` floats (the head's channels
-/// at `h·d .. (h+1)·d`).
-fn gather_head(x: &[f32], dm: Dims, task: usize, width: usize) -> Vec<f32> {
+/// Head `task % heads` of sample `task / heads` as `[N, d]` (token-major), from a channel-major layout of
+/// `channels` rows of N per sample (the head's channels at `h·d .. (h+1)·d`).
+fn gather_head(x: &[f32], dm: Dims, task: usize, channels: usize) -> Vec<f32> {
     let Dims { n, d, .. } = dm;
     let (bi, h) = (task / dm.heads, task % dm.heads);
-    let mut out = Vec::with_capacity(n * d);
-    for tok in x[bi * n * width..(bi + 1) * n * width].chunks_exact(width) {
-        out.extend_from_slice(&tok[h * d..(h + 1) * d]);
+    let rows = &x[(bi * channels + h * d) * n..(bi * channels + (h + 1) * d) * n];
+    let mut out = vec![0f32; n * d];
+    for (e, row) in rows.chunks_exact(n).enumerate() {
+        for (i, &v) in row.iter().enumerate() {
+            out[i * d + e] = v;
+        }
     }
     out
 }
 
-/// Per-head `[N, d]` blocks (task order) into `[B, N, C]`, in parallel over samples.
-fn scatter_heads(per_head: &[f32], dm: Dims, out: &mut [f32]) {
-    let Dims { n, c, d, heads, .. } = dm;
-    out.par_chunks_mut(n * c)
-        .enumerate()
-        .for_each(|(bi, sample)| {
-            for h in 0..heads {
-                let block = &per_head[(bi * heads + h) * n * d..][..n * d];
-                for (tok, row) in sample.chunks_exact_mut(c).zip(block.chunks_exact(d)) {
-                    tok[h * d..(h + 1) * d].copy_from_slice(row);
-                }
-            }
-        });
+/// `block` `[N, d]` (token-major) into the `d` channel rows of N at `rows`.
+fn transpose_into(block: &[f32], n: usize, d: usize, rows: &mut [f32]) {
+    for (e, row) in rows.chunks_exact_mut(n).enumerate() {
+        for (i, r) in row.iter_mut().enumerate() {
+            *r = block[i * d + e];
+        }
+    }
 }
 
-/// Per-task `(dq [N, d], dkᵀ [d, N], dvᵀ [d, N])` into `[B, N, 3C]`.
+/// Per-head `[N, d]` blocks (task order) into `[B, C, N]`, in parallel over (sample, head).
+fn scatter_heads(per_head: &[f32], dm: Dims, out: &mut [f32]) {
+    let Dims { n, d, .. } = dm;
+    out.par_chunks_mut(d * n)
+        .zip(per_head.par_chunks(n * d))
+        .for_each(|(rows, block)| transpose_into(block, n, d, rows));
+}
+
+/// Per-task `(dq [N, d], dkᵀ [d, N], dvᵀ [d, N])` into `[B, 3C, N]`.
 fn scatter_grads(per_head: &[f32], dm: Dims, d_qkv: &mut [f32]) {
     let Dims { n, c, d, heads, .. } = dm;
     d_qkv
-        .par_chunks_mut(n * 3 * c)
+        .par_chunks_mut(3 * c * n)
         .enumerate()
         .for_each(|(bi, sample)| {
             for h in 0..heads {
                 let g = &per_head[(bi * heads + h) * 3 * n * d..][..3 * n * d];
                 let (dq, rest) = g.split_at(n * d);
                 let (dkt, dvt) = rest.split_at(n * d);
-                for (i, tok) in sample.chunks_exact_mut(3 * c).enumerate() {
-                    for e in 0..d {
-                        tok[h * d + e] = dq[i * d + e];
-                        tok[c + h * d + e] = dkt[e * n + i];
-                        tok[2 * c + h * d + e] = dvt[e * n + i];
-                    }
-                }
+                transpose_into(dq, n, d, &mut sample[h * d * n..(h + 1) * d * n]);
+                sample[(c + h * d) * n..(c + (h + 1) * d) * n].copy_from_slice(dkt);
+                sample[(2 * c + h * d) * n..(2 * c + (h + 1) * d) * n].copy_from_slice(dvt);
             }
         });
 }
