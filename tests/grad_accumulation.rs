@@ -2,6 +2,8 @@
 //! against analytic derivatives, for tensors with one consumer (the first gradient is stored as it is) and with
 //! several (the later ones are added), through views (transpose, narrow) and our custom ops' callers.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use candle_core::{Device, Tensor, Var};
 
 fn values(t: &Tensor) -> Vec<f32> {
