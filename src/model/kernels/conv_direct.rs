@@ -151,20 +151,28 @@ fn channel_chunk(items: usize, co: usize, align: usize, threads: usize) -> usize
 
 /// Writes rows `y0 .. y0 + rows` of one sample `src` `[C, H, W]` into `dst` as a zero-padded image with `p` rows
 /// of the sample's neighbourhood (or zeros outside it) above and below and `p` zero columns on each side.
+/// Only the margins are zeroed (a whole-buffer fill first was a second full-size write: 1.4 % of a training step).
 fn pad_rows(src: &[f32], c: usize, g: &Grid, y0: usize, rows: usize, dst: &mut [f32]) {
     let plane = g.plane(rows);
-    dst[..g.padded_len(c, rows)].fill(0.0);
     for ci in 0..c {
         let s = &src[ci * g.h * g.w..(ci + 1) * g.h * g.w];
         let d = &mut dst[ci * plane..(ci + 1) * plane];
-        for r in 0..rows + 2 * g.p {
+        for (r, row) in d.chunks_exact_mut(g.wp).enumerate() {
             let y = (y0 + r) as isize - g.p as isize;
             if y >= 0 && (y as usize) < g.h {
                 let y = y as usize;
-                d[r * g.wp + g.p..r * g.wp + g.p + g.w].copy_from_slice(&s[y * g.w..(y + 1) * g.w]);
+                let (left, rest) = row.split_at_mut(g.p);
+                let (mid, right) = rest.split_at_mut(g.w);
+                left.fill(0.0);
+                mid.copy_from_slice(&s[y * g.w..(y + 1) * g.w]);
+                right.fill(0.0);
+            } else {
+                row.fill(0.0);
             }
         }
     }
+    // The last tap's reads run 2p floats past the last plane.
+    dst[c * plane..g.padded_len(c, rows)].fill(0.0);
 }
 
 /// Copies the first `W` of every `Wp` grid columns of `wide` (`c` rows of `rows · Wp`) into rows `y0..` of `dst`
