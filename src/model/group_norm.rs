@@ -3,6 +3,8 @@
 //! (each a full pass over the activations, forward and backward); here forward and backward are one custom op each,
 //! parallel over (sample, group). Tests compare with candle-nn's GroupNorm + SiLU, values and gradients.
 
+use std::sync::{Arc, OnceLock};
+
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 use candle_nn::VarBuilder;
 use rayon::prelude::*;
@@ -105,8 +107,20 @@ impl GroupNorm {
             has_shift,
         };
         let wb = Tensor::cat(&[&self.weight, &self.bias], 0)?;
+        let op = GnForward {
+            op,
+            stats: Arc::new(OnceLock::new()),
+        };
         x.contiguous()?.apply_op3(&wb, &shift, op)
     }
+}
+
+/// The forward op: [`GnOp`] plus the per-(sample, group) `(mean, 1/σ)` it computed, kept for its backward (which
+/// recomputed them from x: two of the backward's four passes over the input).
+#[derive(Clone, Debug)]
+struct GnForward {
+    op: GnOp,
+    stats: Arc<OnceLock<Vec<(f32, f32)>>>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -119,9 +133,12 @@ struct GnOp {
 }
 
 /// The backward as a separate op on `(x, grad, [weight; bias; shift])`, returning
-/// `[dx…, dweight…, dbias…, dshift…]` flat.
-#[derive(Clone, Copy, Debug)]
-struct GnBackward(GnOp);
+/// `[dx…, dweight…, dbias…, dshift…]` flat; `stats` are the forward's (used when they fit the input).
+#[derive(Clone, Debug)]
+struct GnBackward {
+    op: GnOp,
+    stats: Option<Arc<OnceLock<Vec<(f32, f32)>>>>,
+}
 
 /// Values summed in f32 lanes before each flush into an f64 total (keeps f32 rounding negligible).
 const BLOCK: usize = 64;
@@ -210,7 +227,7 @@ fn fwd_group(
     hw: usize,
     xg: &[f32],
     yg: &mut [f32],
-) {
+) -> (f32, f32) {
     let (mean, rstd) = stats(xg, hw, tg, op.eps);
     for (k, (ys, xs)) in yg.chunks_mut(hw).zip(xg.chunks(hw)).enumerate() {
         let mean_k = mean - tg[k];
@@ -226,10 +243,12 @@ fn fwd_group(
             }
         }
     }
+    (mean, rstd)
 }
 
 /// Backward of one group: writes `dxg`, returns per channel `[Σ dz·x̂, Σ dz, Σ dx]` (dL/dweight, dL/dbias,
-/// dL/dshift) into `pg`.
+/// dL/dshift) into `pg`. `saved`: the group's `(mean, 1/σ)` from the forward (recomputed from `xg` when absent;
+/// the same function of the same values either way).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn bwd_group(
@@ -243,8 +262,9 @@ fn bwd_group(
     dyg: &[f32],
     dxg: &mut [f32],
     pg: &mut [[f64; 3]],
+    saved: Option<(f32, f32)>,
 ) {
-    let (mean, rstd) = stats(xg, hw, tg, op.eps);
+    let (mean, rstd) = saved.unwrap_or_else(|| stats(xg, hw, tg, op.eps));
     // dz = dL/dz at z = x̂ w + b (through the SiLU when fused); dx̂ = dz w. Σ dx̂ = Σ_k w_k Σ dz and
     // Σ dx̂ x̂ = Σ_k w_k Σ dz x̂ follow from the per-channel sums.
     let (mut s1, mut s2) = (0f64, 0f64);
@@ -328,7 +348,7 @@ macro_rules! simd_group_kernels {
                 hw: usize,
                 xg: &[f32],
                 yg: &mut [f32],
-            ) {
+            ) -> (f32, f32) {
                 super::fwd_group(op, w, b, tg, c0, hw, xg, yg)
             }
 
@@ -345,8 +365,9 @@ macro_rules! simd_group_kernels {
                 dyg: &[f32],
                 dxg: &mut [f32],
                 pg: &mut [[f64; 3]],
+                saved: Option<(f32, f32)>,
             ) {
-                super::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg)
+                super::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg, saved)
             }
         }
     };
@@ -380,7 +401,7 @@ fn has_avx2() -> bool {
     }
 }
 
-impl CustomOp3 for GnOp {
+impl CustomOp3 for GnForward {
     fn name(&self) -> &'static str {
         "group-norm-silu"
     }
@@ -400,19 +421,20 @@ impl CustomOp3 for GnOp {
         let dims = l1.shape().dims();
         let c = dims[1];
         let hw: usize = dims[2..].iter().product();
-        let cpg = c / self.groups;
+        let cpg = c / self.op.groups;
         if wb.len() != 2 * c || t.len() != dims[0] * c {
             candle_core::bail!("group_norm: parameters do not fit input {dims:?}");
         }
         let (w, b) = wb.split_at(c);
         // SAFETY: fwd_group writes every value of every (sample, group) chunk.
         let mut y = unsafe { super::kernels::alloc::output_vec(x.len()) };
-        let (op, fast) = (*self, simd_level());
-        y.par_chunks_mut(cpg * hw)
+        let (op, fast) = (self.op, simd_level());
+        let stats: Vec<(f32, f32)> = y
+            .par_chunks_mut(cpg * hw)
             .zip(x.par_chunks(cpg * hw))
             .zip(t.par_chunks(cpg))
             .enumerate()
-            .for_each(|(bg, ((yg, xg), tg))| {
+            .map(|(bg, ((yg, xg), tg))| {
                 let c0 = (bg % op.groups) * cpg;
                 #[cfg(target_arch = "x86_64")]
                 match fast {
@@ -423,8 +445,12 @@ impl CustomOp3 for GnOp {
                     _ => {}
                 }
                 let _ = fast;
-                fwd_group(op, w, b, tg, c0, hw, xg, yg);
-            });
+                fwd_group(op, w, b, tg, c0, hw, xg, yg)
+            })
+            .collect();
+        // A second forward of the same op instance (not done by candle) keeps the first's statistics; the backward
+        // checks that they fit its input.
+        let _ = self.stats.set(stats);
         Ok((CpuStorage::F32(y), l1.shape().clone()))
     }
 
@@ -438,12 +464,16 @@ impl CustomOp3 for GnOp {
     ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
         let (n, c2, nt) = (x.elem_count(), wb.elem_count(), t.elem_count());
         let params = Tensor::cat(&[wb, &t.flatten_all()?], 0)?;
-        let packed =
-            x.contiguous()?
-                .apply_op3_no_bwd(&grad.contiguous()?, &params, &GnBackward(*self))?;
+        let backward = GnBackward {
+            op: self.op,
+            stats: Some(self.stats.clone()),
+        };
+        let packed = x
+            .contiguous()?
+            .apply_op3_no_bwd(&grad.contiguous()?, &params, &backward)?;
         let dx = packed.narrow(0, 0, n)?.reshape(x.shape())?;
         let dwb = packed.narrow(0, n, c2)?;
-        let dt = if self.has_shift {
+        let dt = if self.op.has_shift {
             Some(packed.narrow(0, n + c2, nt)?.reshape(t.shape())?)
         } else {
             None
@@ -466,7 +496,7 @@ impl CustomOp3 for GnBackward {
         s3: &CpuStorage,
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
-        let op = self.0;
+        let op = self.op;
         let x = super::contiguous_f32(s1, l1, "group_norm: x")?;
         let dy = super::contiguous_f32(s2, l2, "group_norm: grad")?;
         let params = super::contiguous_f32(s3, l3, "group_norm: weight/bias/shift")?;
@@ -486,6 +516,12 @@ impl CustomOp3 for GnBackward {
         // Per (sample, channel) sums of dL/dw, dL/db and dL/dshift.
         let mut partial = vec![[0f64; 3]; bsz * c];
         let fast = simd_level();
+        // The forward's statistics where they are for this input's (sample, group) count.
+        let saved = self
+            .stats
+            .as_ref()
+            .and_then(|s| s.get())
+            .filter(|s| s.len() == bsz * op.groups);
         dx.par_chunks_mut(cpg * hw)
             .zip(partial.par_chunks_mut(cpg))
             .zip(t.par_chunks(cpg))
@@ -494,18 +530,25 @@ impl CustomOp3 for GnBackward {
                 let off = bg * cpg * hw;
                 let (xg, dyg) = (&x[off..off + cpg * hw], &dy[off..off + cpg * hw]);
                 let c0 = (bg % op.groups) * cpg;
+                let st = saved.map(|s| s[bg]);
                 #[cfg(target_arch = "x86_64")]
                 match fast {
                     // SAFETY: the CPU supports AVX-512 (F, VL), AVX2 and FMA (checked above).
                     2 => {
-                        return unsafe { avx512::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg) }
+                        return unsafe {
+                            avx512::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg, st)
+                        }
                     }
                     // SAFETY: the CPU supports AVX2 and FMA (checked above).
-                    1 => return unsafe { avx2::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg) },
+                    1 => {
+                        return unsafe {
+                            avx2::bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg, st)
+                        }
+                    }
                     _ => {}
                 }
                 let _ = fast;
-                bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg);
+                bwd_group(op, w, b, tg, c0, hw, xg, dyg, dxg, pg, st);
             });
         for ch in 0..c {
             let (mut dw, mut db) = (0f64, 0f64);
@@ -556,5 +599,60 @@ mod tests {
         let (m, r) = stats(&v, 100, &[0.0; 10], 1e-5);
         assert!((f64::from(m) - mean).abs() < 1e-5);
         assert!((f64::from(r) - 1.0 / (var + 1e-5).sqrt()).abs() < 1e-6 * f64::from(r));
+    }
+
+    /// The backward with the forward's saved statistics gives the bits of the backward that recomputes them, and
+    /// statistics of another shape are ignored.
+    #[test]
+    fn saved_statistics_give_the_recomputed_backward() {
+        use candle_core::{Device, Var};
+        let dev = Device::Cpu;
+        let vals = |n: usize, k: f32| -> Vec<f32> {
+            (0..n)
+                .map(|i| ((i * 7919 % 613) as f32 / 613.0 - 0.4) * k)
+                .collect()
+        };
+        let (b, c, h, w) = (2, 8, 5, 6);
+        let x = Var::from_vec(vals(b * c * h * w, 3.0), (b, c, h, w), &dev).unwrap();
+        let gn = GroupNorm {
+            weight: Tensor::from_vec(vals(c, 2.0), c, &dev).unwrap(),
+            bias: Tensor::from_vec(vals(c, 1.0), c, &dev).unwrap(),
+            groups: 4,
+            eps: 1e-5,
+            portable: false,
+        };
+        let shift = Tensor::from_vec(vals(b * c, 0.5), (b, c), &dev).unwrap();
+        let r = Tensor::from_vec(vals(b * c * h * w, 1.0), (b, c, h, w), &dev).unwrap();
+        let y = gn.forward_shift_silu(x.as_tensor(), &shift).unwrap();
+        let saved = (&y * &r).unwrap().sum_all().unwrap().backward().unwrap();
+        let saved = saved
+            .get(&x)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        let wb = Tensor::cat(&[&gn.weight, &gn.bias], 0).unwrap();
+        let params = Tensor::cat(&[&wb, &shift.flatten_all().unwrap()], 0).unwrap();
+        let op = GnOp {
+            groups: 4,
+            eps: 1e-5,
+            silu: true,
+            has_shift: true,
+        };
+        let wrong = Arc::new(OnceLock::new());
+        let _ = wrong.set(vec![(0.0f32, 1.0f32); 3]);
+        for stats in [None, Some(wrong)] {
+            let packed = x
+                .as_tensor()
+                .apply_op3_no_bwd(&r, &params, &GnBackward { op, stats })
+                .unwrap();
+            let dx = packed
+                .narrow(0, 0, b * c * h * w)
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap();
+            assert_eq!(dx, saved);
+        }
     }
 }
