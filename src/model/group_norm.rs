@@ -115,12 +115,15 @@ impl GroupNorm {
     }
 }
 
+/// Per-(sample, group) `(mean, 1/σ)` of a forward, set once by it and read by its backward.
+type SavedStats = Arc<OnceLock<Vec<(f32, f32)>>>;
+
 /// The forward op: [`GnOp`] plus the per-(sample, group) `(mean, 1/σ)` it computed, kept for its backward (which
 /// recomputed them from x: two of the backward's four passes over the input).
 #[derive(Clone, Debug)]
 struct GnForward {
     op: GnOp,
-    stats: Arc<OnceLock<Vec<(f32, f32)>>>,
+    stats: SavedStats,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -137,7 +140,7 @@ struct GnOp {
 #[derive(Clone, Debug)]
 struct GnBackward {
     op: GnOp,
-    stats: Option<Arc<OnceLock<Vec<(f32, f32)>>>>,
+    stats: Option<SavedStats>,
 }
 
 /// Values summed in f32 lanes before each flush into an f64 total (keeps f32 rounding negligible).
