@@ -7,7 +7,7 @@ use std::sync::Arc;
 use candle_core::{Module, Result, Tensor};
 use candle_nn::{linear, Linear, VarBuilder};
 
-use super::conv::{conv2d, ConvBackend, ConvGeom};
+use super::conv::{conv2d, pack_weight, ConvBackend, ConvGeom};
 use super::group_norm::{group_norm, GroupNorm};
 use super::kernels::attention::fused_attention;
 use super::kernels::sgemm::PackedA;
@@ -81,19 +81,9 @@ impl Attention {
 
     /// Packs the projection weights once for inference (as [`super::conv::Conv2d::freeze`]).
     pub fn freeze(&mut self) -> Result<()> {
-        self.frozen = None;
-        if !self.to_q.weight().device().is_cpu() {
-            return Ok(());
-        }
-        let pack = |w: Tensor| -> Result<Arc<PackedA>> {
-            let co = w.dim(0)?;
-            let v = w.flatten_all()?.to_vec1::<f32>()?;
-            let k = v.len() / co.max(1);
-            Ok(Arc::new(PackedA::new(co, k, &v, k, 1)?))
-        };
-        let qkv = pack(self.qkv_conv()?.0)?;
-        let out = pack(self.out_conv()?.0)?;
-        self.frozen = Some((qkv, out));
+        let qkv = pack_weight(&self.qkv_conv()?.0)?;
+        let out = pack_weight(&self.out_conv()?.0)?;
+        self.frozen = qkv.zip(out);
         Ok(())
     }
 
@@ -139,9 +129,7 @@ impl Attention {
             frozen.map(|f| &f.1),
         )
     }
-}
 
-impl Attention {
     /// candle's own ops (what devices other than the CPU run): token-major q, k, v by `Linear`, matmul and softmax.
     fn forward_portable(&self, x: &Tensor) -> Result<Tensor> {
         let (b, c, h, w) = x.dims4()?;

@@ -97,14 +97,7 @@ impl Conv2d {
     /// not seen until [`Conv2d::thaw`] (or another `freeze`): freeze a model whose weights are final (a loaded
     /// checkpoint), never one being trained. Nothing happens off the CPU.
     pub fn freeze(&mut self) -> Result<()> {
-        self.frozen = None;
-        if !self.weight.device().is_cpu() {
-            return Ok(());
-        }
-        let co = self.weight.dim(0)?;
-        let w = self.weight.flatten_all()?.to_vec1::<f32>()?;
-        let k = w.len() / co.max(1);
-        self.frozen = Some(Arc::new(PackedA::new(co, k, &w, k, 1)?));
+        self.frozen = pack_weight(&self.weight)?;
         Ok(())
     }
 
@@ -125,6 +118,18 @@ impl Module for Conv2d {
             self.frozen.as_ref(),
         )
     }
+}
+
+/// A convolution weight `[Cout, …]` packed as the `Cout × (Cin·k·k)` GEMM operand of our CPU paths (`None` off the
+/// CPU): what [`Conv2d::freeze`] and the attention projections keep.
+pub fn pack_weight(w: &Tensor) -> Result<Option<Arc<PackedA>>> {
+    if !w.device().is_cpu() {
+        return Ok(None);
+    }
+    let co = w.dim(0)?;
+    let v = w.flatten_all()?.to_vec1::<f32>()?;
+    let k = v.len() / co.max(1);
+    Ok(Some(Arc::new(PackedA::new(co, k, &v, k, 1)?)))
 }
 
 /// Convolution of `x` `[B, Cin, H, W]` with `w` `[Cout, Cin, k, k]` plus `bias`, by the chosen backend; `frozen`
