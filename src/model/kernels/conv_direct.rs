@@ -149,6 +149,13 @@ fn channel_chunk(items: usize, co: usize, align: usize, threads: usize) -> usize
     co.div_ceil(split).next_multiple_of(align).max(1)
 }
 
+/// Whether the GEMM writes the output image directly ([`PackedA::matmul_offsets_image_raw`]: whole 16-wide
+/// vectors per image row on AVX-512, any width on the portable path) rather than a wide product over the padded
+/// grid that [`unpad_into`] copies out. At widths like 8 the wide product keeps full vectors and wins.
+fn writes_image(g: &Grid, backend: GemmBackend) -> bool {
+    backend != GemmBackend::Avx512 || g.w.is_multiple_of(16)
+}
+
 /// Writes rows `y0 .. y0 + rows` of one sample `src` `[C, H, W]` into `dst` as a zero-padded image with `p` rows
 /// of the sample's neighbourhood (or zeros outside it) above and below and `p` zero columns on each side.
 /// Only the margins are zeroed (a whole-buffer fill first was a second full-size write: 1.4 % of a training step).
@@ -222,6 +229,7 @@ impl CustomOp3 for DirectConv {
         let w_packed = PackedA::frozen_or_pack(self.frozen.as_deref(), self.backend, co, kk, w)?;
         let tr = g.tile_rows();
         let tiles = g.h.div_ceil(tr);
+        let image = writes_image(&g, w_packed.backend());
         // Tap offsets of a full tile and of the last, possibly shorter one (they depend on the tile's plane size).
         let last_rows = g.h - tiles.saturating_sub(1) * tr;
         let (offs_full, offs_last) = (g.tap_offsets(c, tr), g.tap_offsets(c, last_rows));
@@ -242,7 +250,7 @@ impl CustomOp3 for DirectConv {
             || unsafe {
                 (
                     super::alloc::output_vec(g.padded_len(c, tr)),
-                    super::alloc::output_vec(chunk * tr * g.wp),
+                    super::alloc::output_vec(if image { 0 } else { chunk * tr * g.wp }),
                 )
             },
             |(xp, wide), &(b, tile, c0)| -> Result<()> {
@@ -251,13 +259,29 @@ impl CustomOp3 for DirectConv {
                 let cs = c0..(c0 + chunk).min(co);
                 pad_rows(&x[b * c * hw..(b + 1) * c * hw], c, &g, y0, rows, xp);
                 let offs = if rows == tr { &offs_full } else { &offs_last };
+                let xp = &xp[..g.padded_len(c, rows)];
+                if image {
+                    // SAFETY: channels cs, rows y0..y0+rows of sample b (at stride hw): inside `y`, disjoint
+                    // across items.
+                    return unsafe {
+                        w_packed.matmul_offsets_image_raw(
+                            cs.clone(),
+                            (rows, g.w, g.wp),
+                            xp,
+                            offs,
+                            yp.ptr().add((b * co + cs.start) * hw + y0 * g.w),
+                            hw,
+                            Init::RowBias(bias),
+                        )
+                    };
+                }
                 let n = rows * g.wp;
                 // SAFETY: `wide` holds chunk ≥ cs.len() rows of n floats and is this work item's own buffer.
                 unsafe {
                     w_packed.matmul_offsets_rows_raw(
                         cs.clone(),
                         n,
-                        &xp[..g.padded_len(c, rows)],
+                        xp,
                         offs,
                         wide.as_mut_ptr(),
                         n,
@@ -335,6 +359,7 @@ impl CustomOp3 for DirectConvBackward {
         let (x_offs, dy_offs) = (g.tap_offsets(c, g.h), g.tap_offsets(co, g.h));
         let (plane, n) = (g.plane(g.h), g.h * g.wp);
         let tr = g.tile_rows();
+        let image = writes_image(&g, wt_packed.backend());
         // out = [dx, dw, db]: dx written by the per-sample items (every channel and row), dw and db below.
         let (nx, nw) = (g.b * c * hw, co * kk);
         // SAFETY: every element is written before `out` is returned.
@@ -356,7 +381,7 @@ impl CustomOp3 for DirectConvBackward {
                     (
                         super::alloc::output_vec(g.padded_len(c, g.h)),
                         super::alloc::output_vec(g.padded_len(co, g.h)),
-                        super::alloc::output_vec(c * tr * g.wp),
+                        super::alloc::output_vec(if image { 0 } else { c * tr * g.wp }),
                     )
                 },
                 |(xp, dyp, wide), (b, ((dxb, dwtb), dbb))| -> Result<()> {
@@ -383,6 +408,21 @@ impl CustomOp3 for DirectConvBackward {
                     // dX_b row tile by row tile: rows y0.. of the grid start at dYp row y0.
                     for y0 in (0..g.h).step_by(tr) {
                         let rows = tr.min(g.h - y0);
+                        if image {
+                            // SAFETY: rows y0..y0+rows of every channel of this sample's own dX (stride hw).
+                            unsafe {
+                                wt_packed.matmul_offsets_image_raw(
+                                    0..c,
+                                    (rows, g.w, g.wp),
+                                    &dyp[y0 * g.wp..],
+                                    &dy_offs,
+                                    dxb.as_mut_ptr().add(y0 * g.w),
+                                    hw,
+                                    Init::Zero,
+                                )?;
+                            }
+                            continue;
+                        }
                         let m = rows * g.wp;
                         // SAFETY: `wide` holds c rows of m floats and is this work item's own buffer.
                         unsafe {
@@ -554,6 +594,11 @@ mod tests {
             (1, 8, 16, 12, 9, 1),
             (2, 4, 3, 5, 5, 5),
             (1, 6, 40, 7, 6, 3),
+            // Widths of whole 16-lane vectors: the GEMM writes the output image directly (several row tiles
+            // for the 70-row image).
+            (2, 5, 19, 7, 16, 3),
+            (1, 3, 12, 70, 32, 3),
+            (1, 4, 9, 3, 48, 1),
         ]
         .iter()
         .enumerate()

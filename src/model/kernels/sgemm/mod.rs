@@ -345,6 +345,90 @@ impl PackedA {
     }
 }
 
+impl PackedA {
+    /// [`PackedA::matmul_offsets_rows_raw`] over a padded grid of `rows` rows of `wp` positions (B's `n` is
+    /// `rows · wp`), keeping only the first `w` positions of each grid row: the product at `(y, x < w)` goes to
+    /// column `y · w + x` of C, which holds `rows.len()` rows of `rows · w` floats at stride `ldc` — a
+    /// convolution writes its output image directly instead of a wide product copied out row by row. Each element
+    /// is summed exactly as in the wide product. On the AVX-512 backend `w` must be a multiple of 16 (whole
+    /// vectors per image row); other backends take any `w`.
+    ///
+    /// # Safety
+    /// As [`PackedA::matmul_raw`] for the `rows.len()` rows of `rows · w` floats at `c`.
+    #[allow(clippy::too_many_arguments)]
+    pub unsafe fn matmul_offsets_image_raw(
+        &self,
+        rows: Range<usize>,
+        (grid_rows, w, wp): (usize, usize, usize),
+        b: &[f32],
+        offs: &[usize],
+        c: *mut f32,
+        ldc: usize,
+        init: Init,
+    ) -> Result<()> {
+        if w > wp {
+            candle_core::bail!("sgemm: image width {w} exceeds the grid's row of {wp}");
+        }
+        check_offsets(offs, self.k, grid_rows * wp, b.len(), "B")?;
+        match self.backend {
+            #[cfg(target_arch = "x86_64")]
+            GemmBackend::Avx512 => {
+                if !w.is_multiple_of(16) {
+                    candle_core::bail!("sgemm: image width {w} is not a multiple of 16");
+                }
+                let k = self.k;
+                check_bias(init, self.m)?;
+                if rows.end > self.m
+                    || rows.start > rows.end
+                    || !rows.start.is_multiple_of(avx512::MR)
+                {
+                    candle_core::bail!(
+                        "sgemm: rows {rows:?} of a {}-row A (starts at multiples of {})",
+                        self.m,
+                        avx512::MR
+                    );
+                }
+                let init = match init {
+                    Init::RowBias(bias) => Init::RowBias(&bias[rows.clone()]),
+                    other => other,
+                };
+                let b_rows = avx512::Offsets {
+                    base: b.as_ptr(),
+                    offs: offs.as_ptr(),
+                };
+                let panels = &self.data[rows.start * k..];
+                // SAFETY: as in matmul_offsets_rows_raw; B's grid rows checked above, C by the caller.
+                avx512::gemm_packed_image(
+                    rows.len(),
+                    k,
+                    panels,
+                    b_rows,
+                    (grid_rows, w, wp),
+                    c,
+                    ldc,
+                    init,
+                );
+                Ok(())
+            }
+            _ => {
+                for y in 0..grid_rows {
+                    // SAFETY: column y · w of C's rows (caller's contract); grid row y of B is B from y · wp.
+                    self.matmul_offsets_rows_raw(
+                        rows.clone(),
+                        w,
+                        b.get(y * wp..).unwrap_or_default(),
+                        offs,
+                        c.add(y * w),
+                        ldc,
+                        init,
+                    )?;
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
 /// An `Init::RowBias` holds one value per row of C.
 fn check_bias(init: Init, m: usize) -> Result<()> {
     match init {

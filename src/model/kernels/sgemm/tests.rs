@@ -372,3 +372,124 @@ fn row_ranges_give_the_whole_product(backend: GemmBackend) {
         }
     }
 }
+
+// The image product (a convolution writing its output directly) gives the wide product's bits at every on-image
+// grid position, for every init, K across several blocks, m off the panel height, a row range, and leaves C's
+// elements past each row's image untouched; widths the backend cannot take are errors.
+on_both_backends!(
+    image_product_is_the_wide_product_on_the_image,
+    image_product_is_the_wide_product_on_the_image_gemm_crate,
+    image_product_is_the_wide_product_on_the_image_avx512
+);
+
+fn image_product_is_the_wide_product_on_the_image(backend: GemmBackend) {
+    let mut rng = ChaCha8Rng::seed_from_u64(13);
+    let (m, k) = (21, 300);
+    let a = random(&mut rng, m * k);
+    let bias = random(&mut rng, m);
+    let pa = PackedA::with_backend(backend, m, k, &a, k, 1).unwrap();
+    let align = pa.row_align();
+    let widths: &[usize] = if backend == GemmBackend::Avx512 {
+        &[16, 32, 48, 64]
+    } else {
+        &[8, 16, 37]
+    };
+    for &w in widths {
+        for rows in [1, 3, 4] {
+            let wp = w + 2;
+            let n = rows * wp;
+            let img = random(&mut rng, 4 * n + 64);
+            let offs: Vec<usize> = (0..k).map(|p| (p * 7) % (3 * n)).collect();
+            let init_c = random(&mut rng, m * n);
+            for init in [Init::Zero, Init::RowBias(&bias), Init::Accumulate] {
+                let mut wide = init_c.clone();
+                // SAFETY: wide holds m rows of n floats.
+                unsafe { pa.matmul_offsets_raw(n, &img, &offs, wide.as_mut_ptr(), n, init) }
+                    .unwrap();
+                // C at stride ldc > rows · w: the gap must stay as it was. Accumulate starts from the same
+                // values as the wide product did at those positions.
+                let ldc = rows * w + 5;
+                let mut got = vec![f32::NAN; m * ldc];
+                for i in 0..m {
+                    for y in 0..rows {
+                        for x in 0..w {
+                            got[i * ldc + y * w + x] = init_c[i * n + y * wp + x];
+                        }
+                    }
+                }
+                let cuts = [0, align, m];
+                for r in cuts.windows(2) {
+                    // SAFETY: rows r[0]..r[1] of got at stride ldc, rows · w floats each.
+                    unsafe {
+                        pa.matmul_offsets_image_raw(
+                            r[0]..r[1],
+                            (rows, w, wp),
+                            &img,
+                            &offs,
+                            got.as_mut_ptr().add(r[0] * ldc),
+                            ldc,
+                            init,
+                        )
+                    }
+                    .unwrap();
+                }
+                for i in 0..m {
+                    for y in 0..rows {
+                        for x in 0..w {
+                            assert_eq!(
+                                got[i * ldc + y * w + x].to_bits(),
+                                wide[i * n + y * wp + x].to_bits(),
+                                "{backend:?} w {w} rows {rows} at ({i}, {y}, {x})"
+                            );
+                        }
+                    }
+                    assert!(got[i * ldc + rows * w..(i + 1) * ldc]
+                        .iter()
+                        .all(|v| v.is_nan()));
+                }
+            }
+        }
+    }
+    let img = random(&mut rng, 4000);
+    let offs: Vec<usize> = (0..k).map(|p| p % 100).collect();
+    let mut c = vec![0f32; m * 64];
+    // SAFETY: c holds m rows of 64 floats; the calls are refused before writing.
+    unsafe {
+        assert!(pa
+            .matmul_offsets_image_raw(
+                0..m,
+                (2, 34, 32),
+                &img,
+                &offs,
+                c.as_mut_ptr(),
+                64,
+                Init::Zero
+            )
+            .is_err());
+        if backend == GemmBackend::Avx512 {
+            assert!(pa
+                .matmul_offsets_image_raw(
+                    0..m,
+                    (2, 24, 26),
+                    &img,
+                    &offs,
+                    c.as_mut_ptr(),
+                    64,
+                    Init::Zero
+                )
+                .is_err());
+        }
+        let short = &img[..99 + 2 * 34 - 1];
+        assert!(pa
+            .matmul_offsets_image_raw(
+                0..m,
+                (2, 32, 34),
+                short,
+                &offs,
+                c.as_mut_ptr(),
+                64,
+                Init::Zero
+            )
+            .is_err());
+    }
+}
