@@ -52,6 +52,13 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
+    // Piped into `head` and the like, end quietly when the reader goes away, as other Unix tools do, instead of
+    // panicking in `println!` on the broken pipe (Rust ignores SIGPIPE by default).
+    #[cfg(unix)]
+    // SAFETY: restores the default disposition of one signal at start-up, before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     progress::set_quiet(cli.quiet);
     // The model's process-wide settings, the same as the workbench's; a variable the user set is kept.

@@ -49,7 +49,7 @@ pub fn run(a: &GemmBenchArgs) -> Result<()> {
     }
     println!(
         "{}",
-        json!({"bench": "info", "tool": "tnd", "detected": format!("{:?}", GemmBackend::detect()),
+        json!({"bench": "info", "tool": "tnd", "host": super::host(), "detected": format!("{:?}", GemmBackend::detect()),
             "threads": 1})
     );
     for &(co, k, t, hw) in &SHAPES {

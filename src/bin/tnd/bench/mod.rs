@@ -130,9 +130,23 @@ fn bench_meshes(peer_dir: Option<&Path>) -> Result<Vec<(String, Mesh)>> {
     }
 }
 
+/// The processor the figures were taken on (`/proc/cpuinfo`'s model name and family, "unknown" elsewhere) and
+/// its core count: ratios against a peer differ between CPUs, so every benchmark's info record carries it.
+pub(crate) fn host() -> serde_json::Value {
+    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let field = |name: &str| {
+        info.lines()
+            .find(|l| l.split(':').next().is_some_and(|k| k.trim() == name))
+            .and_then(|l| l.split_once(':'))
+            .map_or_else(|| "unknown".to_string(), |(_, v)| v.trim().to_string())
+    };
+    json!({"cpu": field("model name"), "cpu_family": field("cpu family"),
+           "cpus": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)})
+}
+
 fn bench_sim(a: &SimBenchArgs) -> Result<()> {
     emit(
-        json!({"bench": "info", "tool": "tnd", "version": env!("CARGO_PKG_VERSION"),
+        json!({"bench": "info", "tool": "tnd", "version": env!("CARGO_PKG_VERSION"), "host": host(),
         "cpus": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         "peer_dir": a.peer_dir}),
     );

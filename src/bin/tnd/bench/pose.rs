@@ -274,7 +274,7 @@ pub fn run(a: &PoseBenchArgs) -> Result<()> {
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     println!(
         "{}",
-        json!({"bench": "info", "tool": "tnd", "problem": p.source, "threads": a.threads,
+        json!({"bench": "info", "tool": "tnd", "host": super::host(), "problem": p.source, "threads": a.threads,
                "loadavg": load.split_whitespace().take(3).collect::<Vec<_>>().join(" ")})
     );
     let config = SdfRegistrationConfig {

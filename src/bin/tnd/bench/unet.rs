@@ -117,7 +117,7 @@ pub fn run(a: &UnetBenchArgs) -> Result<()> {
     let loadavg = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     println!(
         "{}",
-        json!({"bench": "info", "tool": "tnd", "conv": a.conv, "params": params,
+        json!({"bench": "info", "tool": "tnd", "host": super::host(), "conv": a.conv, "params": params,
             "gflops_per_sample_forward": vars.unet.flops_per_sample() / 1e9,
             "threads": rayon::current_num_threads(), "loadavg": loadavg.trim(),
             "config": serde_json::from_str::<Value>(&cfg.to_json()?)?})
