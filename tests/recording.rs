@@ -381,4 +381,43 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
     assert_eq!(eval["pairs"].as_u64(), Some(pairs));
     assert!(eval["failed"].as_array().unwrap().is_empty());
     assert!(eval["model"]["position_mm"]["median"].as_f64().unwrap() < 0.05);
+    // The saved run in the paper's layout: one row for the run (named here), the baseline, θ in radians.
+    std::fs::write(dir.path().join("gt.json"), format!("{eval}\n")).unwrap();
+    let out = std::process::Command::new(tnd)
+        .args(["eval", "--tables-from", "truth=gt.json"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let md = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        md.contains("| configuration | unseen_objects: position [mm] | unseen_objects: θ [rad] |")
+    );
+    let row = md.lines().rfind(|l| l.starts_with("| truth |")).unwrap();
+    let position: f64 = row
+        .split('|')
+        .nth(2)
+        .unwrap()
+        .split('±')
+        .next()
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    let want = eval["model"]["position_mm"]["mean"].as_f64().unwrap();
+    assert!((position - want).abs() < 0.006, "{row} vs {want}");
+    assert!(md.contains("| threshold baseline |"));
+    // A file that is not a tnd eval output is refused with its name.
+    std::fs::write(dir.path().join("bad.json"), "{}\n").unwrap();
+    let out = std::process::Command::new(tnd)
+        .args(["eval", "--tables-from", "bad.json"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("bad.json: no split summaries"));
 }

@@ -16,7 +16,7 @@ use super::MetricsError;
 use crate::image::Image;
 use crate::mesh::Mesh;
 use crate::objects::{ObjectError, ObjectSet, Symmetry};
-use crate::pose::from_depth::{consensus_depth, SensorView};
+use crate::pose::from_depth::{anchor_to_signature, consensus_depth, SensorView};
 use crate::pose::{
     sample_surface, threshold_contact, BaselineConfig, Hypothesis, InitStrategy, PoseError,
     SdfRegistration, SdfRegistrationConfig,
@@ -155,6 +155,10 @@ pub struct EvalConfig {
     pub pose_samples: usize,
     /// Fraction of the samples that must mark a pixel as contact for the consensus (default 0.5).
     pub consensus_probability: f64,
+    /// Shift every estimate's contact depths onto the measured signature before registering it
+    /// ([`crate::pose::from_depth::anchor_to_signature`]; default true). Depth metrics score the estimate as
+    /// generated.
+    pub anchor_to_signature: bool,
 }
 
 impl Default for EvalConfig {
@@ -169,6 +173,7 @@ impl Default for EvalConfig {
             chamfer_points: 1000,
             pose_samples: 1,
             consensus_probability: 0.5,
+            anchor_to_signature: true,
         }
     }
 }
@@ -370,6 +375,24 @@ impl Evaluator {
         )
     }
 
+    /// The estimates `samples` as registered: with [`EvalConfig::anchor_to_signature`] and a signature, each one's
+    /// contact depths moved onto it where the imprint says contact ([`anchor_to_signature`]), with the shifts (metres); otherwise unchanged, with
+    /// no shifts.
+    pub fn anchor(
+        &self,
+        samples: &[Image],
+        signature: Option<&Image>,
+        imprint: &Image,
+    ) -> Result<(Vec<Image>, Vec<f64>), PoseError> {
+        match signature {
+            Some(s) if self.config.anchor_to_signature => samples
+                .iter()
+                .map(|x| anchor_to_signature(x, s, imprint))
+                .collect(),
+            _ => Ok((samples.to_vec(), Vec::new())),
+        }
+    }
+
     /// Score one in-contact depth estimate of `pair`.
     pub fn score(
         &self,
@@ -385,10 +408,20 @@ impl Evaluator {
             radius_m: self.config.init_radius_m,
             seed,
         };
+        let (anchored, _) = self
+            .anchor(
+                std::slice::from_ref(estimate),
+                Some(&pair.signature),
+                &pair.imprint,
+            )
+            .map_err(|source| EvalError::Pose {
+                object: pair.object.clone(),
+                source,
+            })?;
         let hyps = self
             .register_depth(
                 &object,
-                estimate,
+                &anchored[0],
                 ctx,
                 &pair.t_world_camera,
                 &strategy,

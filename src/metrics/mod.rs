@@ -1,12 +1,14 @@
 //! **Metrics** of the evaluation (paper V.C Table I, V.D Table II): depth-image metrics of a generated in-contact
 //! depth against the true one ([`depth`], [`ssim`]) and pose metrics with the objects' symmetry exclusions
 //! ([`pose`]); [`summary`] aggregates them into mean/std rows; [`evaluate`] runs the whole loop over a
-//! [`evaluate::PairSource`] ([`sources`]: dataset splits, simulated pairs) with a [`evaluate::Generator`].
+//! [`evaluate::PairSource`] ([`sources`]: dataset splits, simulated pairs) with a [`evaluate::Generator`];
+//! [`paper_table`] sets runs side by side in the paper's layout and units.
 
 pub mod breakdown;
 pub mod depth;
 pub mod evaluate;
 pub mod model_generator;
+pub mod paper_table;
 pub mod pose;
 pub mod sources;
 pub mod ssim;

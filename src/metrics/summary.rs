@@ -7,9 +7,11 @@ use serde::{Deserialize, Serialize};
 /// PSNR of identical images).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct MeanStd {
-    /// Mean of the used values (NaN when none; serialised as null).
+    /// Mean of the used values (NaN when none; serialised as null, read back as NaN).
+    #[serde(deserialize_with = "nan_if_null")]
     pub mean: f64,
     /// Population standard deviation of the used values.
+    #[serde(deserialize_with = "nan_if_null")]
     pub std: f64,
     /// Number of values used.
     pub n: usize,
@@ -17,8 +19,13 @@ pub struct MeanStd {
     pub excluded: usize,
     /// Median of the used values (NaN when none): a few ambiguous pairs (a contact hidden in the sensor noise) can
     /// dominate a mean.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "nan_if_null")]
     pub median: f64,
+}
+
+/// serde_json writes a NaN as null; read null back as NaN.
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 impl MeanStd {
@@ -75,6 +82,19 @@ mod tests {
         assert_eq!(m.median, 2.0);
         assert!(MeanStd::of([None]).mean.is_nan());
         assert!(MeanStd::of([None]).median.is_nan());
+    }
+
+    #[test]
+    fn json_round_trip_keeps_values_and_turns_null_back_into_nan() {
+        let m = MeanStd::of([Some(1.0), Some(3.0), None]);
+        let back: MeanStd = serde_json::from_str(&serde_json::to_string(&m).unwrap()).unwrap();
+        assert_eq!(back, m);
+        let none = MeanStd::of([None]);
+        let json = serde_json::to_string(&none).unwrap();
+        assert!(json.contains("\"mean\":null"), "{json}");
+        let back: MeanStd = serde_json::from_str(&json).unwrap();
+        assert!(back.mean.is_nan() && back.std.is_nan() && back.median.is_nan());
+        assert_eq!((back.n, back.excluded), (0, 1));
     }
 
     #[test]

@@ -44,6 +44,9 @@ pub struct PoseEstimate {
     pub with_contact: Vec<usize>,
     /// Every sample's, the baseline's and the multi-sample estimate's pose and errors, with the KDEs.
     pub report: UncertaintyReport,
+    /// Per sample, the depth shift that anchored its contact onto the signature before registration (metres;
+    /// [`EvalConfig::anchor_to_signature`]); empty when the samples were registered as generated.
+    pub anchor_shift_m: Vec<f64>,
 }
 
 impl PoseEstimate {
@@ -54,12 +57,18 @@ impl PoseEstimate {
 
     /// The contact points the single-sample estimate was fitted to: sample `registered_sample` of `input`
     /// back-projected, world frame, metres.
+    /// Anchored onto the signature as registered ([`PoseEstimate::anchor_shift_m`]).
     pub fn contact_points(&self, sim: &Simulator, input: &PoseInput<'_>) -> Vec<glam::DVec3> {
-        input
-            .samples
-            .get(self.registered_sample)
-            .map(|s| crate::recon::back_project(s, sim.intrinsics(), &input.t_world_camera).p_world)
-            .unwrap_or_default()
+        let Some(s) = input.samples.get(self.registered_sample) else {
+            return Vec::new();
+        };
+        let mut s = s.clone();
+        if let Some(&shift) = self.anchor_shift_m.get(self.registered_sample) {
+            for d in s.data.iter_mut().filter(|d| **d > 0.0) {
+                *d = (f64::from(*d) + shift) as f32;
+            }
+        }
+        crate::recon::back_project(&s, sim.intrinsics(), &input.t_world_camera).p_world
     }
 }
 
@@ -76,6 +85,8 @@ pub fn estimate_pose(
     let ctx = EvalContext::of_simulator(sim, ObjectSet::builtin());
     let evaluator = Evaluator::new(config.clone());
     let model = evaluator.object_from_mesh(&object.name, &object.mesh, object.symmetry)?;
+    let (samples, anchor_shift_m) =
+        evaluator.anchor(input.samples, input.signature, input.imprint)?;
     let with_contact: Vec<usize> = input
         .samples
         .iter()
@@ -90,7 +101,7 @@ pub fn estimate_pose(
         &model,
         &ctx,
         &input.t_world_camera,
-        input.samples,
+        &samples,
         seed,
     )?
     .ok_or(PipelineError::NoContact)?;
@@ -104,7 +115,7 @@ pub fn estimate_pose(
         .map(|s| threshold_contact(s, input.imprint, &config.baseline));
     let sig = Signature {
         t_world_camera: input.t_world_camera,
-        samples: input.samples,
+        samples: &samples,
         baseline: baseline.as_ref(),
         truth: input.truth,
         init: hypotheses.first().map(|h| h.pose),
@@ -122,6 +133,7 @@ pub fn estimate_pose(
         registered_sample,
         with_contact,
         report,
+        anchor_shift_m,
     })
 }
 

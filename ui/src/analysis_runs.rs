@@ -516,6 +516,7 @@ impl WorkbenchApp {
             registered_sample: r.registered_sample,
             with_contact: r.sample_index.clone(),
             report: r.report.clone(),
+            anchor_shift_m: r.anchor_shift_m.clone(),
         };
         let input = tactile_derender::pipeline::PoseInput {
             t_world_camera: c.t_world_camera,

@@ -71,6 +71,7 @@ pub fn run(
         contacts,
         report: estimate.report,
         sample_index: estimate.with_contact,
+        anchor_shift_m: estimate.anchor_shift_m,
         inputs: Some(Box::new(req.clone())),
     })
 }

@@ -26,6 +26,8 @@ pub struct PoseAnalysis {
     pub report: UncertaintyReport,
     /// The sample index of each entry of `report.samples` (samples without contact are not registered).
     pub sample_index: Vec<usize>,
+    /// Per sample, the depth shift that anchored it onto the signature before registration, metres (empty: none).
+    pub anchor_shift_m: Vec<f64>,
     /// What the analysis registered, for exporting its geometry.
     pub inputs: Option<Box<crate::pose_job::PoseRequest>>,
 }

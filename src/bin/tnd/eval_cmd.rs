@@ -14,6 +14,7 @@ use tactile_derender::metrics::evaluate::{
     EvalConfig, EvalReport, Evaluator, Generator, GroundTruthGenerator, MethodSummary, PairSource,
 };
 use tactile_derender::metrics::model_generator::ModelGenerator;
+use tactile_derender::metrics::paper_table::{paper_tables, PaperEntry};
 use tactile_derender::metrics::sources::DatasetSource;
 use tactile_derender::metrics::MeanStd;
 use tactile_derender::model::{DiffusionModel, SamplerConfig};
@@ -27,8 +28,8 @@ pub struct EvalArgs {
     #[arg(long, default_value = "default")]
     pub model: String,
     /// Dataset directory (`tnd dataset gen`).
-    #[arg(long)]
-    pub data: PathBuf,
+    #[arg(long, required_unless_present = "tables_from")]
+    pub data: Option<PathBuf>,
     /// unseen_poses, unseen_objects, train or all (= unseen_poses and unseen_objects).
     #[arg(long, default_value = "all")]
     pub split: String,
@@ -62,6 +63,18 @@ pub struct EvalArgs {
     /// Samples per uncertainty analysis.
     #[arg(long, default_value_t = 50)]
     pub samples: usize,
+    /// Register the estimates as generated, without shifting their contact depths onto the measured signature
+    /// (depth anchoring, on by default: it removes the offset a drifted membrane inflation gives).
+    #[arg(long)]
+    pub no_anchor: bool,
+    /// Also print this run in the paper's table layout and units (θ in rad, Chamfer in m², splits side by side).
+    #[arg(long)]
+    pub paper: bool,
+    /// Evaluate nothing: print the paper's tables from earlier `tnd eval --json` outputs, one row per file
+    /// (training configuration) plus the first file's threshold baseline. `LABEL=FILE` names a row (default: the
+    /// generator in the file). Repeat the option or separate files with commas.
+    #[arg(long, value_name = "[LABEL=]FILE", value_delimiter = ',')]
+    pub tables_from: Vec<String>,
     /// Also write every pair's scores (both methods, estimated and true pose) as JSON lines to this file.
     #[arg(long)]
     pub records: Option<PathBuf>,
@@ -92,10 +105,20 @@ fn splits(s: &str) -> Result<Vec<SplitName>> {
 }
 
 pub fn run(a: EvalArgs) -> Result<()> {
+    if !a.tables_from.is_empty() {
+        print!("{}", paper_tables(&tables_from(&a.tables_from)?));
+        return Ok(());
+    }
+    let data = a
+        .data
+        .as_deref()
+        .ok_or_else(|| anyhow!("--data DIR is needed (or --tables-from FILE)"))?;
     let gen = generator(&a.model, &a.sampler)?;
-    let dataset = Dataset::open(&a.data)?;
+    let dataset = Dataset::open(data)?;
+    let mut paper = Vec::new();
     let evaluator = Evaluator::new(EvalConfig {
         pose_samples: a.pose_samples.max(1),
+        anchor_to_signature: !a.no_anchor,
         ..EvalConfig::default()
     });
     let rrd = a.rerun.open("tnd eval")?;
@@ -106,7 +129,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     for split in splits(&a.split)? {
         let source = DatasetSource::new(&dataset, split, None)?.skip(a.skip, a.limit);
         if source.is_empty() {
-            eprintln!("{}: split {split} has no pairs; skipped", a.data.display());
+            eprintln!("{}: split {split} has no pairs; skipped", data.display());
             continue;
         }
         let bar = Mutex::new(super::progress::bar(
@@ -159,6 +182,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         }
         markdown.push_str(&table);
         markdown.push_str(&breakdown);
+        paper.extend(paper_entries(&report.generator, split.as_str(), &report));
         for f in &report.failed {
             eprintln!("failed: {} ({}): {}", f.name, f.object, f.reason);
             let _ = writeln!(records, "{}", json!({"split": split.as_str(), "failed": f}));
@@ -179,6 +203,14 @@ pub fn run(a: EvalArgs) -> Result<()> {
             )?;
         }
     }
+    if a.paper {
+        let tables = paper_tables(&paper);
+        if !a.json {
+            eprintln!("{tables}");
+        }
+        markdown.push_str("## In the paper's layout\n\n");
+        markdown.push_str(&tables);
+    }
     if let Some(path) = &a.records {
         tactile_derender::io::write_atomic(path, records.as_bytes())
             .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
@@ -189,7 +221,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         let mut text = format!(
             "# Evaluation\n\nGenerator `{}`, dataset `{}`, seed {}. Metric definitions: README, section Evaluation.\n\n",
             gen.name(),
-            a.data.display(),
+            data.display(),
             a.seed
         );
         text.push_str(&markdown);
@@ -205,6 +237,71 @@ pub fn run(a: EvalArgs) -> Result<()> {
         bail!("{failed} pair(s) could not be scored (listed above and in --records); the tables cover the others");
     }
     Ok(())
+}
+
+/// The paper-table rows of one split's report: the model, its multi-sample estimate, the threshold baseline.
+fn paper_entries(label: &str, split: &str, r: &EvalReport) -> Vec<PaperEntry> {
+    let entry = |label: String, summary: &MethodSummary| PaperEntry {
+        label,
+        split: split.to_string(),
+        summary: summary.clone(),
+    };
+    let mut out = vec![entry(label.to_string(), &r.model)];
+    if let Some(m) = &r.model_multi {
+        out.push(entry(format!("{label} (multi-sample)"), m));
+    }
+    out.push(entry("threshold baseline".into(), &r.baseline));
+    out
+}
+
+/// Paper-table rows from `tnd eval --json` outputs (`[LABEL=]FILE`, one JSON object per split and line).
+fn tables_from(files: &[String]) -> Result<Vec<PaperEntry>> {
+    let mut out = Vec::new();
+    for spec in files {
+        let (label, path) = match spec.split_once('=') {
+            Some((l, p)) if !l.is_empty() => (Some(l), p),
+            _ => (None, spec.as_str()),
+        };
+        let text =
+            std::fs::read_to_string(path).map_err(|e| anyhow!("{path}: cannot read: {e}"))?;
+        let mut splits = 0;
+        for (n, line) in text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty())
+        {
+            let v: serde_json::Value = serde_json::from_str(line)
+                .map_err(|e| anyhow!("{path}: line {}: not JSON: {e}", n + 1))?;
+            let (Some(split), Some(generator)) = (v["split"].as_str(), v["generator"].as_str())
+            else {
+                continue; // Not a split summary (e.g. a progress or info line).
+            };
+            let summary = |key: &str| -> Result<MethodSummary> {
+                serde_json::from_value(v[key].clone()).map_err(|e| {
+                    anyhow!(
+                        "{path}: line {}: \"{key}\" is not a tnd eval summary: {e}",
+                        n + 1
+                    )
+                })
+            };
+            let report = EvalReport {
+                model: summary("model")?,
+                model_multi: if v["model_multi"].is_null() {
+                    None
+                } else {
+                    Some(summary("model_multi")?)
+                },
+                baseline: summary("baseline")?,
+                ..EvalReport::new(generator.to_string(), Vec::new(), Vec::new())
+            };
+            out.extend(paper_entries(label.unwrap_or(generator), split, &report));
+            splits += 1;
+        }
+        if splits == 0 {
+            bail!("{path}: no split summaries (write them with tnd eval --json > FILE)");
+        }
+    }
+    Ok(out)
 }
 
 fn cell(m: &MeanStd, scale: f64, digits: usize) -> String {
@@ -319,6 +416,7 @@ fn uncertainty_plots(
     for i in 0..a.report_pairs.min(source.len()) {
         let pair = source.pair(i)?;
         let samples = gen.generate(&pair, a.samples, a.seed.wrapping_add(i as u64))?;
+        let (samples, _) = evaluator.anchor(&samples, Some(&pair.signature), &pair.imprint)?;
         let base = threshold_contact(&pair.signature, &pair.imprint, &evaluator.config.baseline);
         let object = evaluator.object(&ctx.objects, &pair.object)?;
         let sig = Signature {

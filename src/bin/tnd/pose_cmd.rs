@@ -223,7 +223,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         "seed": a.derender.seed, "estimate": estimate.best(),
         "estimate_multi_sample": report.multi_sample.map(|m| m.pose),
         "truth": truth, "baseline": report.baseline, "multi_sample": report.multi_sample,
-        "failed": report.failed, "geometry": geometry,
+        "failed": report.failed, "geometry": geometry, "anchor_shift_m": estimate.anchor_shift_m,
         "position_err_mm": report.samples.iter().map(|s| s.position_mm).collect::<Vec<_>>(),
         "out": a.out});
     let path = a.out.join("pose.json");
