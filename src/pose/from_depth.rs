@@ -83,9 +83,8 @@ pub const ANCHOR_MIN_SHIFT_M: f64 = 0.001;
 /// real bubble's inflation has drifted, so every contact depth is off by the drift — is shifted by the median of
 /// `S − X̂0` over its contact pixels where S is valid and the imprint Y is at least [`ANCHOR_MIN_IMPRINT_M`] deep
 /// (clamped to ±[`MAX_ANCHOR_SHIFT_M`]; no shift with fewer than [`ANCHOR_MIN_PIXELS`] such pixels or a median
-/// under [`ANCHOR_MIN_SHIFT_M`]). The
-/// registration, an SE(2) fit with no height freedom, otherwise trades that offset for a lateral error. Returns
-/// the shifted image and the shift (metres).
+/// under [`ANCHOR_MIN_SHIFT_M`]). The registration, an SE(2) fit with no height freedom, otherwise trades that
+/// offset for a lateral error. Returns the shifted image and the shift (metres).
 pub fn anchor_to_signature(
     x0: &Image,
     signature: &Image,
