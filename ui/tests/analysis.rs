@@ -395,6 +395,14 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     assert!(h
         .query_by_label_contains("multi-sample estimate (consensus of 4 samples)")
         .is_some());
+    // Depth anchoring ran (the scene has a signature) and says what it did to the registered sample.
+    assert_eq!(r.anchor_shift_m.len(), 4);
+    assert!(
+        h.query_by_label_contains("contact depths as generated")
+            .is_some()
+            || h.query_by_label_contains("contact depths anchored to the signature")
+                .is_some()
+    );
 
     // Hovering the position KDE highlights the sample nearest to the pointer: near its left end (below every error:
     // the curve extends past the samples; the first ~10 % of the widget is the y axis) it picks the smallest error,

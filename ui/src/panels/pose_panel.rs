@@ -170,11 +170,12 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
         "{}: hypotheses of sample {} (best first)",
         r.object, r.registered_sample
     ));
-    if let Some(shift) = r.anchor_shift_m.get(r.registered_sample) {
-        ui.label(format!(
-            "contact depths anchored to the signature: {:+.2} mm",
-            shift * 1e3
-        ))
+    if let Some(&shift) = r.anchor_shift_m.get(r.registered_sample) {
+        ui.label(if shift == 0.0 {
+            "contact depths as generated (no offset to the signature to correct)".to_string()
+        } else {
+            format!("contact depths anchored to the signature: {:+.2} mm", shift * 1e3)
+        })
         .on_hover_text(
             "The sample's contact depths were moved by the median difference to the measured signature before \
              registration (a drifted membrane inflation offsets them all alike).",
