@@ -321,12 +321,15 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
     // As a user would: tnd recording simulate -> tnd recording info -> tnd dataset import -> tnd eval.
     let dir = tempfile::tempdir().unwrap();
     let tnd = env!("CARGO_BIN_EXE_tnd");
-    let run = |args: &[&str]| -> serde_json::Value {
-        let out = std::process::Command::new(tnd)
+    let output = |args: &[&str]| {
+        std::process::Command::new(tnd)
             .args(args)
             .current_dir(dir.path())
             .output()
-            .unwrap();
+            .unwrap()
+    };
+    let run = |args: &[&str]| -> serde_json::Value {
+        let out = output(args);
         assert!(
             out.status.success(),
             "tnd {args:?}: {}",
@@ -383,11 +386,7 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
     assert!(eval["model"]["position_mm"]["median"].as_f64().unwrap() < 0.05);
     // The saved run in the paper's layout: one row for the run (named here), the baseline, θ in radians.
     std::fs::write(dir.path().join("gt.json"), format!("{eval}\n")).unwrap();
-    let out = std::process::Command::new(tnd)
-        .args(["eval", "--tables-from", "truth=gt.json"])
-        .current_dir(dir.path())
-        .output()
-        .unwrap();
+    let out = output(&["eval", "--tables-from", "truth=gt.json"]);
     assert!(
         out.status.success(),
         "{}",
@@ -413,11 +412,7 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
     assert!(md.contains("| threshold baseline |"));
     // A file that is not a tnd eval output is refused with its name.
     std::fs::write(dir.path().join("bad.json"), "{}\n").unwrap();
-    let out = std::process::Command::new(tnd)
-        .args(["eval", "--tables-from", "bad.json"])
-        .current_dir(dir.path())
-        .output()
-        .unwrap();
+    let out = output(&["eval", "--tables-from", "bad.json"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.json: no split summaries"));
 }

@@ -62,12 +62,8 @@ impl PoseEstimate {
         let Some(s) = input.samples.get(self.registered_sample) else {
             return Vec::new();
         };
-        let mut s = s.clone();
-        if let Some(&shift) = self.anchor_shift_m.get(self.registered_sample) {
-            for d in s.data.iter_mut().filter(|d| **d > 0.0) {
-                *d = (f64::from(*d) + shift) as f32;
-            }
-        }
+        let shift = self.anchor_shift_m.get(self.registered_sample).copied();
+        let s = crate::pose::from_depth::shift_contact(s, shift.unwrap_or(0.0));
         crate::recon::back_project(&s, sim.intrinsics(), &input.t_world_camera).p_world
     }
 }

@@ -122,11 +122,16 @@ pub fn anchor_to_signature(
         return Ok((x0.clone(), 0.0));
     }
     let shift = median.clamp(-MAX_ANCHOR_SHIFT_M, MAX_ANCHOR_SHIFT_M);
+    Ok((shift_contact(x0, shift), shift))
+}
+
+/// `x0` with every contact depth moved by `shift` metres (kept positive: still contact); background stays 0.
+pub fn shift_contact(x0: &Image, shift: f64) -> Image {
     let mut out = x0.clone();
     for d in out.data.iter_mut().filter(|d| **d > 0.0) {
         *d = (f64::from(*d) + shift).max(f64::from(f32::MIN_POSITIVE)) as f32;
     }
-    Ok((out, shift))
+    out
 }
 
 /// Check that `samples` is non-empty, same-sized and finite.

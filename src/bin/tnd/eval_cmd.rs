@@ -182,7 +182,13 @@ pub fn run(a: EvalArgs) -> Result<()> {
         }
         markdown.push_str(&table);
         markdown.push_str(&breakdown);
-        paper.extend(paper_entries(&report.generator, split.as_str(), &report));
+        paper.extend(paper_entries(
+            &report.generator,
+            split.as_str(),
+            report.model.clone(),
+            report.model_multi.clone(),
+            report.baseline.clone(),
+        ));
         for f in &report.failed {
             eprintln!("failed: {} ({}): {}", f.name, f.object, f.reason);
             let _ = writeln!(records, "{}", json!({"split": split.as_str(), "failed": f}));
@@ -239,18 +245,24 @@ pub fn run(a: EvalArgs) -> Result<()> {
     Ok(())
 }
 
-/// The paper-table rows of one split's report: the model, its multi-sample estimate, the threshold baseline.
-fn paper_entries(label: &str, split: &str, r: &EvalReport) -> Vec<PaperEntry> {
-    let entry = |label: String, summary: &MethodSummary| PaperEntry {
+/// The paper-table rows of one split: the model, its multi-sample estimate (if any), the threshold baseline.
+fn paper_entries(
+    label: &str,
+    split: &str,
+    model: MethodSummary,
+    model_multi: Option<MethodSummary>,
+    baseline: MethodSummary,
+) -> Vec<PaperEntry> {
+    let entry = |label: String, summary| PaperEntry {
         label,
         split: split.to_string(),
-        summary: summary.clone(),
+        summary,
     };
-    let mut out = vec![entry(label.to_string(), &r.model)];
-    if let Some(m) = &r.model_multi {
+    let mut out = vec![entry(label.to_string(), model)];
+    if let Some(m) = model_multi {
         out.push(entry(format!("{label} (multi-sample)"), m));
     }
-    out.push(entry("threshold baseline".into(), &r.baseline));
+    out.push(entry("threshold baseline".into(), baseline));
     out
 }
 
@@ -284,17 +296,18 @@ fn tables_from(files: &[String]) -> Result<Vec<PaperEntry>> {
                     )
                 })
             };
-            let report = EvalReport {
-                model: summary("model")?,
-                model_multi: if v["model_multi"].is_null() {
-                    None
-                } else {
-                    Some(summary("model_multi")?)
-                },
-                baseline: summary("baseline")?,
-                ..EvalReport::new(generator.to_string(), Vec::new(), Vec::new())
+            let model_multi = if v["model_multi"].is_null() {
+                None
+            } else {
+                Some(summary("model_multi")?)
             };
-            out.extend(paper_entries(label.unwrap_or(generator), split, &report));
+            out.extend(paper_entries(
+                label.unwrap_or(generator),
+                split,
+                summary("model")?,
+                model_multi,
+                summary("baseline")?,
+            ));
             splits += 1;
         }
         if splits == 0 {

@@ -153,6 +153,14 @@ impl<const NV: usize> Lanes<NV> {
         let v = core::array::from_fn(|v| 16 * v);
         Self { b: v, c: v }
     }
+
+    /// The first `NV` (≤ 3) columns of `b` and `c`.
+    fn first(b: [usize; 3], c: [usize; 3]) -> Self {
+        Self {
+            b: core::array::from_fn(|v| b[v]),
+            c: core::array::from_fn(|v| c[v]),
+        }
+    }
 }
 
 /// One `R × (16 · NV)` block: `C = start + A[R, kc] · B[kc, 16 · NV]`, where row `r` of A is read
@@ -259,58 +267,86 @@ pub unsafe fn gemm_packed(
         }
         return;
     }
-    let blocks = m.div_ceil(MR);
     for j0 in (0..n).step_by(NR) {
         let w = NR.min(n - j0);
         let nv = w.div_ceil(16);
         let mask = lane_mask(w - 16 * (nv - 1));
-        for k0 in (0..k).step_by(KC) {
-            let kc = KC.min(k - k0);
-            let bp = b.shifted(k0, j0);
-            for ib in 0..blocks {
-                let mr = MR.min(m - ib * MR);
-                let panel = pa.as_ptr().add((ib * k + k0) * MR);
-                let ap: [*const f32; MR] = core::array::from_fn(|r| panel.add(r));
-                let cp = c.add(ib * MR * ldc + j0);
-                let start = Start::first(init, ib * MR, k0);
-                match nv {
-                    1 => kernel::<MR, 1, _>(
-                        kc,
-                        &ap,
-                        MR,
-                        bp,
-                        cp,
-                        ldc,
-                        mr,
-                        mask,
-                        start,
-                        Lanes::contiguous(),
-                    ),
-                    2 => kernel::<MR, 2, _>(
-                        kc,
-                        &ap,
-                        MR,
-                        bp,
-                        cp,
-                        ldc,
-                        mr,
-                        mask,
-                        start,
-                        Lanes::contiguous(),
-                    ),
-                    _ => kernel::<MR, 3, _>(
-                        kc,
-                        &ap,
-                        MR,
-                        bp,
-                        cp,
-                        ldc,
-                        mr,
-                        mask,
-                        start,
-                        Lanes::contiguous(),
-                    ),
-                }
+        strip(
+            (m, k),
+            pa,
+            b.shifted(0, j0),
+            (c.add(j0), ldc),
+            init,
+            (nv, CONTIGUOUS, CONTIGUOUS),
+            mask,
+        );
+    }
+}
+
+/// Columns of the three vectors of a plain strip (B and C alike).
+const CONTIGUOUS: [usize; 3] = [0, 16, 32];
+
+/// One strip of C `nv` (≤ 3) vectors wide, vector `v` at column `lb[v]` of B's rows and `lc[v]` of C's (from `b`
+/// and `c`), the last vector covering the lanes in `mask`: for each block of K in turn, every row block of A.
+///
+/// # Safety
+/// As [`kernel`] for every block.
+#[target_feature(enable = "avx512f")]
+unsafe fn strip(
+    (m, k): (usize, usize),
+    pa: &[f32],
+    b: impl Rows,
+    (c, ldc): (*mut f32, usize),
+    init: Init,
+    (nv, lb, lc): (usize, [usize; 3], [usize; 3]),
+    mask: __mmask16,
+) {
+    for k0 in (0..k).step_by(KC) {
+        let kc = KC.min(k - k0);
+        let bp = b.shifted(k0, 0);
+        for ib in 0..m.div_ceil(MR) {
+            let mr = MR.min(m - ib * MR);
+            let panel = pa.as_ptr().add((ib * k + k0) * MR);
+            let ap: [*const f32; MR] = core::array::from_fn(|r| panel.add(r));
+            let cp = c.add(ib * MR * ldc);
+            let start = Start::first(init, ib * MR, k0);
+            match nv {
+                1 => kernel::<MR, 1, _>(
+                    kc,
+                    &ap,
+                    MR,
+                    bp,
+                    cp,
+                    ldc,
+                    mr,
+                    mask,
+                    start,
+                    Lanes::first(lb, lc),
+                ),
+                2 => kernel::<MR, 2, _>(
+                    kc,
+                    &ap,
+                    MR,
+                    bp,
+                    cp,
+                    ldc,
+                    mr,
+                    mask,
+                    start,
+                    Lanes::first(lb, lc),
+                ),
+                _ => kernel::<MR, 3, _>(
+                    kc,
+                    &ap,
+                    MR,
+                    bp,
+                    cp,
+                    ldc,
+                    mr,
+                    mask,
+                    start,
+                    Lanes::first(lb, lc),
+                ),
             }
         }
     }
@@ -349,48 +385,13 @@ pub unsafe fn gemm_packed_image(
         let (y, x) = (s / per_row, s % per_row * 16);
         (y * wp + x, y * w + x)
     };
-    let lanes = |s0: usize, nv: usize| -> ([usize; 3], [usize; 3]) {
-        let mut l = ([0; 3], [0; 3]);
-        for v in 0..nv {
-            (l.0[v], l.1[v]) = at(s0 + v);
-        }
-        l
-    };
-    let blocks = m.div_ceil(MR);
     for s0 in (0..vectors).step_by(3) {
         let nv = 3.min(vectors - s0);
-        let (lb, lc) = lanes(s0, nv);
-        for k0 in (0..k).step_by(KC) {
-            let kc = KC.min(k - k0);
-            let bp = b.shifted(k0, 0);
-            for ib in 0..blocks {
-                let mr = MR.min(m - ib * MR);
-                let panel = pa.as_ptr().add((ib * k + k0) * MR);
-                let ap: [*const f32; MR] = core::array::from_fn(|r| panel.add(r));
-                let cp = c.add(ib * MR * ldc);
-                let start = Start::first(init, ib * MR, k0);
-                match nv {
-                    1 => {
-                        let l = Lanes {
-                            b: [lb[0]],
-                            c: [lc[0]],
-                        };
-                        kernel::<MR, 1, _>(kc, &ap, MR, bp, cp, ldc, mr, 0xFFFF, start, l)
-                    }
-                    2 => {
-                        let l = Lanes {
-                            b: [lb[0], lb[1]],
-                            c: [lc[0], lc[1]],
-                        };
-                        kernel::<MR, 2, _>(kc, &ap, MR, bp, cp, ldc, mr, 0xFFFF, start, l)
-                    }
-                    _ => {
-                        let l = Lanes { b: lb, c: lc };
-                        kernel::<MR, 3, _>(kc, &ap, MR, bp, cp, ldc, mr, 0xFFFF, start, l)
-                    }
-                }
-            }
+        let (mut lb, mut lc) = ([0; 3], [0; 3]);
+        for v in 0..nv {
+            (lb[v], lc[v]) = at(s0 + v);
         }
+        strip((m, k), pa, b, (c, ldc), init, (nv, lb, lc), 0xFFFF);
     }
 }
 

@@ -291,26 +291,12 @@ impl PackedA {
         init: Init,
     ) -> Result<()> {
         let k = self.k;
-        check_bias(init, self.m)?;
         check_offsets(offs, k, n, b.len(), "B")?;
-        if rows.end > self.m
-            || rows.start > rows.end
-            || !rows.start.is_multiple_of(self.row_align())
-        {
-            candle_core::bail!(
-                "sgemm: rows {rows:?} of a {}-row A (starts at multiples of {})",
-                self.m,
-                self.row_align()
-            );
-        }
+        let init = self.rows_init(&rows, init)?;
         let m = rows.len();
         if m == 0 || n == 0 {
             return Ok(());
         }
-        let init = match init {
-            Init::RowBias(bias) => Init::RowBias(&bias[rows.clone()]),
-            other => other,
-        };
         match self.backend {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: the backend is usable (checked when packing); every row of B checked above, C by the caller;
@@ -346,6 +332,26 @@ impl PackedA {
 }
 
 impl PackedA {
+    /// Checks that `rows` is a range of A's rows starting at a multiple of [`PackedA::row_align`] and that an
+    /// `Init::RowBias` holds one value per row of A; returns `init` for those rows.
+    fn rows_init<'a>(&self, rows: &Range<usize>, init: Init<'a>) -> Result<Init<'a>> {
+        check_bias(init, self.m)?;
+        if rows.end > self.m
+            || rows.start > rows.end
+            || !rows.start.is_multiple_of(self.row_align())
+        {
+            candle_core::bail!(
+                "sgemm: rows {rows:?} of a {}-row A (starts at multiples of {})",
+                self.m,
+                self.row_align()
+            );
+        }
+        Ok(match init {
+            Init::RowBias(bias) => Init::RowBias(&bias[rows.clone()]),
+            other => other,
+        })
+    }
+
     /// [`PackedA::matmul_offsets_rows_raw`] over a padded grid of `rows` rows of `wp` positions (B's `n` is
     /// `rows · wp`), keeping only the first `w` positions of each grid row: the product at `(y, x < w)` goes to
     /// column `y · w + x` of C, which holds `rows.len()` rows of `rows · w` floats at stride `ldc` — a
@@ -377,21 +383,7 @@ impl PackedA {
                     candle_core::bail!("sgemm: image width {w} is not a multiple of 16");
                 }
                 let k = self.k;
-                check_bias(init, self.m)?;
-                if rows.end > self.m
-                    || rows.start > rows.end
-                    || !rows.start.is_multiple_of(avx512::MR)
-                {
-                    candle_core::bail!(
-                        "sgemm: rows {rows:?} of a {}-row A (starts at multiples of {})",
-                        self.m,
-                        avx512::MR
-                    );
-                }
-                let init = match init {
-                    Init::RowBias(bias) => Init::RowBias(&bias[rows.clone()]),
-                    other => other,
-                };
+                let init = self.rows_init(&rows, init)?;
                 let b_rows = avx512::Offsets {
                     base: b.as_ptr(),
                     offs: offs.as_ptr(),
