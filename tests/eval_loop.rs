@@ -103,6 +103,7 @@ fn uncertainty_analysis_reports_each_registration_and_can_cancel() {
         baseline: Some(&base),
         truth: Some(pair.object_pose),
         init: None,
+        measured: Some((&pair.signature, &pair.imprint)),
     };
     // K-start search + 2 samples + baseline + the multi-sample estimate.
     let mut seen = Vec::new();
@@ -272,15 +273,17 @@ impl tactile_derender::metrics::evaluate::Generator for OffsetTruth {
 #[test]
 fn depth_anchoring_undoes_a_common_depth_offset() {
     let src = source();
-    let run = |anchor: bool| {
+    // Anchoring alone: the signature check (which would also undo the offset, below) is off.
+    let run = |anchor: bool, check: bool| {
         let eval = Evaluator::new(EvalConfig {
             anchor_to_signature: anchor,
+            check_signature: check,
             ..EvalConfig::default()
         });
         eval.evaluate(&src, &OffsetTruth { offset_m: 0.003 }, 7, &mut |_, _| true)
             .unwrap()
     };
-    let (anchored, raw) = (run(true), run(false));
+    let (anchored, raw) = (run(true, false), run(false, false));
     for (a, r) in anchored.records.iter().zip(&raw.records) {
         let (pa, pr) = (a.model.pose.unwrap(), r.model.pose.unwrap());
         eprintln!(
@@ -300,4 +303,11 @@ fn depth_anchoring_undoes_a_common_depth_offset() {
         "{:?}",
         raw.model.position_mm
     );
+    // The signature check without anchoring: the offset hypotheses predict a signature the sensor did not measure;
+    // the check moves each estimate back to a pose that explains it (within the noise, < 1 mm).
+    let checked = run(false, true);
+    for r in &checked.records {
+        let p = r.model.pose.unwrap();
+        assert!(p.position_mm < 1.0, "{}: {} mm", r.name, p.position_mm);
+    }
 }

@@ -30,6 +30,9 @@ pub struct GroupSummary {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_multi: Option<MethodSummary>,
     pub baseline: MethodSummary,
+    /// The baseline with the signature check, where it ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub baseline_checked: Option<MethodSummary>,
     /// Model mean position error / baseline mean position error (NaN when either has no pose); below 1 the model
     /// is better.
     pub position_ratio: f64,
@@ -48,6 +51,12 @@ impl GroupSummary {
             .filter_map(|r| r.model_multi.as_ref())
             .collect();
         let model_multi = (!multi.is_empty()).then(|| MethodSummary::of(multi.iter().copied()));
+        let checked: Vec<&MethodResult> = records
+            .iter()
+            .filter_map(|r| r.baseline_checked.as_ref())
+            .collect();
+        let baseline_checked =
+            (!checked.is_empty()).then(|| MethodSummary::of(checked.iter().copied()));
         let ratio = |m: &MethodSummary| m.position_mm.mean / baseline.position_mm.mean;
         Self {
             label,
@@ -57,6 +66,7 @@ impl GroupSummary {
             model,
             model_multi,
             baseline,
+            baseline_checked,
         }
     }
 }
@@ -140,6 +150,7 @@ mod tests {
             model: result(model),
             model_multi: None,
             baseline: result(baseline),
+            baseline_checked: None,
         }
     }
 

@@ -14,9 +14,10 @@ use super::pose::{pose_errors, PoseErrors};
 use super::summary::MeanStd;
 use super::MetricsError;
 use crate::image::Image;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, RayCaster};
 use crate::objects::{ObjectError, ObjectSet, Symmetry};
 use crate::pose::from_depth::{anchor_to_signature, consensus_depth, SensorView};
+use crate::pose::signature_check::{SignatureCheckConfig, SignatureModel};
 use crate::pose::{
     sample_surface, threshold_contact, BaselineConfig, Hypothesis, InitStrategy, PoseError,
     SdfRegistration, SdfRegistrationConfig,
@@ -88,6 +89,9 @@ pub struct EvalContext {
     /// E: depth of the undeformed membrane, metres (0 where not seen).
     pub membrane: Image,
     pub objects: ObjectSet,
+    /// How a contact becomes a signature on this sensor (the shadow cloak), for the signature check; `None` when
+    /// unknown (the check is then skipped).
+    pub signature_model: Option<SignatureModel>,
 }
 
 impl EvalContext {
@@ -97,6 +101,10 @@ impl EvalContext {
             intrinsics: *sim.intrinsics(),
             membrane: sim.nominal_depth().clone(),
             objects,
+            signature_model: Some(SignatureModel {
+                shadow_px: sim.config().signature.shadow_px,
+                spacing: sim.intrinsics().pixel_size_in(&sim.config().camera.native),
+            }),
         }
     }
 }
@@ -159,6 +167,12 @@ pub struct EvalConfig {
     /// ([`crate::pose::from_depth::anchor_to_signature`]; default true). Depth metrics score the estimate as
     /// generated.
     pub anchor_to_signature: bool,
+    /// Choose among the registration's hypotheses (and refine the choice) by the signature each one predicts
+    /// against the measured one ([`crate::pose::signature_check`]; default true). Needs the pair's signature and
+    /// the sensor's signature model.
+    pub check_signature: bool,
+    /// Settings of the signature check.
+    pub signature_check: SignatureCheckConfig,
 }
 
 impl Default for EvalConfig {
@@ -174,6 +188,8 @@ impl Default for EvalConfig {
             pose_samples: 1,
             consensus_probability: 0.5,
             anchor_to_signature: true,
+            check_signature: true,
+            signature_check: SignatureCheckConfig::default(),
         }
     }
 }
@@ -184,6 +200,8 @@ pub struct ObjectModel {
     /// Surface samples (object frame) for the Chamfer distance.
     pub cloud: Vec<DVec3>,
     pub symmetry: Symmetry,
+    /// Ray caster of the mesh (object frame) for the signature check.
+    pub caster: RayCaster,
 }
 
 /// Scores of one method on one pair.
@@ -210,7 +228,12 @@ pub struct PairRecord {
     /// The model's multi-sample estimate (with [`EvalConfig::pose_samples`] > 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_multi: Option<MethodResult>,
+    /// The threshold baseline as the paper defines it (no signature check).
     pub baseline: MethodResult,
+    /// The threshold baseline's registration with the signature check ([`EvalConfig::check_signature`]), so that
+    /// what the check alone gives is in every report.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub baseline_checked: Option<MethodResult>,
 }
 
 /// A pair that could not be scored, and why; the evaluation goes on without it.
@@ -272,6 +295,9 @@ pub struct EvalReport {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_multi: Option<MethodSummary>,
     pub baseline: MethodSummary,
+    /// The baseline with the signature check (when it ran).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub baseline_checked: Option<MethodSummary>,
     /// Per contact-size bin and per object.
     #[serde(default)]
     pub breakdown: super::breakdown::Breakdown,
@@ -293,6 +319,7 @@ impl EvalReport {
             model: rows.model,
             model_multi: rows.model_multi,
             baseline: rows.baseline,
+            baseline_checked: rows.baseline_checked,
             breakdown: super::breakdown::Breakdown::of(&records),
             records,
             failed,
@@ -338,10 +365,12 @@ impl Evaluator {
                     source,
                 }
             })?;
+        let caster = RayCaster::new(mesh)?;
         let model = Arc::new(ObjectModel {
             registration,
             cloud: sample_surface(mesh, self.config.chamfer_points, 0),
             symmetry,
+            caster,
         });
         if let Ok(mut m) = self.objects.lock() {
             m.insert(name.to_string(), model.clone());
@@ -401,45 +430,91 @@ impl Evaluator {
         ctx: &EvalContext,
         seed: u64,
     ) -> Result<MethodResult, EvalError> {
-        let depth = depth_metrics(estimate, &pair.target, &self.config.depth)?;
+        self.score_pooled(pair, estimate, std::slice::from_ref(estimate), ctx, seed)
+    }
+
+    /// Score the depth estimate `depth` of `pair`, with the pose from the hypotheses of registering every image of
+    /// `registered` (each anchored as [`Self::anchor`]): without the signature check the best hypothesis of the
+    /// first image with contact, with it the pooled hypotheses' best explanation of the signature ([`Self::choose`]).
+    pub fn score_pooled(
+        &self,
+        pair: &EvalPair,
+        depth: &Image,
+        registered: &[Image],
+        ctx: &EvalContext,
+        seed: u64,
+    ) -> Result<MethodResult, EvalError> {
+        let (result, _) = self.score_variants(
+            pair,
+            depth,
+            registered,
+            ctx,
+            seed,
+            self.config.check_signature,
+            false,
+        )?;
+        Ok(result)
+    }
+
+    /// [`Self::score_pooled`] from one registration twice: with the signature check as `check` says, and (when
+    /// `also_checked` and the check applies) with it; the second is `None` otherwise.
+    #[allow(clippy::too_many_arguments)]
+    fn score_variants(
+        &self,
+        pair: &EvalPair,
+        depth: &Image,
+        registered: &[Image],
+        ctx: &EvalContext,
+        seed: u64,
+        check: bool,
+        also_checked: bool,
+    ) -> Result<(MethodResult, Option<MethodResult>), EvalError> {
+        let depth = depth_metrics(depth, &pair.target, &self.config.depth)?;
         let object = self.object(&ctx.objects, &pair.object)?;
         let strategy = InitStrategy::Random {
             count: self.config.inits,
             radius_m: self.config.init_radius_m,
             seed,
         };
-        let (anchored, _) = self
-            .anchor(
-                std::slice::from_ref(estimate),
-                Some(&pair.signature),
-                &pair.imprint,
-            )
-            .map_err(|source| EvalError::Pose {
-                object: pair.object.clone(),
-                source,
-            })?;
-        let hyps = self
-            .register_depth(
+        let pose_error = |source| EvalError::Pose {
+            object: pair.object.clone(),
+            source,
+        };
+        let hypotheses = self
+            .pooled_hypotheses(
                 &object,
-                &anchored[0],
+                registered,
                 ctx,
                 &pair.t_world_camera,
+                Some((&pair.signature, &pair.imprint)),
                 &strategy,
-                seed,
             )
-            .map_err(|source| EvalError::Pose {
-                object: pair.object.clone(),
-                source,
-            })?;
-        let estimate = hyps.and_then(|h| h.first().map(|b| b.pose));
-        let pose = estimate
-            .map(|e| pose_errors(e, pair.object_pose, &object.symmetry, &object.cloud))
-            .transpose()?;
-        Ok(MethodResult {
-            depth,
-            estimate,
-            pose,
-        })
+            .map_err(pose_error)?;
+        let result = |check: bool| -> Result<MethodResult, EvalError> {
+            let estimate = self
+                .choose_with(
+                    &object,
+                    &hypotheses,
+                    ctx,
+                    &pair.t_world_camera,
+                    Some((&pair.signature, &pair.imprint)).filter(|_| check),
+                )
+                .map_err(pose_error)?;
+            let pose = estimate
+                .map(|e| pose_errors(e, pair.object_pose, &object.symmetry, &object.cloud))
+                .transpose()?;
+            Ok(MethodResult {
+                depth,
+                estimate,
+                pose,
+            })
+        };
+        let checked = if also_checked && ctx.signature_model.is_some() {
+            Some(result(true)?)
+        } else {
+            None
+        };
+        Ok((result(check)?, checked))
     }
 
     /// Score both methods on pair `i` of `source`.
@@ -478,15 +553,30 @@ impl Evaluator {
                         source,
                     })
                 })?;
+            let mut registered = vec![consensus.clone()];
+            if self.config.check_signature {
+                registered.extend(samples.iter().cloned());
+            }
             Some(
-                self.score(&pair, &consensus, ctx, pair_seed)
+                self.score_pooled(&pair, &consensus, &registered, ctx, pair_seed)
                     .map_err(fail)?,
             )
         } else {
             None
         };
         let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.baseline);
-        let baseline = self.score(&pair, &base_x0, ctx, pair_seed).map_err(fail)?;
+        // The baseline as the paper defines it (its registration's best hypothesis), and with the signature check.
+        let (baseline, baseline_checked) = self
+            .score_variants(
+                &pair,
+                &base_x0,
+                std::slice::from_ref(&base_x0),
+                ctx,
+                pair_seed,
+                false,
+                self.config.check_signature,
+            )
+            .map_err(fail)?;
         Ok(PairRecord {
             name: pair.name.clone(),
             object: pair.object.clone(),
@@ -495,6 +585,7 @@ impl Evaluator {
             model,
             model_multi,
             baseline,
+            baseline_checked,
         })
     }
 

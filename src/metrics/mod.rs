@@ -7,6 +7,7 @@
 pub mod breakdown;
 pub mod depth;
 pub mod evaluate;
+pub mod hypotheses;
 pub mod model_generator;
 pub mod paper_table;
 pub mod pose;

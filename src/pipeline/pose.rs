@@ -40,6 +40,9 @@ pub struct PoseEstimate {
     pub hypotheses: Vec<Hypothesis>,
     /// The sample whose K-start registration gave the start of the others.
     pub registered_sample: usize,
+    /// The single-sample estimate after the signature check ([`crate::pose::signature_check`]): the hypothesis
+    /// that best explains the measured signature, refined; `None` without a signature or with the check off.
+    pub checked: Option<Se2>,
     /// Indices of the samples with contact (the others cannot be registered).
     pub with_contact: Vec<usize>,
     /// Every sample's, the baseline's and the multi-sample estimate's pose and errors, with the KDEs.
@@ -50,9 +53,11 @@ pub struct PoseEstimate {
 }
 
 impl PoseEstimate {
-    /// The single-sample estimate: the best hypothesis of the K-start registration.
+    /// The single-sample estimate: the signature check's pick when it ran, else the best hypothesis of the K-start
+    /// registration.
     pub fn best(&self) -> Option<Se2> {
-        self.hypotheses.first().map(|h| h.pose)
+        self.checked
+            .or_else(|| self.hypotheses.first().map(|h| h.pose))
     }
 
     /// The contact points the single-sample estimate was fitted to: sample `registered_sample` of `input`
@@ -101,6 +106,15 @@ pub fn estimate_pose(
         seed,
     )?
     .ok_or(PipelineError::NoContact)?;
+    let checked = evaluator
+        .choose(
+            &model,
+            &hypotheses,
+            &ctx,
+            &input.t_world_camera,
+            input.signature.map(|s| (s, input.imprint)),
+        )?
+        .filter(|_| config.check_signature && input.signature.is_some());
     let multi = usize::from(input.samples.len() > 1);
     let total = 2 + input.samples.len() + multi;
     if !progress(1, total) {
@@ -115,6 +129,7 @@ pub fn estimate_pose(
         baseline: baseline.as_ref(),
         truth: input.truth,
         init: hypotheses.first().map(|h| h.pose),
+        measured: input.signature.map(|s| (s, input.imprint)),
     };
     let report = analyse_with_progress(&evaluator, &model, &ctx, &sig, seed, &mut |done, _| {
         progress(1 + done, total)
@@ -127,6 +142,7 @@ pub fn estimate_pose(
         object: object.name.clone(),
         hypotheses,
         registered_sample,
+        checked,
         with_contact,
         report,
         anchor_shift_m,

@@ -14,6 +14,7 @@ pub mod register;
 pub mod sdf;
 pub mod sdf_grid;
 pub mod sdf_register;
+pub mod signature_check;
 
 pub use baseline::{threshold_contact, BaselineConfig};
 pub use register::{

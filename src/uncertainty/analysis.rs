@@ -23,6 +23,10 @@ pub struct Signature<'a> {
     pub truth: Option<Se2>,
     /// The fixed start; `None`: the best of a K-start registration of the first sample with contact.
     pub init: Option<Se2>,
+    /// (S, Y), the measured signature and imprint: with them (and
+    /// [`crate::metrics::evaluate::EvalConfig::check_signature`]) the multi-sample estimate is the signature check's
+    /// pick among the consensus's and every sample's hypotheses.
+    pub measured: Option<(&'a Image, &'a Image)>,
 }
 
 /// The K-start registration that gives an analysis its fixed start: the first of `samples` with contact that
@@ -173,22 +177,12 @@ pub fn analyse_with_progress(
         step(&mut done)?;
     }
     let multi_sample = if multi {
-        let registered = consensus_depth(sig.samples, evaluator.config.consensus_probability)
-            .and_then(|consensus| {
-                evaluator.register_depth(
-                    object,
-                    &consensus,
-                    ctx,
-                    &sig.t_world_camera,
-                    &strategy,
-                    seed,
-                )
-            });
+        let estimate = multi_sample_estimate(evaluator, object, ctx, sig, &strategy);
         step(&mut done)?;
-        match registered {
-            Ok(h) => h
-                .and_then(|h| h.first().copied())
-                .map(|b| SampleError::new(b.pose, b.cost, reference, &object.symmetry)),
+        match estimate {
+            Ok(pose) => {
+                pose.map(|(pose, cost)| SampleError::new(pose, cost, reference, &object.symmetry))
+            }
             Err(e) => {
                 record("multi-sample estimate".into(), &e);
                 None
@@ -202,4 +196,39 @@ pub fn analyse_with_progress(
     report.multi_sample = multi_sample;
     report.failed = failed;
     Ok(report)
+}
+
+/// The multi-sample estimate of `sig`: the samples' consensus contact registered from `strategy`'s starts; with the
+/// signature check ([`Evaluator::choose`]) every sample is registered from them too and the check picks among all
+/// those hypotheses. Returns the pose with its registration cost (NaN for a pose the check refined).
+pub fn multi_sample_estimate(
+    evaluator: &Evaluator,
+    object: &ObjectModel,
+    ctx: &EvalContext,
+    sig: &Signature<'_>,
+    strategy: &InitStrategy,
+) -> Result<Option<(Se2, f64)>, PoseError> {
+    let consensus = consensus_depth(sig.samples, evaluator.config.consensus_probability)?;
+    let checked = evaluator.config.check_signature && sig.measured.is_some();
+    let mut registered = vec![consensus];
+    if checked {
+        registered.extend(sig.samples.iter().cloned());
+    }
+    // The samples arrive anchored (or not) as the caller chose: no second anchoring here.
+    let hypotheses = evaluator.pooled_hypotheses(
+        object,
+        &registered,
+        ctx,
+        &sig.t_world_camera,
+        None,
+        strategy,
+    )?;
+    let pose = evaluator.choose(object, &hypotheses, ctx, &sig.t_world_camera, sig.measured)?;
+    Ok(pose.map(|p| {
+        let cost = hypotheses
+            .iter()
+            .find(|h| h.pose == p)
+            .map_or(f64::NAN, |h| h.cost);
+        (p, cost)
+    }))
 }

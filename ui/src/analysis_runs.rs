@@ -514,6 +514,7 @@ impl WorkbenchApp {
             object: r.object.clone(),
             hypotheses: r.hypotheses.clone(),
             registered_sample: r.registered_sample,
+            checked: r.checked,
             with_contact: r.sample_index.clone(),
             report: r.report.clone(),
             anchor_shift_m: r.anchor_shift_m.clone(),

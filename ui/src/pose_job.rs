@@ -67,6 +67,7 @@ pub fn run(
         outline: outline(&object.mesh),
         truth: c.truth,
         registered_sample: estimate.registered_sample,
+        checked: estimate.checked,
         hypotheses: estimate.hypotheses,
         contacts,
         report: estimate.report,

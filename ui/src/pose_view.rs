@@ -20,6 +20,9 @@ pub struct PoseAnalysis {
     pub registered_sample: usize,
     /// Hypotheses of that registration, best first.
     pub hypotheses: Vec<Hypothesis>,
+    /// The single-sample estimate after the signature check (the hypothesis that best explains the measured
+    /// signature, refined); `None` when the check did not run.
+    pub checked: Option<Se2>,
     /// Its contact points (back-projected X̂0), world frame, metres.
     pub contacts: Vec<[f64; 2]>,
     /// Per-sample errors (from the fixed start), baseline errors and KDE curves.
@@ -33,6 +36,12 @@ pub struct PoseAnalysis {
 }
 
 impl PoseAnalysis {
+    /// The single-sample estimate: the signature check's pick, else the best hypothesis.
+    pub fn single_estimate(&self) -> Option<Se2> {
+        self.checked
+            .or_else(|| self.hypotheses.first().map(|h| h.pose))
+    }
+
     /// The sample index of `report.samples[k]`.
     pub fn sample_of(&self, k: usize) -> Option<usize> {
         self.sample_index.get(k).copied()

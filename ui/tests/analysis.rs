@@ -395,6 +395,14 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     assert!(h
         .query_by_label_contains("multi-sample estimate (consensus of 4 samples)")
         .is_some());
+    // The signature check ran (the scene has a signature): its pick is the single-sample estimate, shown by name.
+    let checked = r.checked.expect("signature-checked estimate");
+    let truth = r.truth.unwrap();
+    assert!(
+        (checked.x - truth.x).hypot(checked.y - truth.y) < 1.5e-3,
+        "{checked:?}"
+    );
+    assert!(h.query_by_label_contains("signature check: x").is_some());
     // Depth anchoring ran (the scene has a signature) and says what it did to the registered sample.
     assert_eq!(r.anchor_shift_m.len(), 4);
     assert!(

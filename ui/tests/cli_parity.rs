@@ -130,7 +130,9 @@ fn workbench_jobs_and_cli_commands_give_bit_identical_samples_and_poses() {
         pose_dir.display().to_string(),
     ]);
     let summary = tnd(&args.iter().map(String::as_str).collect::<Vec<_>>());
-    let best = posed.hypotheses[0].pose;
+    // The single-sample estimate: the signature check's pick (the scene has a signature), in both.
+    assert!(posed.checked.is_some() && summary["signature_checked"] == true);
+    let best = posed.single_estimate().unwrap();
     let cli_best: tactile_derender::sensor::Se2 =
         serde_json::from_value(summary["estimate"].clone()).unwrap();
     assert_eq!(

@@ -67,6 +67,15 @@ pub struct EvalArgs {
     /// (depth anchoring, on by default: it removes the offset a drifted membrane inflation gives).
     #[arg(long)]
     pub no_anchor: bool,
+    /// Take the registration's lowest-cost hypothesis as the pose, without checking the hypotheses against the
+    /// measured signature (the signature check, on by default: each hypothesis predicts the signature, the best
+    /// explanation is refined and kept).
+    #[arg(long)]
+    pub no_signature_check: bool,
+    /// Random starts per registration (the paper's K = 10); with the signature check more starts give it more
+    /// hypotheses to choose from.
+    #[arg(long, default_value_t = EvalConfig::default().inits)]
+    pub inits: usize,
     /// Also print this run in the paper's table layout and units (θ in rad, Chamfer in m², splits side by side).
     #[arg(long)]
     pub paper: bool,
@@ -119,6 +128,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let evaluator = Evaluator::new(EvalConfig {
         pose_samples: a.pose_samples.max(1),
         anchor_to_signature: !a.no_anchor,
+        check_signature: !a.no_signature_check,
+        inits: a.inits,
         ..EvalConfig::default()
     });
     let rrd = a.rerun.open("tnd eval")?;
@@ -171,7 +182,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
             "{}",
             json!({"split": split.as_str(), "generator": report.generator, "pairs": report.pairs,
                    "model": report.model, "model_multi": report.model_multi,
-                   "baseline": report.baseline, "breakdown": report.breakdown,
+                   "baseline": report.baseline, "baseline_checked": report.baseline_checked,
+                   "breakdown": report.breakdown,
                    "failed": report.failed})
         );
         if !a.json {
@@ -372,6 +384,9 @@ pub fn markdown_table(split: &str, r: &EvalReport) -> String {
         s.push_str(&row(&format!("{} (multi-sample)", r.generator), m));
     }
     s.push_str(&row("threshold baseline", &r.baseline));
+    if let Some(b) = &r.baseline_checked {
+        s.push_str(&row("threshold baseline + signature check", b));
+    }
     s.push('\n');
     s
 }
@@ -379,6 +394,7 @@ pub fn markdown_table(split: &str, r: &EvalReport) -> String {
 /// Position error per contact-size bin and per object, model against baseline, as markdown.
 fn breakdown_tables(r: &EvalReport) -> String {
     let multi = r.model_multi.is_some();
+    let checked = r.baseline_checked.is_some();
     let mut s = String::new();
     for (title, groups) in [
         ("contact size", &r.breakdown.contact_size),
@@ -386,25 +402,28 @@ fn breakdown_tables(r: &EvalReport) -> String {
     ] {
         let _ = writeln!(
             s,
-            "| {title} | pairs | model position [mm] |{} baseline position [mm] | model / baseline |{}",
+            "| {title} | pairs | model position [mm] |{} baseline position [mm] |{} model / baseline |{}",
             if multi { " multi-sample position [mm] |" } else { "" },
+            if checked { " baseline + check [mm] |" } else { "" },
             if multi { " multi-sample / baseline |" } else { "" }
         );
-        s.push_str(if multi {
-            "| --- | --- | --- | --- | --- | --- | --- |\n"
-        } else {
-            "| --- | --- | --- | --- | --- |\n"
-        });
+        let columns = 5 + 2 * usize::from(multi) + usize::from(checked);
+        let _ = writeln!(s, "|{}", " --- |".repeat(columns));
         for g in groups {
             let m = g.model_multi.as_ref().map(|m| median_cell(&m.position_mm));
+            let c = g
+                .baseline_checked
+                .as_ref()
+                .map(|b| median_cell(&b.position_mm));
             let _ = writeln!(
                 s,
-                "| {} | {} | {} |{} {} | {:.2} |{}",
+                "| {} | {} | {} |{} {} |{} {:.2} |{}",
                 g.label,
                 g.pairs,
                 median_cell(&g.model.position_mm),
                 m.map(|c| format!(" {c} |")).unwrap_or_default(),
                 median_cell(&g.baseline.position_mm),
+                c.map(|c| format!(" {c} |")).unwrap_or_default(),
                 g.position_ratio,
                 g.position_ratio_multi
                     .map(|x| format!(" {x:.2} |"))
@@ -438,6 +457,7 @@ fn uncertainty_plots(
             baseline: Some(&base),
             truth: Some(pair.object_pose),
             init: None,
+            measured: Some((&pair.signature, &pair.imprint)),
         };
         let r = analyse(evaluator, &object, ctx, &sig, a.seed)?;
         let sub = dir.join(format!("{split}_{i}"));

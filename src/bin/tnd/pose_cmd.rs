@@ -40,9 +40,13 @@ pub struct PoseArgs {
     /// The true in-contact depth X0 (.npy), used by --model ground-truth.
     #[arg(long)]
     pub target: Option<PathBuf>,
-    /// The signature S (.npy), for the threshold baseline.
+    /// The signature S (.npy), for the threshold baseline and the signature check.
     #[arg(long)]
     pub signature: Option<PathBuf>,
+    /// Take the registration's lowest-cost hypothesis as the estimate, without checking the hypotheses against the
+    /// signature (the check needs --signature; on by default).
+    #[arg(long)]
+    pub no_signature_check: bool,
     /// The true pose X,Y,THETA (metres, metres, radians; errors are measured against it, otherwise against the
     /// estimate).
     #[arg(long)]
@@ -103,7 +107,10 @@ pub fn run(a: PoseArgs) -> Result<()> {
         .transpose()
         .map_err(|e| anyhow!("--truth: {e}"))?;
     let signature = a.signature.as_ref().map(|p| read(p, res)).transpose()?;
-    let eval = EvalConfig::default();
+    let eval = EvalConfig {
+        check_signature: !a.no_signature_check,
+        ..EvalConfig::default()
+    };
     let (generator, samples, probability) = if a.model == "ground-truth" {
         let target = a.target.as_ref().ok_or_else(|| {
             anyhow!("--model ground-truth needs --target FILE.npy (the in-contact depth to use as every sample)")
@@ -221,6 +228,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let rerun = crate::rerun_out::finish(rrd)?;
     let summary = json!({"object": object.name, "generator": generator, "rerun": rerun, "samples": report.samples.len(),
         "seed": a.derender.seed, "estimate": estimate.best(),
+        "signature_checked": estimate.checked.is_some(),
+        "best_hypothesis": estimate.hypotheses.first().map(|h| h.pose),
         "estimate_multi_sample": report.multi_sample.map(|m| m.pose),
         "truth": truth, "baseline": report.baseline, "multi_sample": report.multi_sample,
         "failed": report.failed, "geometry": geometry, "anchor_shift_m": estimate.anchor_shift_m,

@@ -137,8 +137,13 @@ fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, heigh
                     );
                 }
             };
-            if let Some(best) = r.hypotheses.first() {
-                outline("best hypothesis", &best.pose, ESTIMATE_COLOUR, 2.0);
+            if let Some(best) = r.single_estimate() {
+                let name = if r.checked.is_some() {
+                    "single-sample estimate (signature-checked)"
+                } else {
+                    "best hypothesis"
+                };
+                outline(name, &best, ESTIMATE_COLOUR, 2.0);
             }
             if let Some(m) = &r.report.multi_sample {
                 outline("multi-sample estimate", &m.pose, MULTI_COLOUR, 2.0);
@@ -179,6 +184,28 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
         .on_hover_text(
             "The sample's contact depths were moved by the median difference to the measured signature before \
              registration (a drifted membrane inflation offsets them all alike).",
+        );
+    }
+    if let Some(c) = r.checked {
+        let error = r
+            .truth
+            .map(|t| {
+                format!(
+                    " ({:.2} mm from the true position)",
+                    (c.x - t.x).hypot(c.y - t.y) * 1e3
+                )
+            })
+            .unwrap_or_default();
+        ui.label(format!(
+            "signature check: x {:.2} mm, y {:.2} mm, θ {:.1}°{error}",
+            c.x * 1e3,
+            c.y * 1e3,
+            c.theta.to_degrees()
+        ))
+        .on_hover_text(
+            "Each hypothesis predicts the signature the sensor would have measured (object rendered at that pose, \
+             contact where it reaches past the membrane, tactile shadow); the best explanation of the measured \
+             signature is refined and drawn as the single-sample estimate.",
         );
     }
     egui::ScrollArea::vertical()
@@ -238,7 +265,9 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
         ))
         .on_hover_text(
             "the pixels at least half of the samples mark as contact, at their median depth, registered from \
-             K random starts (the De-render tab shows this consensus and the per-pixel contact probability)",
+             K random starts; with the signature check every sample is registered from them too and the \
+             hypothesis that best explains the measured signature wins (the De-render tab shows the consensus and \
+             the per-pixel contact probability)",
         );
     }
     match &rep.baseline {

@@ -1,0 +1,90 @@
+//! **Choosing the pose** from registration hypotheses (paper IV.C, extended): the hypotheses of one or several
+//! in-contact depth estimates pooled, and the pick — the registration's best, or the hypothesis that best explains
+//! the measured signature ([`crate::pose::signature_check`]), refined.
+
+use glam::DAffine3;
+
+use super::evaluate::{EvalContext, Evaluator, ObjectModel};
+use crate::image::Image;
+use crate::pose::signature_check::{measured_membrane, SignatureCheck};
+use crate::pose::{Hypothesis, InitStrategy, PoseError};
+use crate::sensor::Se2;
+
+impl Evaluator {
+    /// Every image of `estimates` anchored to `anchor_to` = (signature, imprint) ([`Self::anchor`]; `None`: as
+    /// given) and registered from `strategy`'s starts: the
+    /// hypotheses of all of them, each image's best first, in the order of `estimates` (images without contact
+    /// give none).
+    #[allow(clippy::too_many_arguments)]
+    pub fn pooled_hypotheses(
+        &self,
+        object: &ObjectModel,
+        estimates: &[Image],
+        ctx: &EvalContext,
+        t_world_camera: &DAffine3,
+        anchor_to: Option<(&Image, &Image)>,
+        strategy: &InitStrategy,
+    ) -> Result<Vec<Hypothesis>, PoseError> {
+        let seed = match strategy {
+            InitStrategy::Random { seed, .. } => *seed,
+            InitStrategy::Fixed(_) => 0,
+        };
+        let (anchored, _) = match anchor_to {
+            Some((signature, imprint)) => self.anchor(estimates, Some(signature), imprint)?,
+            None => (estimates.to_vec(), Vec::new()),
+        };
+        let mut hypotheses = Vec::new();
+        for x0 in &anchored {
+            let hyps = self.register_depth(object, x0, ctx, t_world_camera, strategy, seed)?;
+            hypotheses.extend(hyps.unwrap_or_default());
+        }
+        Ok(hypotheses)
+    }
+
+    /// The pose from a registration's `hypotheses`: the first one (the best of a single registration), or, with
+    /// [`EvalConfig::check_signature`], a `measured` (signature, imprint) and the sensor's signature model, the one the
+    /// signature check picks and refines ([`SignatureCheck::select`]). `None` without hypotheses.
+    pub fn choose(
+        &self,
+        object: &ObjectModel,
+        hypotheses: &[Hypothesis],
+        ctx: &EvalContext,
+        t_world_camera: &DAffine3,
+        measured: Option<(&Image, &Image)>,
+    ) -> Result<Option<Se2>, PoseError> {
+        let measured = measured.filter(|_| self.config.check_signature);
+        self.choose_with(object, hypotheses, ctx, t_world_camera, measured)
+    }
+
+    /// [`Self::choose`] checking against `measured` = (signature, imprint) whenever it is given.
+    pub(crate) fn choose_with(
+        &self,
+        object: &ObjectModel,
+        hypotheses: &[Hypothesis],
+        ctx: &EvalContext,
+        t_world_camera: &DAffine3,
+        measured: Option<(&Image, &Image)>,
+    ) -> Result<Option<Se2>, PoseError> {
+        let best = hypotheses.first().map(|h| h.pose);
+        let (Some(model), Some((signature, imprint))) = (ctx.signature_model, measured) else {
+            return Ok(best);
+        };
+        let cfg = &self.config.signature_check;
+        let membrane = if cfg.reference_radius_px > 0 {
+            measured_membrane(&ctx.membrane, signature, imprint, cfg.reference_radius_px)?
+        } else {
+            ctx.membrane.clone()
+        };
+        let check = SignatureCheck {
+            caster: &object.caster,
+            intrinsics: &ctx.intrinsics,
+            membrane: &membrane,
+            t_world_camera: *t_world_camera,
+            signature,
+            model,
+            config: &self.config.signature_check,
+        };
+        let poses: Vec<Se2> = hypotheses.iter().map(|h| h.pose).collect();
+        Ok(check.select(&poses)?.map(|c| c.pose).or(best))
+    }
+}
