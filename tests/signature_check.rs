@@ -45,6 +45,7 @@ fn model(sim: &Simulator) -> SignatureModel {
     SignatureModel {
         shadow_px: sim.config().signature.shadow_px,
         spacing: sim.intrinsics().pixel_size_in(&sim.config().camera.native),
+        noise_std: sim.config().signature.noise_std,
     }
 }
 
@@ -137,4 +138,31 @@ fn images_that_do_not_fit_the_camera_and_bad_settings_are_errors() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("scale_m must be positive"), "{err}");
+}
+
+#[test]
+fn poses_the_signature_cannot_tell_apart_keep_the_registrations_pick_with_a_margin() {
+    // A sphere turned about the table normal leaves the same signature up to its tessellation: far less than 3 nats
+    // of log-likelihood apart, so with that margin the check keeps the registration's best (the first hypothesis),
+    // whichever order the two come in.
+    let truth = Se2::new(0.002, -0.001, 0.3);
+    let s = setup("sphere_r20", truth, 0.005, 1.38e-3);
+    let config = SignatureCheckConfig {
+        margin_nats: 3.0,
+        refine: 0,
+        ..Default::default()
+    };
+    let c = check(&s, &s.out.signature, &config);
+    let turned = Se2::new(truth.x, truth.y, truth.theta + 1.0);
+    let nats =
+        (c.cost(truth) - c.cost(turned)).abs() * c.measured_pixels() as f64 / 1.38e-3f64.powi(2);
+    assert!(nats < 1.0, "{nats} nats apart");
+    for (first, second) in [(truth, turned), (turned, truth)] {
+        let picked = c.select(&[first, second]).unwrap().unwrap();
+        assert_eq!(picked.from, 0, "{picked:?}");
+        assert_eq!(picked.pose, first);
+    }
+    // A clearly better explanation still wins over the first hypothesis.
+    let off = Se2::new(truth.x + 0.004, truth.y, truth.theta);
+    assert_eq!(c.select(&[off, truth]).unwrap().unwrap().from, 1);
 }

@@ -104,6 +104,7 @@ impl EvalContext {
             signature_model: Some(SignatureModel {
                 shadow_px: sim.config().signature.shadow_px,
                 spacing: sim.intrinsics().pixel_size_in(&sim.config().camera.native),
+                noise_std: sim.config().signature.noise_std,
             }),
         }
     }
