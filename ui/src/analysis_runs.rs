@@ -64,6 +64,8 @@ pub struct PoseView {
     pub result: Option<Box<PoseAnalysis>>,
     /// The sample highlighted by hovering the KDE plots.
     pub highlight: Option<usize>,
+    /// Register without the signature check (the registration's best hypothesis is the estimate).
+    pub no_signature_check: bool,
 }
 
 /// Live state of the analysis tabs.
@@ -482,6 +484,7 @@ impl WorkbenchApp {
             imprint: r.input.imprint.clone(),
             samples: r.samples.clone(),
             seed: r.config.seed,
+            check_signature: !view.no_signature_check,
         };
         raise_cancel(&mut view.cancel);
         let cancel = Arc::new(AtomicBool::new(false));

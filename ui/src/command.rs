@@ -78,6 +78,8 @@ pub enum Command {
     ExportPose,
     /// Highlight one sample in the Pose tab's plots (`None`: none), as the pointer hovers it.
     HighlightSample(Option<usize>),
+    /// Turn the signature check of the next registration on or off.
+    SetSignatureCheck(bool),
     /// Undo the last scene, sensor or elastomer edit.
     Undo,
     /// Redo the last undone edit.
@@ -251,6 +253,7 @@ impl WorkbenchApp {
                 self.report("export", r);
             }
             Command::HighlightSample(k) => self.analysis.pose.highlight = k,
+            Command::SetSignatureCheck(on) => self.analysis.pose.no_signature_check = !on,
             Command::ZoomImage(target) => self.analysis.zoom = target,
             Command::OpenRecording(path) => {
                 self.state.recording = crate::recording_view::RecordingSettings {

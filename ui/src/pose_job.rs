@@ -27,6 +27,8 @@ pub struct PoseRequest {
     /// The run's X̂0 samples, metres.
     pub samples: Vec<Image>,
     pub seed: u64,
+    /// Judge the registration's hypotheses by the signature each predicts (the signature check).
+    pub check_signature: bool,
 }
 
 /// Register the samples and the baseline ([`pipeline::estimate_pose`], as `tnd pose` does), reporting
@@ -50,7 +52,10 @@ pub fn run(
         &object,
         &sim,
         &input,
-        &EvalConfig::default(),
+        &EvalConfig {
+            check_signature: req.check_signature,
+            ..EvalConfig::default()
+        },
         req.seed,
         &mut |done, total| {
             progress(done, total);

@@ -493,6 +493,20 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     assert!(h.state().analysis.pose.result.is_none());
     assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
     assert!(h.query_by_label("Register samples").is_some());
+
+    // With the signature check unticked the registration's best hypothesis is the estimate, and the tab says no
+    // check ran.
+    h.get_by_label("signature check").click();
+    h.run_ok();
+    assert!(h.state().analysis.pose.no_signature_check);
+    h.get_by_label("Register samples").click();
+    wait_for(&mut h, "the registration without the check", |a| {
+        !a.analysis.pose.running && a.analysis.pose.result.is_some()
+    });
+    let r = h.state().analysis.pose.result.as_ref().unwrap();
+    assert!(r.checked.is_none());
+    assert_eq!(r.single_estimate(), r.hypotheses.first().map(|h| h.pose));
+    assert!(h.query_by_label_contains("signature check: x").is_none());
 }
 
 #[test]

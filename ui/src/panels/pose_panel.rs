@@ -48,6 +48,17 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
         {
             cmds.push(Command::RunPose);
         }
+        if !pose.running {
+            let mut check = !pose.no_signature_check;
+            ui.checkbox(&mut check, "signature check").on_hover_text(
+                "judge the registration's hypotheses by the signature each one predicts (object rendered at the \
+                 pose, contact, tactile shadow) against the measured one, and refine the best; off: the \
+                 registration's lowest-cost hypothesis is the estimate. Applies to the next registration.",
+            );
+            if check == pose.no_signature_check {
+                cmds.push(Command::SetSignatureCheck(check));
+            }
+        }
         if pose.result.is_some()
             && ui
                 .button("Export CSV, figures, PLY")
