@@ -328,6 +328,13 @@ impl EvalReport {
     }
 }
 
+/// One registration of a pair's estimates: the depth metrics and every pooled hypothesis.
+struct Registered {
+    depth: DepthMetrics,
+    object: Arc<ObjectModel>,
+    hypotheses: Vec<Hypothesis>,
+}
+
 /// Runs the evaluation; caches one [`ObjectModel`] per object.
 pub struct Evaluator {
     pub config: EvalConfig,
@@ -445,41 +452,25 @@ impl Evaluator {
         ctx: &EvalContext,
         seed: u64,
     ) -> Result<MethodResult, EvalError> {
-        let (result, _) = self.score_variants(
-            pair,
-            depth,
-            registered,
-            ctx,
-            seed,
-            self.config.check_signature,
-            false,
-        )?;
-        Ok(result)
+        let r = self.register_pair(pair, depth, registered, ctx, seed)?;
+        self.pose_result(pair, ctx, &r, true)
     }
 
-    /// [`Self::score_pooled`] from one registration twice: with the signature check as `check` says, and (when
-    /// `also_checked` and the check applies) with it; the second is `None` otherwise.
-    #[allow(clippy::too_many_arguments)]
-    fn score_variants(
+    /// The depth metrics of `depth` and the pooled hypotheses of `registered` (see [`Self::score_pooled`]).
+    fn register_pair(
         &self,
         pair: &EvalPair,
         depth: &Image,
         registered: &[Image],
         ctx: &EvalContext,
         seed: u64,
-        check: bool,
-        also_checked: bool,
-    ) -> Result<(MethodResult, Option<MethodResult>), EvalError> {
+    ) -> Result<Registered, EvalError> {
         let depth = depth_metrics(depth, &pair.target, &self.config.depth)?;
         let object = self.object(&ctx.objects, &pair.object)?;
         let strategy = InitStrategy::Random {
             count: self.config.inits,
             radius_m: self.config.init_radius_m,
             seed,
-        };
-        let pose_error = |source| EvalError::Pose {
-            object: pair.object.clone(),
-            source,
         };
         let hypotheses = self
             .pooled_hypotheses(
@@ -490,32 +481,47 @@ impl Evaluator {
                 Some((&pair.signature, &pair.imprint)),
                 &strategy,
             )
-            .map_err(pose_error)?;
-        let result = |check: bool| -> Result<MethodResult, EvalError> {
-            let estimate = self
-                .choose_with(
-                    &object,
-                    &hypotheses,
-                    ctx,
-                    &pair.t_world_camera,
-                    Some((&pair.signature, &pair.imprint)).filter(|_| check),
-                )
-                .map_err(pose_error)?;
-            let pose = estimate
-                .map(|e| pose_errors(e, pair.object_pose, &object.symmetry, &object.cloud))
-                .transpose()?;
-            Ok(MethodResult {
-                depth,
-                estimate,
-                pose,
-            })
-        };
-        let checked = if also_checked && ctx.signature_model.is_some() {
-            Some(result(true)?)
-        } else {
-            None
-        };
-        Ok((result(check)?, checked))
+            .map_err(|source| EvalError::Pose {
+                object: pair.object.clone(),
+                source,
+            })?;
+        Ok(Registered {
+            depth,
+            object,
+            hypotheses,
+        })
+    }
+
+    /// The scores of a registration: its pose chosen by [`Self::choose`], with the signature check only when `check`
+    /// (and [`EvalConfig::check_signature`]) allow it, and the pose errors against the truth.
+    fn pose_result(
+        &self,
+        pair: &EvalPair,
+        ctx: &EvalContext,
+        r: &Registered,
+        check: bool,
+    ) -> Result<MethodResult, EvalError> {
+        let measured = Some((&pair.signature, &pair.imprint)).filter(|_| check);
+        let estimate = self
+            .choose(
+                &r.object,
+                &r.hypotheses,
+                ctx,
+                &pair.t_world_camera,
+                measured,
+            )
+            .map_err(|source| EvalError::Pose {
+                object: pair.object.clone(),
+                source,
+            })?;
+        let pose = estimate
+            .map(|e| pose_errors(e, pair.object_pose, &r.object.symmetry, &r.object.cloud))
+            .transpose()?;
+        Ok(MethodResult {
+            depth: r.depth,
+            estimate,
+            pose,
+        })
     }
 
     /// Score both methods on pair `i` of `source`.
@@ -567,16 +573,19 @@ impl Evaluator {
         };
         let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.baseline);
         // The baseline as the paper defines it (its registration's best hypothesis), and with the signature check.
-        let (baseline, baseline_checked) = self
-            .score_variants(
+        let base = self
+            .register_pair(
                 &pair,
                 &base_x0,
                 std::slice::from_ref(&base_x0),
                 ctx,
                 pair_seed,
-                false,
-                self.config.check_signature,
             )
+            .map_err(fail)?;
+        let baseline = self.pose_result(&pair, ctx, &base, false).map_err(fail)?;
+        let baseline_checked = (self.config.check_signature && ctx.signature_model.is_some())
+            .then(|| self.pose_result(&pair, ctx, &base, true))
+            .transpose()
             .map_err(fail)?;
         Ok(PairRecord {
             name: pair.name.clone(),

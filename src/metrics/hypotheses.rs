@@ -52,20 +52,8 @@ impl Evaluator {
         t_world_camera: &DAffine3,
         measured: Option<(&Image, &Image)>,
     ) -> Result<Option<Se2>, PoseError> {
-        let measured = measured.filter(|_| self.config.check_signature);
-        self.choose_with(object, hypotheses, ctx, t_world_camera, measured)
-    }
-
-    /// [`Self::choose`] checking against `measured` = (signature, imprint) whenever it is given.
-    pub(crate) fn choose_with(
-        &self,
-        object: &ObjectModel,
-        hypotheses: &[Hypothesis],
-        ctx: &EvalContext,
-        t_world_camera: &DAffine3,
-        measured: Option<(&Image, &Image)>,
-    ) -> Result<Option<Se2>, PoseError> {
         let best = hypotheses.first().map(|h| h.pose);
+        let measured = measured.filter(|_| self.config.check_signature);
         let (Some(model), Some((signature, imprint))) = (ctx.signature_model, measured) else {
             return Ok(best);
         };

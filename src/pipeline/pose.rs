@@ -106,15 +106,14 @@ pub fn estimate_pose(
         seed,
     )?
     .ok_or(PipelineError::NoContact)?;
-    let checked = evaluator
-        .choose(
-            &model,
-            &hypotheses,
-            &ctx,
-            &input.t_world_camera,
-            input.signature.map(|s| (s, input.imprint)),
-        )?
-        .filter(|_| config.check_signature && input.signature.is_some());
+    let measured = input
+        .signature
+        .map(|s| (s, input.imprint))
+        .filter(|_| config.check_signature);
+    let checked = match measured {
+        Some(m) => evaluator.choose(&model, &hypotheses, &ctx, &input.t_world_camera, Some(m))?,
+        None => None,
+    };
     let multi = usize::from(input.samples.len() > 1);
     let total = 2 + input.samples.len() + multi;
     if !progress(1, total) {

@@ -36,3 +36,27 @@ pub enum PoseError {
     #[error("{what} contains a non-finite value at index {index}")]
     NonFinite { what: &'static str, index: usize },
 }
+
+/// Check settings: each of `positive` finite and > 0, each of `non_negative` finite and >= 0; the error names the
+/// first that is not, after `prefix` (e.g. `"signature check: "`).
+pub(crate) fn check_settings(
+    prefix: &str,
+    positive: &[(&str, f64)],
+    non_negative: &[(&str, f64)],
+) -> Result<(), PoseError> {
+    for &(name, v) in positive {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(PoseError::Config(format!(
+                "{prefix}{name} must be positive, got {v}"
+            )));
+        }
+    }
+    for &(name, v) in non_negative {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(PoseError::Config(format!(
+                "{prefix}{name} must be >= 0, got {v}"
+            )));
+        }
+    }
+    Ok(())
+}

@@ -133,20 +133,7 @@ impl SdfRegistrationConfig {
             ("max_step_m", self.max_step_m),
             ("step_tolerance_m", self.step_tolerance_m),
         ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(PoseError::Config(format!(
-                    "{name} must be positive, got {v}"
-                )));
-            }
-        }
-        if !(self.free_weight.is_finite() && self.free_weight >= 0.0) {
-            return Err(PoseError::Config(format!(
-                "free_weight must be >= 0, got {}",
-                self.free_weight
-            )));
-        }
-        Ok(())
+        super::check_settings("", &positive, &[("free_weight", self.free_weight)])
     }
 }
 

@@ -68,25 +68,16 @@ impl Default for SignatureCheckConfig {
 
 impl SignatureCheckConfig {
     fn validate(&self) -> Result<(), PoseError> {
-        for (name, v) in [
-            ("scale_m", self.scale_m),
-            ("step_m", self.step_m),
-            ("min_step_m", self.min_step_m),
-            ("lever_m", self.lever_m),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(PoseError::Config(format!(
-                    "signature check: {name} must be positive, got {v}"
-                )));
-            }
-        }
-        if !(self.margin_nats.is_finite() && self.margin_nats >= 0.0) {
-            return Err(PoseError::Config(format!(
-                "signature check: margin_nats must be >= 0, got {}",
-                self.margin_nats
-            )));
-        }
-        Ok(())
+        super::check_settings(
+            "signature check: ",
+            &[
+                ("scale_m", self.scale_m),
+                ("step_m", self.step_m),
+                ("min_step_m", self.min_step_m),
+                ("lever_m", self.lever_m),
+            ],
+            &[("margin_nats", self.margin_nats)],
+        )
     }
 }
 
