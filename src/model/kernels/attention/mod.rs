@@ -244,18 +244,7 @@ fn head_forward(x: &Packed, scale: f32, out: &mut [f32]) {
     for (blk, ob) in out.chunks_mut(ROWS * d).enumerate() {
         let rows = ob.len() / d;
         block_probabilities(x, blk * ROWS, rows, scale, &mut s, &mut p, Some(&mut inv));
-        let mut r = 0;
-        while r < rows {
-            let (head, tail) = ob[r * d..].split_at_mut(d);
-            if r + 1 < rows {
-                let (pa, pb) = p[r * n..(r + 2) * n].split_at(n);
-                row_dots_pair(pa, pb, &x.vt, n, head, &mut tail[..d]);
-                r += 2;
-            } else {
-                row_dots(&p[r * n..(r + 1) * n], &x.vt, n, head);
-                r += 1;
-            }
-        }
+        rows_times(&p, &x.vt, n, ob);
         for (or, &k) in ob.chunks_exact_mut(d).zip(&inv) {
             or.iter_mut().for_each(|o| *o *= k);
         }
@@ -306,19 +295,7 @@ fn head_backward(x: &Packed, o: &[f32], d_o: &[f32], scale: f32, grads: &mut [f3
             }
         }
         // dQ = dS K, two rows at a time.
-        let dqb = &mut dq[i0 * d..(i0 + rows) * d];
-        let mut r = 0;
-        while r < rows {
-            let (head, tail) = dqb[r * d..].split_at_mut(d);
-            if r + 1 < rows {
-                let (sa, sb) = ds[r * n..(r + 2) * n].split_at(n);
-                row_dots_pair(sa, sb, &x.kt, n, head, &mut tail[..d]);
-                r += 2;
-            } else {
-                row_dots(&ds[r * n..(r + 1) * n], &x.kt, n, head);
-                r += 1;
-            }
-        }
+        rows_times(&ds, &x.kt, n, &mut dq[i0 * d..(i0 + rows) * d]);
         // dkᵀ[e] += Σ_r q_re · dS_r and dvᵀ[e] += Σ_r dO_re · P_r, a chunk of LANES at a time held in registers.
         let qb = &x.q[i0 * d..(i0 + rows) * d];
         let blocks = n / LANES;

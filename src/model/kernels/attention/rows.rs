@@ -64,6 +64,26 @@ pub(super) fn row_dots(p: &[f32], bt: &[f32], n: usize, out: &mut [f32]) {
 /// Outputs per register group of [`row_dots`] (a head width of 8 is one group).
 const GROUP: usize = 8;
 
+/// `out` `[rows, d]` = rows of `a` (`[rows, N]`, row stride N) times `btᵀ` (`bt` `[d, N]`): [`row_dots_pair`] two rows
+/// at a time, [`row_dots`] for an odd last row.
+#[inline(always)]
+pub(super) fn rows_times(a: &[f32], bt: &[f32], n: usize, out: &mut [f32]) {
+    let d = bt.len() / n.max(1);
+    let rows = out.len() / d.max(1);
+    let mut r = 0;
+    while r < rows {
+        let (head, tail) = out[r * d..].split_at_mut(d);
+        if r + 1 < rows {
+            let (pa, pb) = a[r * n..(r + 2) * n].split_at(n);
+            row_dots_pair(pa, pb, bt, n, head, &mut tail[..d]);
+            r += 2;
+        } else {
+            row_dots(&a[r * n..(r + 1) * n], bt, n, head);
+            r += 1;
+        }
+    }
+}
+
 /// [`row_dots`] of two rows `p0`, `p1` at once for a head width of [`GROUP`]: each chunk of `bt` is loaded once for
 /// both (one row at a time was 9 loads per 8 multiply-adds); other widths run [`row_dots`] per row.
 #[inline(always)]
