@@ -5,6 +5,7 @@ use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
 use glam::{Affine3A, DQuat};
+use rayon::prelude::*;
 
 use super::builtin::{catalogue, ShapeSpec};
 use super::{ObjectEntry, ObjectError, ObjectManifest, MANIFEST_VERSION};
@@ -223,21 +224,29 @@ impl ObjectSet {
     /// written atomically with the manifest last, so exporting a directory set onto itself is safe.
     pub fn export(&self, dir: &Path) -> Result<(), ObjectError> {
         let mut used = HashSet::new();
-        let mut files = Vec::with_capacity(self.entries.len());
-        let mut objects = Vec::with_capacity(self.entries.len());
-        for entry in &self.entries {
-            let file = unique_file_name(&entry.name, &mut used);
-            files.push((dir.join(&file), self.mesh(&entry.name)?));
-            objects.push(ObjectEntry {
-                mesh: file,
+        let objects: Vec<ObjectEntry> = self
+            .entries
+            .iter()
+            .map(|entry| ObjectEntry {
+                mesh: unique_file_name(&entry.name, &mut used),
                 scale_to_m: 1.0,
                 rotation: None,
                 ..entry.clone()
-            });
-        }
-        for (path, mesh) in &files {
-            write(path, mesh.to_obj_string().as_bytes())?;
-        }
+            })
+            .collect();
+        // Building and writing the meshes is the whole cost (6 000 procedural objects took ~25 s on one core), and
+        // each object is independent: both run in parallel.
+        let meshes: Vec<Mesh> = self
+            .entries
+            .par_iter()
+            .map(|entry| self.mesh(&entry.name))
+            .collect::<Result<_, _>>()?;
+        meshes
+            .par_iter()
+            .zip(objects.par_iter())
+            .try_for_each(|(mesh, out)| {
+                write(&dir.join(&out.mesh), mesh.to_obj_string().as_bytes())
+            })?;
         let manifest = ObjectManifest {
             version: MANIFEST_VERSION,
             objects,
