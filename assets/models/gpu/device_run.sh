@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# One GPU training session, end to end, on a machine with CUDA PyTorch and 16 cores (see README.md here): the tnd
+# release binary (built elsewhere, given as $1) generates the procedural objects and the datasets while two
+# trainers (train_torch.py) share the GPU and read the train shards as they appear:
+#   a: the shipped default architecture, fine-tuned from assets/models/default.safetensors;
+#   b: the wider architecture of wide_config.json here (wide1 with every other setting spelled out), from scratch.
+# Everything ends by BUDGET_S seconds after the start; the EMA checkpoints and logs go to OUT.
+#
+#     assets/models/gpu/device_run.sh TND OUT BUDGET_S
+set -u
+tnd=$1 out=$2 budget=$3
+t0=$(date +%s)
+here=$(cd "$(dirname "$0")" && pwd)
+w=/tmp/tnd-gpu
+mkdir -p "$w" "$out"
+{ nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader; nproc; df -h /tmp | tail -n 1; } \
+    > "$out/gen.log" 2>&1
+nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv -l 20 > "$out/smi.log" 2>&1 &
+smi=$!
+objs="--press 0.001,0.015 --min-contact 0.004"
+# Validation objects and pairs: the same commands as data/proc_val in the model card (never trained on).
+"$tnd" objects generate "$w/val_objects" --count 300 --seed 1 --builtin-share 0 >> "$out/gen.log" 2>&1
+"$tnd" dataset gen --out "$w/val" --pairs 1000 --seed 12 --objects "$w/val_objects" $objs >> "$out/gen.log" 2>&1
+# Training objects: 6 000 procedural objects (seed 2) + the built-in set (a quarter of the draws); inflation drawn
+# per pair in 27-33 mm.
+"$tnd" objects generate "$w/objects" --count 6000 --seed 2 >> "$out/gen.log" 2>&1
+echo "data ready to stream after $(( $(date +%s) - t0 )) s" >> "$out/gen.log"
+nice -n 5 "$tnd" dataset gen --out "$w/train" --pairs "${PAIRS:-300000}" --seed 41 --objects "$w/objects" $objs \
+    --inflation-range 0.027,0.033 >> "$out/gen.log" 2>&1 &
+gen=$!
+left=$(( budget - ($(date +%s) - t0) - 25 ))
+python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" --init "$here/../default.safetensors" \
+    --out "$out/a" --deadline-s "$left" --lr 2e-4 --seed 1 --batch "${BATCH:-256}" --capacity 300000 > "$out/a.out" 2>&1 &
+pa=$!
+python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" --config "$here/wide_config.json" \
+    --out "$out/b" --deadline-s "$left" --lr 3e-4 --seed 2 --batch "${BATCH:-256}" --capacity 300000 > "$out/b.out" 2>&1 &
+pb=$!
+wait $pa $pb
+kill $gen $smi 2>/dev/null
+ls "$w/train/shards" | wc -l >> "$out/gen.log"
+echo "done after $(( $(date +%s) - t0 )) s" >> "$out/gen.log"
+tail -n 3 "$out/a.out" "$out/b.out"
