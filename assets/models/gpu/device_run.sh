@@ -6,7 +6,7 @@
 #   b: the wider architecture of wide_config.json here (wide1 with every other setting spelled out), from scratch.
 # Everything ends by BUDGET_S seconds after the start; the EMA checkpoints and logs go to OUT.
 #
-#     assets/models/gpu/device_run.sh TND OUT BUDGET_S
+#     [PAIRS=300000] [INFLATION=0.027,0.033] [MODELS="a b"|a] [SAVE_EVERY_S=120] assets/models/gpu/device_run.sh TND OUT BUDGET_S
 set -u
 tnd=$1 out=$2 budget=$3
 t0=$(date +%s)
@@ -25,18 +25,25 @@ objs="--press 0.001,0.015 --min-contact 0.004"
 # per pair in 27-33 mm.
 "$tnd" objects generate "$w/objects" --count 6000 --seed 2 >> "$out/gen.log" 2>&1
 echo "data ready to stream after $(( $(date +%s) - t0 )) s" >> "$out/gen.log"
+# INFLATION= (empty) keeps every pair at the sensor's nominal inflation.
+inflation=${INFLATION-0.027,0.033}
 nice -n 5 "$tnd" dataset gen --out "$w/train" --pairs "${PAIRS:-300000}" --seed 41 --objects "$w/objects" $objs \
-    --inflation-range 0.027,0.033 >> "$out/gen.log" 2>&1 &
+    ${inflation:+--inflation-range "$inflation"} >> "$out/gen.log" 2>&1 &
 gen=$!
 left=$(( budget - ($(date +%s) - t0) - 25 ))
+save=${SAVE_EVERY_S:-120}
 python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" --init "$here/../default.safetensors" \
-    --out "$out/a" --deadline-s "$left" --lr 2e-4 --seed 1 --batch "${BATCH:-256}" --capacity 300000 > "$out/a.out" 2>&1 &
-pa=$!
-python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" --config "$here/wide_config.json" \
-    --out "$out/b" --deadline-s "$left" --lr 3e-4 --seed 2 --batch "${BATCH:-256}" --capacity 300000 > "$out/b.out" 2>&1 &
-pb=$!
+    --out "$out/a" --deadline-s "$left" --lr 2e-4 --seed 1 --batch "${BATCH:-256}" --capacity 300000 \
+    --save-every-s "$save" > "$out/a.out" 2>&1 &
+pa=$! pb=
+if [ "${MODELS:-a b}" = "a b" ]; then
+    python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" --config "$here/wide_config.json" \
+        --out "$out/b" --deadline-s "$left" --lr 3e-4 --seed 2 --batch "${BATCH:-256}" --capacity 300000 \
+        --save-every-s "$save" > "$out/b.out" 2>&1 &
+    pb=$!
+fi
 wait $pa $pb
 kill $gen $smi 2>/dev/null
 ls "$w/train/shards" | wc -l >> "$out/gen.log"
 echo "done after $(( $(date +%s) - t0 )) s" >> "$out/gen.log"
-tail -n 3 "$out/a.out" "$out/b.out"
+tail -n 3 "$out"/*.out
