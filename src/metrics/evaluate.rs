@@ -299,6 +299,12 @@ pub struct EvalReport {
     /// The baseline with the signature check (when it ran).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub baseline_checked: Option<MethodSummary>,
+    /// Model / baseline mean position error and its 95 % paired bootstrap interval (`None` under 2 pairs with
+    /// poses); the same for the multi-sample estimate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_ratio_ci95: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_ratio_multi_ci95: Option<[f64; 2]>,
     /// Per contact-size bin and per object.
     #[serde(default)]
     pub breakdown: super::breakdown::Breakdown,
@@ -321,6 +327,8 @@ impl EvalReport {
             model_multi: rows.model_multi,
             baseline: rows.baseline,
             baseline_checked: rows.baseline_checked,
+            position_ratio_ci95: rows.position_ratio_ci95,
+            position_ratio_multi_ci95: rows.position_ratio_multi_ci95,
             breakdown: super::breakdown::Breakdown::of(&records),
             records,
             failed,

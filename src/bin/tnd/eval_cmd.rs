@@ -388,7 +388,40 @@ pub fn markdown_table(split: &str, r: &EvalReport) -> String {
         s.push_str(&row("threshold baseline + signature check", b));
     }
     s.push('\n');
+    let ratio = |m: &MethodSummary| m.position_mm.mean / r.baseline.position_mm.mean;
+    for (what, m, ci) in [
+        ("model", Some(&r.model), r.position_ratio_ci95),
+        (
+            "multi-sample",
+            r.model_multi.as_ref(),
+            r.position_ratio_multi_ci95,
+        ),
+    ] {
+        if let (Some(m), Some(ci)) = (m, ci) {
+            let _ = writeln!(
+                s,
+                "Mean position error, {what} / threshold baseline: {:.2} (95 % paired bootstrap interval {}, {} \
+                 resamples of these pairs).\n",
+                ratio(m),
+                interval_text(ci),
+                tactile_derender::metrics::breakdown::BOOTSTRAP_RESAMPLES,
+            );
+        }
+    }
     s
+}
+
+/// `[lo, hi]` as `lo–hi`.
+fn interval_text([lo, hi]: [f64; 2]) -> String {
+    format!("{lo:.2}–{hi:.2}")
+}
+
+/// A ratio with its interval, when there is one.
+fn ratio_cell(ratio: f64, ci: Option<[f64; 2]>) -> String {
+    match ci {
+        Some(ci) => format!("{ratio:.2} [{}]", interval_text(ci)),
+        None => format!("{ratio:.2}"),
+    }
 }
 
 /// Position error per contact-size bin and per object, model against baseline, as markdown.
@@ -402,10 +435,14 @@ fn breakdown_tables(r: &EvalReport) -> String {
     ] {
         let _ = writeln!(
             s,
-            "| {title} | pairs | model position [mm] |{} baseline position [mm] |{} model / baseline |{}",
+            "| {title} | pairs | model position [mm] |{} baseline position [mm] |{} model / baseline [95 % interval] |{}",
             if multi { " multi-sample position [mm] |" } else { "" },
             if checked { " baseline + check [mm] |" } else { "" },
-            if multi { " multi-sample / baseline |" } else { "" }
+            if multi {
+                " multi-sample / baseline [95 % interval] |"
+            } else {
+                ""
+            }
         );
         let columns = 5 + 2 * usize::from(multi) + usize::from(checked);
         let _ = writeln!(s, "|{}", " --- |".repeat(columns));
@@ -417,16 +454,16 @@ fn breakdown_tables(r: &EvalReport) -> String {
                 .map(|b| median_cell(&b.position_mm));
             let _ = writeln!(
                 s,
-                "| {} | {} | {} |{} {} |{} {:.2} |{}",
+                "| {} | {} | {} |{} {} |{} {} |{}",
                 g.label,
                 g.pairs,
                 median_cell(&g.model.position_mm),
                 m.map(|c| format!(" {c} |")).unwrap_or_default(),
                 median_cell(&g.baseline.position_mm),
                 c.map(|c| format!(" {c} |")).unwrap_or_default(),
-                g.position_ratio,
+                ratio_cell(g.position_ratio, g.position_ratio_ci95),
                 g.position_ratio_multi
-                    .map(|x| format!(" {x:.2} |"))
+                    .map(|x| format!(" {} |", ratio_cell(x, g.position_ratio_multi_ci95)))
                     .unwrap_or_default(),
             );
         }
