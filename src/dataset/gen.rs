@@ -25,7 +25,7 @@ use super::sample::Sampler;
 use super::shard::{self, Record, SHARDS_DIR};
 use super::split::{self, PlannedPair};
 use super::{DatasetError, GenConfig, SplitName};
-use crate::objects::{ObjectManifest, ObjectSet};
+use crate::objects::ObjectSet;
 use crate::sim::{PreparedObject, SimConfig, Simulator};
 
 /// What a generation run did.
@@ -167,7 +167,7 @@ fn planned_manifest(
         object_set: ObjectSetInfo {
             source: set.spec(),
             dir: OBJECTS_DIR.into(),
-            manifest: exported_manifest(set)?,
+            manifest: set.exported_manifest(),
         },
         counts,
         arrays: DatasetManifest::array_table(),
@@ -335,25 +335,6 @@ fn load_progress(path: &Path) -> Result<Progress, DatasetError> {
         });
     }
     Ok(p)
-}
-
-/// The object set's manifest as exported into a dataset (meshes as `<name>.obj` in metres, no rotation).
-pub(crate) fn exported_manifest(set: &ObjectSet) -> Result<ObjectManifest, DatasetError> {
-    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.subsec_nanos());
-    let tmp = std::env::temp_dir().join(format!(
-        "tnd-objects-{}-{nanos}-{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-    ));
-    let result = set
-        .export(&tmp)
-        .map_err(DatasetError::from)
-        .and_then(|()| Ok(ObjectSet::load_dir(&tmp)?.manifest()));
-    let _ = std::fs::remove_dir_all(&tmp);
-    result
 }
 
 /// A new dataset goes into a missing or empty directory only.

@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::gen::{exported_manifest, refuse_foreign_dir, remove_all_stale_temp_files};
+use super::gen::{refuse_foreign_dir, remove_all_stale_temp_files};
 use super::manifest::{
     DatasetKind, DatasetManifest, ImportInfo, ObjectSetInfo, SplitCounts, FORMAT_NAME,
     FORMAT_VERSION, MANIFEST_FILE, OBJECTS_DIR,
@@ -205,7 +205,7 @@ pub(crate) fn write_real_dataset(
         object_set: ObjectSetInfo {
             source: set.spec(),
             dir: OBJECTS_DIR.into(),
-            manifest: exported_manifest(set)?,
+            manifest: set.exported_manifest(),
         },
         counts,
         arrays: DatasetManifest::array_table(),

@@ -218,13 +218,11 @@ impl ObjectSet {
         }
     }
 
-    /// Write every mesh as `<name>.obj` in metres, in its resting pose, plus `objects.json` (pretty JSON) into `dir`
-    /// (created if needed). Exported entries have `scale_to_m = 1` and no rotation; names with characters unsafe in
-    /// file names get a sanitised file name. All meshes are built before anything is written, and each file is
-    /// written atomically with the manifest last, so exporting a directory set onto itself is safe.
-    pub fn export(&self, dir: &Path) -> Result<(), ObjectError> {
+    /// The manifest [`Self::export`] writes: the same entries with their exported file names (sanitised, unique),
+    /// `scale_to_m = 1` and no rotation. Building it touches no mesh.
+    pub fn exported_manifest(&self) -> ObjectManifest {
         let mut used = HashSet::new();
-        let objects: Vec<ObjectEntry> = self
+        let objects = self
             .entries
             .iter()
             .map(|entry| ObjectEntry {
@@ -234,6 +232,18 @@ impl ObjectSet {
                 ..entry.clone()
             })
             .collect();
+        ObjectManifest {
+            version: MANIFEST_VERSION,
+            objects,
+        }
+    }
+
+    /// Write every mesh as `<name>.obj` in metres, in its resting pose, plus `objects.json` (pretty JSON) into `dir`
+    /// (created if needed). Exported entries have `scale_to_m = 1` and no rotation; names with characters unsafe in
+    /// file names get a sanitised file name. All meshes are built before anything is written, and each file is
+    /// written atomically with the manifest last, so exporting a directory set onto itself is safe.
+    pub fn export(&self, dir: &Path) -> Result<(), ObjectError> {
+        let manifest = self.exported_manifest();
         // Building and writing the meshes is the whole cost (6 000 procedural objects took ~25 s on one core), and
         // each object is independent: both run in parallel.
         let meshes: Vec<Mesh> = self
@@ -243,14 +253,10 @@ impl ObjectSet {
             .collect::<Result<_, _>>()?;
         meshes
             .par_iter()
-            .zip(objects.par_iter())
+            .zip(manifest.objects.par_iter())
             .try_for_each(|(mesh, out)| {
                 write(&dir.join(&out.mesh), mesh.to_obj_string().as_bytes())
             })?;
-        let manifest = ObjectManifest {
-            version: MANIFEST_VERSION,
-            objects,
-        };
         let mut json = serde_json::to_string_pretty(&manifest).map_err(ObjectError::Serialize)?;
         json.push('\n');
         write(&dir.join(MANIFEST_FILE), json.as_bytes())
