@@ -32,13 +32,13 @@ import json
 import math
 import os
 import queue
-import struct
 import threading
 import time
 
 import numpy as np
 import torch
 from diffusers import UNet2DModel
+from safetensors import safe_open
 from safetensors.torch import load_file, save_file
 
 FORMAT = "tactile-derender UNet2DModel (diffusers keys)"
@@ -46,9 +46,15 @@ FORMAT = "tactile-derender UNet2DModel (diffusers keys)"
 
 def read_metadata(path):
     """The `__metadata__` of a safetensors file."""
-    with open(path, "rb") as f:
-        n = struct.unpack("<Q", f.read(8))[0]
-        return json.loads(f.read(n)).get("__metadata__", {})
+    with safe_open(path, framework="pt") as f:
+        return f.metadata() or {}
+
+
+def normalised(z, norm):
+    """(imprint, target) of an open shard in model units."""
+    y = (z["imprint"] - norm["imprint"]["offset_m"]) / norm["imprint"]["scale_m"]
+    x0 = (z["target"] - norm["target"]["offset_m"]) / norm["target"]["scale_m"]
+    return y, x0
 
 
 def cosine_alphas_cumprod(steps):
@@ -77,8 +83,7 @@ class ShardReader(threading.Thread):
         for path in new:
             self.seen.add(path)
             with np.load(path) as z:
-                y = (z["imprint"] - self.norm["imprint"]["offset_m"]) / self.norm["imprint"]["scale_m"]
-                x0 = (z["target"] - self.norm["target"]["offset_m"]) / self.norm["target"]["scale_m"]
+                y, x0 = normalised(z, self.norm)
             self.out.put((y.astype(np.float16), x0.astype(np.float16)))
         return len(new)
 
@@ -97,8 +102,9 @@ def load_split_any(root, norm, limit):
         ys, xs = [], []
         for p in paths:
             with np.load(p) as z:
-                ys.append((z["imprint"] - norm["imprint"]["offset_m"]) / norm["imprint"]["scale_m"])
-                xs.append((z["target"] - norm["target"]["offset_m"]) / norm["target"]["scale_m"])
+                y, x0 = normalised(z, norm)
+            ys.append(y)
+            xs.append(x0)
             if sum(len(y) for y in ys) >= limit:
                 break
         return np.concatenate(ys)[:limit].astype(np.float32), np.concatenate(xs)[:limit].astype(np.float32)
@@ -179,8 +185,8 @@ def main():
     ema.load_state_dict(unet.state_dict())
     for p in ema.parameters():
         p.requires_grad_(False)
-    params = [p for p in unet.parameters()]
-    ema_params = [p for p in ema.parameters()]
+    params = list(unet.parameters())
+    ema_params = list(ema.parameters())
     fused = dev.type == "cuda"
     opt = torch.optim.Adam(params, lr=args.lr, betas=(0.9, 0.999), eps=1e-8, fused=fused)
     n_params = sum(p.numel() for p in params)
