@@ -35,6 +35,9 @@ pub struct GroupSummary {
     pub model: MethodSummary,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_multi: Option<MethodSummary>,
+    /// The model with the baseline's proposals, where the check ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_combined: Option<MethodSummary>,
     pub baseline: MethodSummary,
     /// The baseline with the signature check, where it ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -51,6 +54,11 @@ pub struct GroupSummary {
     /// The same for `position_ratio_multi`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub position_ratio_multi_ci95: Option<[f64; 2]>,
+    /// Model with the baseline's proposals / baseline, and its interval.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_ratio_combined: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_ratio_combined_ci95: Option<[f64; 2]>,
 }
 
 impl GroupSummary {
@@ -58,17 +66,13 @@ impl GroupSummary {
     pub fn of(label: String, records: &[&PairRecord]) -> Self {
         let model = MethodSummary::of(records.iter().map(|r| &r.model));
         let baseline = MethodSummary::of(records.iter().map(|r| &r.baseline));
-        let multi: Vec<&MethodResult> = records
-            .iter()
-            .filter_map(|r| r.model_multi.as_ref())
-            .collect();
-        let model_multi = (!multi.is_empty()).then(|| MethodSummary::of(multi.iter().copied()));
-        let checked: Vec<&MethodResult> = records
-            .iter()
-            .filter_map(|r| r.baseline_checked.as_ref())
-            .collect();
-        let baseline_checked =
-            (!checked.is_empty()).then(|| MethodSummary::of(checked.iter().copied()));
+        let optional = |m: &dyn Fn(&PairRecord) -> Option<&MethodResult>| {
+            let results: Vec<&MethodResult> = records.iter().filter_map(|r| m(r)).collect();
+            (!results.is_empty()).then(|| MethodSummary::of(results.iter().copied()))
+        };
+        let model_multi = optional(&|r| r.model_multi.as_ref());
+        let model_combined = optional(&|r| r.model_combined.as_ref());
+        let baseline_checked = optional(&|r| r.baseline_checked.as_ref());
         let ratio = |m: &MethodSummary| m.position_mm.mean / baseline.position_mm.mean;
         let interval = |m: &dyn Fn(&PairRecord) -> Option<&MethodResult>| {
             let pairs: Vec<_> = records
@@ -86,8 +90,13 @@ impl GroupSummary {
             position_ratio_multi_ci95: model_multi
                 .as_ref()
                 .and_then(|_| interval(&|r| r.model_multi.as_ref())),
+            position_ratio_combined: model_combined.as_ref().map(ratio),
+            position_ratio_combined_ci95: model_combined
+                .as_ref()
+                .and_then(|_| interval(&|r| r.model_combined.as_ref())),
             model,
             model_multi,
+            model_combined,
             baseline,
             baseline_checked,
         }
@@ -222,6 +231,7 @@ mod tests {
             contact_pixels,
             model: result(model),
             model_multi: None,
+            model_combined: None,
             baseline: result(baseline),
             baseline_checked: None,
         }

@@ -159,8 +159,9 @@ pub struct EvalConfig {
     /// Points sampled on each object for the Chamfer distance (default 1000).
     pub chamfer_points: usize,
     /// Model samples per pair. With more than 1, the model is also scored on the multi-sample estimate (the
-    /// consensus of the samples, [`crate::pose::from_depth::consensus_depth`]) beside the first sample alone
-    /// (default 1: single sample only).
+    /// consensus of the samples, [`crate::pose::from_depth::consensus_depth`]; with the signature check, every
+    /// sample's hypotheses and, with [`Self::imprint_proposals`], the imprint's, pooled and checked) beside the
+    /// first sample alone (default 1: single sample only).
     pub pose_samples: usize,
     /// Fraction of the samples that must mark a pixel as contact for the consensus (default 0.5).
     pub consensus_probability: f64,
@@ -174,6 +175,10 @@ pub struct EvalConfig {
     pub check_signature: bool,
     /// Settings of the signature check.
     pub signature_check: SignatureCheckConfig,
+    /// Give the signature check the threshold baseline's registration hypotheses beside the sample's (the
+    /// imprint's own contact as further proposals; default true): where the imprint says more than one sample
+    /// (small, shallow contacts) its pose can win. `tnd eval` then scores it as a row of its own.
+    pub imprint_proposals: bool,
 }
 
 impl Default for EvalConfig {
@@ -191,6 +196,7 @@ impl Default for EvalConfig {
             anchor_to_signature: true,
             check_signature: true,
             signature_check: SignatureCheckConfig::default(),
+            imprint_proposals: true,
         }
     }
 }
@@ -229,6 +235,11 @@ pub struct PairRecord {
     /// The model's multi-sample estimate (with [`EvalConfig::pose_samples`] > 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_multi: Option<MethodResult>,
+    /// The model's first sample with the threshold baseline's hypotheses as further proposals, chosen by the
+    /// signature check ([`EvalConfig::check_signature`]): where the imprint alone says more than the sample
+    /// (small, shallow contacts) its pose can win. `None` without the check.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_combined: Option<MethodResult>,
     /// The threshold baseline as the paper defines it (no signature check).
     pub baseline: MethodResult,
     /// The threshold baseline's registration with the signature check ([`EvalConfig::check_signature`]), so that
@@ -295,6 +306,9 @@ pub struct EvalReport {
     /// The multi-sample estimate's rows (with [`EvalConfig::pose_samples`] > 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_multi: Option<MethodSummary>,
+    /// The model with the baseline's proposals (when the check ran; [`PairRecord::model_combined`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_combined: Option<MethodSummary>,
     pub baseline: MethodSummary,
     /// The baseline with the signature check (when it ran).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -305,6 +319,9 @@ pub struct EvalReport {
     pub position_ratio_ci95: Option<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub position_ratio_multi_ci95: Option<[f64; 2]>,
+    /// The same for the model with the baseline's proposals.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_ratio_combined_ci95: Option<[f64; 2]>,
     /// Per contact-size bin and per object.
     #[serde(default)]
     pub breakdown: super::breakdown::Breakdown,
@@ -325,10 +342,12 @@ impl EvalReport {
             pairs: records.len(),
             model: rows.model,
             model_multi: rows.model_multi,
+            model_combined: rows.model_combined,
             baseline: rows.baseline,
             baseline_checked: rows.baseline_checked,
             position_ratio_ci95: rows.position_ratio_ci95,
             position_ratio_multi_ci95: rows.position_ratio_multi_ci95,
+            position_ratio_combined_ci95: rows.position_ratio_combined_ci95,
             breakdown: super::breakdown::Breakdown::of(&records),
             records,
             failed,
@@ -475,11 +494,7 @@ impl Evaluator {
     ) -> Result<Registered, EvalError> {
         let depth = depth_metrics(depth, &pair.target, &self.config.depth)?;
         let object = self.object(&ctx.objects, &pair.object)?;
-        let strategy = InitStrategy::Random {
-            count: self.config.inits,
-            radius_m: self.config.init_radius_m,
-            seed,
-        };
+        let strategy = self.random_starts(seed);
         let hypotheses = self
             .pooled_hypotheses(
                 &object,
@@ -559,7 +574,13 @@ impl Evaluator {
             .first()
             .ok_or_else(|| fail(EvalError::Generator("returned no sample".into())))?;
         observe(i, &pair, first);
-        let model = self.score(&pair, first, ctx, pair_seed).map_err(fail)?;
+        let model_reg = self
+            .register_pair(&pair, first, std::slice::from_ref(first), ctx, pair_seed)
+            .map_err(fail)?;
+        let model = self
+            .pose_result(&pair, ctx, &model_reg, true)
+            .map_err(fail)?;
+        let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.baseline);
         let model_multi = if samples.len() > 1 {
             let consensus =
                 consensus_depth(&samples, self.config.consensus_probability).map_err(|source| {
@@ -571,6 +592,9 @@ impl Evaluator {
             let mut registered = vec![consensus.clone()];
             if self.config.check_signature {
                 registered.extend(samples.iter().cloned());
+                if self.config.imprint_proposals {
+                    registered.push(base_x0.clone());
+                }
             }
             Some(
                 self.score_pooled(&pair, &consensus, &registered, ctx, pair_seed)
@@ -579,7 +603,6 @@ impl Evaluator {
         } else {
             None
         };
-        let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.baseline);
         // The baseline as the paper defines it (its registration's best hypothesis), and with the signature check.
         let base = self
             .register_pair(
@@ -591,8 +614,22 @@ impl Evaluator {
             )
             .map_err(fail)?;
         let baseline = self.pose_result(&pair, ctx, &base, false).map_err(fail)?;
-        let baseline_checked = (self.config.check_signature && ctx.signature_model.is_some())
+        let checks = self.config.check_signature && ctx.signature_model.is_some();
+        let combine = checks && self.config.imprint_proposals;
+        let baseline_checked = checks
             .then(|| self.pose_result(&pair, ctx, &base, true))
+            .transpose()
+            .map_err(fail)?;
+        // The sample's hypotheses first, the imprint's after: the check scores them all alike.
+        let model_combined = combine
+            .then(|| {
+                let pooled = Registered {
+                    depth: model_reg.depth,
+                    object: model_reg.object.clone(),
+                    hypotheses: [model_reg.hypotheses.as_slice(), &base.hypotheses].concat(),
+                };
+                self.pose_result(&pair, ctx, &pooled, true)
+            })
             .transpose()
             .map_err(fail)?;
         Ok(PairRecord {
@@ -602,6 +639,7 @@ impl Evaluator {
             contact_pixels: pair.target.count_nonzero(),
             model,
             model_multi,
+            model_combined,
             baseline,
             baseline_checked,
         })

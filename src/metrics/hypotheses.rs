@@ -11,6 +11,19 @@ use crate::pose::{Hypothesis, InitStrategy, PoseError};
 use crate::sensor::Se2;
 
 impl Evaluator {
+    /// The registration's starts: [`EvalConfig::inits`] random poses within [`EvalConfig::init_radius_m`] of the
+    /// contact centroid, drawn from `seed`.
+    ///
+    /// [`EvalConfig::inits`]: super::evaluate::EvalConfig::inits
+    /// [`EvalConfig::init_radius_m`]: super::evaluate::EvalConfig::init_radius_m
+    pub fn random_starts(&self, seed: u64) -> InitStrategy {
+        InitStrategy::Random {
+            count: self.config.inits,
+            radius_m: self.config.init_radius_m,
+            seed,
+        }
+    }
+
     /// Every image of `estimates` anchored to `anchor_to` = (signature, imprint) ([`Self::anchor`]; `None`: as
     /// given) and registered from `strategy`'s starts: the
     /// hypotheses of all of them, each image's best first, in the order of `estimates` (images without contact
@@ -52,7 +65,22 @@ impl Evaluator {
         t_world_camera: &DAffine3,
         measured: Option<(&Image, &Image)>,
     ) -> Result<Option<Se2>, PoseError> {
-        let best = hypotheses.first().map(|h| h.pose);
+        Ok(self
+            .choose_indexed(object, hypotheses, ctx, t_world_camera, measured)?
+            .map(|(pose, _)| pose))
+    }
+
+    /// [`Self::choose`], with the index in `hypotheses` of the hypothesis the pose came from (0 without the
+    /// check).
+    pub fn choose_indexed(
+        &self,
+        object: &ObjectModel,
+        hypotheses: &[Hypothesis],
+        ctx: &EvalContext,
+        t_world_camera: &DAffine3,
+        measured: Option<(&Image, &Image)>,
+    ) -> Result<Option<(Se2, usize)>, PoseError> {
+        let best = hypotheses.first().map(|h| (h.pose, 0));
         let measured = measured.filter(|_| self.config.check_signature);
         let (Some(model), Some((signature, imprint))) = (ctx.signature_model, measured) else {
             return Ok(best);
@@ -73,6 +101,6 @@ impl Evaluator {
             config: &self.config.signature_check,
         };
         let poses: Vec<Se2> = hypotheses.iter().map(|h| h.pose).collect();
-        Ok(check.select(&poses)?.map(|c| c.pose).or(best))
+        Ok(check.select(&poses)?.map(|c| (c.pose, c.from)).or(best))
     }
 }

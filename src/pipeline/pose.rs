@@ -43,6 +43,9 @@ pub struct PoseEstimate {
     /// The single-sample estimate after the signature check ([`crate::pose::signature_check`]): the hypothesis
     /// that best explains the measured signature, refined; `None` without a signature or with the check off.
     pub checked: Option<Se2>,
+    /// The signature check picked a hypothesis of the imprint's threshold contact over the sample's
+    /// ([`EvalConfig::imprint_proposals`]).
+    pub checked_from_imprint: bool,
     /// Indices of the samples with contact (the others cannot be registered).
     pub with_contact: Vec<usize>,
     /// Every sample's, the baseline's and the multi-sample estimate's pose and errors, with the KDEs.
@@ -106,22 +109,40 @@ pub fn estimate_pose(
         seed,
     )?
     .ok_or(PipelineError::NoContact)?;
+    let baseline = input
+        .signature
+        .map(|s| threshold_contact(s, input.imprint, &config.baseline));
     let measured = input
         .signature
         .map(|s| (s, input.imprint))
         .filter(|_| config.check_signature);
-    let checked = match measured {
-        Some(m) => evaluator.choose(&model, &hypotheses, &ctx, &input.t_world_camera, Some(m))?,
-        None => None,
+    let (checked, checked_from_imprint) = match measured {
+        Some(m) => {
+            // The imprint's own contact proposes poses too; the check scores them beside the sample's.
+            let mut pool = hypotheses.clone();
+            if let (true, Some(b)) = (config.imprint_proposals, &baseline) {
+                let strategy = evaluator.random_starts(seed);
+                pool.extend(evaluator.pooled_hypotheses(
+                    &model,
+                    std::slice::from_ref(b),
+                    &ctx,
+                    &input.t_world_camera,
+                    Some(m),
+                    &strategy,
+                )?);
+            }
+            match evaluator.choose_indexed(&model, &pool, &ctx, &input.t_world_camera, Some(m))? {
+                Some((pose, from)) => (Some(pose), from >= hypotheses.len()),
+                None => (None, false),
+            }
+        }
+        None => (None, false),
     };
     let multi = usize::from(input.samples.len() > 1);
     let total = 2 + input.samples.len() + multi;
     if !progress(1, total) {
         return Err(PipelineError::Cancelled);
     }
-    let baseline = input
-        .signature
-        .map(|s| threshold_contact(s, input.imprint, &config.baseline));
     let sig = Signature {
         t_world_camera: input.t_world_camera,
         samples: &samples,
@@ -142,6 +163,7 @@ pub fn estimate_pose(
         hypotheses,
         registered_sample,
         checked,
+        checked_from_imprint,
         with_contact,
         report,
         anchor_shift_m,

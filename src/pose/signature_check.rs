@@ -11,6 +11,7 @@
 //! artefacts do not dominate).
 
 use glam::DAffine3;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::register::wrap_angle;
@@ -30,7 +31,10 @@ pub struct SignatureCheckConfig {
     /// noise σ = 1.38 mm).
     pub scale_m: f64,
     /// Hypotheses (the lowest-scoring distinct ones) refined by the pattern search besides the registration's best
-    /// (default 3); 0 refines none and picks among all as scored.
+    /// (default 20: every hypothesis of a 10-start registration of the sample and of the imprint; 0 refines none
+    /// and picks among all as scored). On the real-mesh validation set refining 20 instead of 3 took the mean
+    /// position error from 1.94 to 1.44 mm: the pose that explains the signature best often starts as a
+    /// hypothesis the unrefined score ranks low.
     pub refine: usize,
     /// How much better (natural log-likelihood under the sensor's Gaussian noise, [`SignatureModel::noise_std`])
     /// another hypothesis must explain the signature than the registration's best to replace it (default 0: the
@@ -55,7 +59,7 @@ impl Default for SignatureCheckConfig {
     fn default() -> Self {
         Self {
             scale_m: 0.003,
-            refine: 3,
+            refine: 20,
             margin_nats: 0.0,
             step_m: 0.001,
             min_step_m: 5e-5,
@@ -260,21 +264,27 @@ impl SignatureCheck<'_> {
         };
         let mut candidates = vec![first];
         candidates.extend(scored.iter().filter(|c| c.0 != first.0).take(others));
-        let mut refined = Vec::with_capacity(candidates.len());
-        for &(from, p, c) in &candidates {
-            let (pose, cost, used) = if self.config.refine > 0 {
-                self.refine(p)
-            } else {
-                (p, c, 0)
-            };
-            evaluations += used;
-            refined.push(Checked {
-                pose,
-                cost,
-                from,
-                evaluations: 0,
-            });
-        }
+        // Each refinement is its own pattern search: in parallel, collected in order (the same pick on any
+        // number of threads).
+        let refined: Vec<(Checked, usize)> = candidates
+            .par_iter()
+            .map(|&(from, p, c)| {
+                let (pose, cost, used) = if self.config.refine > 0 {
+                    self.refine(p)
+                } else {
+                    (p, c, 0)
+                };
+                let checked = Checked {
+                    pose,
+                    cost,
+                    from,
+                    evaluations: 0,
+                };
+                (checked, used)
+            })
+            .collect();
+        evaluations += refined.iter().map(|(_, used)| used).sum::<usize>();
+        let refined: Vec<Checked> = refined.into_iter().map(|(c, _)| c).collect();
         // A cost difference ΔC over n pixels is n·ΔC/σ² nats of Gaussian log-likelihood.
         let n = self.measured_pixels().max(1) as f64;
         let margin = self.config.margin_nats * self.model.noise_std * self.model.noise_std / n;

@@ -41,11 +41,7 @@ pub fn first_registration(
     samples: &[Image],
     seed: u64,
 ) -> Result<Option<(usize, Vec<Hypothesis>)>, PoseError> {
-    let strategy = InitStrategy::Random {
-        count: evaluator.config.inits,
-        radius_m: evaluator.config.init_radius_m,
-        seed,
-    };
+    let strategy = evaluator.random_starts(seed);
     let mut last_error = None;
     for (i, s) in samples.iter().enumerate() {
         match evaluator.register_depth(object, s, ctx, t_world_camera, &strategy, seed) {
@@ -93,11 +89,7 @@ pub fn analyse_with_progress(
             Err(EvalError::Cancelled)
         }
     };
-    let strategy = InitStrategy::Random {
-        count: evaluator.config.inits,
-        radius_m: evaluator.config.init_radius_m,
-        seed,
-    };
+    let strategy = evaluator.random_starts(seed);
     let init = match sig.init {
         Some(i) => i,
         None => {
@@ -199,8 +191,8 @@ pub fn analyse_with_progress(
 }
 
 /// The multi-sample estimate of `sig`: the samples' consensus contact registered from `strategy`'s starts; with the
-/// signature check ([`Evaluator::choose`]) every sample is registered from them too and the check picks among all
-/// those hypotheses. Returns the pose with its registration cost (NaN for a pose the check refined).
+/// signature check ([`Evaluator::choose`]) every sample (and, with [`crate::metrics::evaluate::EvalConfig::imprint_proposals`], the threshold
+/// baseline's contact) is registered from them too and the check picks among all those hypotheses. Returns the pose with its registration cost (NaN for a pose the check refined).
 pub fn multi_sample_estimate(
     evaluator: &Evaluator,
     object: &ObjectModel,
@@ -213,6 +205,10 @@ pub fn multi_sample_estimate(
     let mut registered = vec![consensus];
     if checked {
         registered.extend(sig.samples.iter().cloned());
+        // The imprint's threshold contact proposes too (its depths are the signature's: nothing to anchor).
+        if let (true, Some(b)) = (evaluator.config.imprint_proposals, sig.baseline) {
+            registered.push(b.clone());
+        }
     }
     // The samples arrive anchored (or not) as the caller chose: no second anchoring here.
     let hypotheses = evaluator.pooled_hypotheses(

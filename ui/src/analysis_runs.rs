@@ -518,6 +518,7 @@ impl WorkbenchApp {
             hypotheses: r.hypotheses.clone(),
             registered_sample: r.registered_sample,
             checked: r.checked,
+            checked_from_imprint: r.checked_from_imprint,
             with_contact: r.sample_index.clone(),
             report: r.report.clone(),
             anchor_shift_m: r.anchor_shift_m.clone(),

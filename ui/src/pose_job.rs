@@ -73,6 +73,7 @@ pub fn run(
         truth: c.truth,
         registered_sample: estimate.registered_sample,
         checked: estimate.checked,
+        checked_from_imprint: estimate.checked_from_imprint,
         hypotheses: estimate.hypotheses,
         contacts,
         report: estimate.report,

@@ -23,6 +23,8 @@ pub struct PoseAnalysis {
     /// The single-sample estimate after the signature check (the hypothesis that best explains the measured
     /// signature, refined); `None` when the check did not run.
     pub checked: Option<Se2>,
+    /// The check's pick came from the imprint's threshold contact, not the sample.
+    pub checked_from_imprint: bool,
     /// Its contact points (back-projected X̂0), world frame, metres.
     pub contacts: Vec<[f64; 2]>,
     /// Per-sample errors (from the fixed start), baseline errors and KDE curves.

@@ -10,6 +10,7 @@ use clap::Args;
 use kdam::BarExt;
 use serde_json::json;
 use tactile_derender::dataset::{Dataset, SplitName};
+use tactile_derender::metrics::breakdown::GroupSummary;
 use tactile_derender::metrics::evaluate::{
     EvalConfig, EvalReport, Evaluator, Generator, GroundTruthGenerator, MethodSummary, PairSource,
 };
@@ -72,6 +73,14 @@ pub struct EvalArgs {
     /// explanation is refined and kept).
     #[arg(long)]
     pub no_signature_check: bool,
+    /// Leave out the row of the model's sample with the imprint's threshold contact as further proposals to the
+    /// signature check (shown by default with the check).
+    #[arg(long)]
+    pub no_imprint_proposals: bool,
+    /// Hypotheses the signature check refines besides the registration's best (the lowest-scoring distinct
+    /// ones; default 20): more cost more time and find poses further from the best one.
+    #[arg(long, default_value_t = tactile_derender::pose::signature_check::SignatureCheckConfig::default().refine)]
+    pub check_refine: usize,
     /// Random starts per registration (the paper's K = 10); with the signature check more starts give it more
     /// hypotheses to choose from.
     #[arg(long, default_value_t = EvalConfig::default().inits)]
@@ -129,7 +138,12 @@ pub fn run(a: EvalArgs) -> Result<()> {
         pose_samples: a.pose_samples.max(1),
         anchor_to_signature: !a.no_anchor,
         check_signature: !a.no_signature_check,
+        imprint_proposals: !a.no_imprint_proposals,
         inits: a.inits,
+        signature_check: tactile_derender::pose::signature_check::SignatureCheckConfig {
+            refine: a.check_refine,
+            ..Default::default()
+        },
         ..EvalConfig::default()
     });
     let rrd = a.rerun.open("tnd eval")?;
@@ -182,6 +196,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
             "{}",
             json!({"split": split.as_str(), "generator": report.generator, "pairs": report.pairs,
                    "model": report.model, "model_multi": report.model_multi,
+                   "model_combined": report.model_combined,
                    "baseline": report.baseline, "baseline_checked": report.baseline_checked,
                    "breakdown": report.breakdown,
                    "failed": report.failed})
@@ -383,6 +398,12 @@ pub fn markdown_table(split: &str, r: &EvalReport) -> String {
     if let Some(m) = &r.model_multi {
         s.push_str(&row(&format!("{} (multi-sample)", r.generator), m));
     }
+    if let Some(m) = &r.model_combined {
+        s.push_str(&row(
+            &format!("{} + imprint proposals (checked)", r.generator),
+            m,
+        ));
+    }
     s.push_str(&row("threshold baseline", &r.baseline));
     if let Some(b) = &r.baseline_checked {
         s.push_str(&row("threshold baseline + signature check", b));
@@ -395,6 +416,11 @@ pub fn markdown_table(split: &str, r: &EvalReport) -> String {
             "multi-sample",
             r.model_multi.as_ref(),
             r.position_ratio_multi_ci95,
+        ),
+        (
+            "model + imprint proposals",
+            r.model_combined.as_ref(),
+            r.position_ratio_combined_ci95,
         ),
     ] {
         if let (Some(m), Some(ci)) = (m, ci) {
@@ -426,46 +452,69 @@ fn ratio_cell(ratio: f64, ci: Option<[f64; 2]>) -> String {
 
 /// Position error per contact-size bin and per object, model against baseline, as markdown.
 fn breakdown_tables(r: &EvalReport) -> String {
-    let multi = r.model_multi.is_some();
-    let checked = r.baseline_checked.is_some();
+    type Cell = fn(&GroupSummary) -> Option<String>;
+    // (header, cell): a column is shown when the report has its method.
+    let columns: [(&str, bool, Cell); 8] = [
+        ("model position [mm]", true, |g| {
+            Some(median_cell(&g.model.position_mm))
+        }),
+        ("multi-sample position [mm]", r.model_multi.is_some(), |g| {
+            g.model_multi.as_ref().map(|m| median_cell(&m.position_mm))
+        }),
+        (
+            "model + imprint proposals [mm]",
+            r.model_combined.is_some(),
+            |g| {
+                g.model_combined
+                    .as_ref()
+                    .map(|m| median_cell(&m.position_mm))
+            },
+        ),
+        ("baseline position [mm]", true, |g| {
+            Some(median_cell(&g.baseline.position_mm))
+        }),
+        ("baseline + check [mm]", r.baseline_checked.is_some(), |g| {
+            g.baseline_checked
+                .as_ref()
+                .map(|b| median_cell(&b.position_mm))
+        }),
+        ("model / baseline [95 % interval]", true, |g| {
+            Some(ratio_cell(g.position_ratio, g.position_ratio_ci95))
+        }),
+        (
+            "multi-sample / baseline [95 % interval]",
+            r.model_multi.is_some(),
+            |g| {
+                g.position_ratio_multi
+                    .map(|x| ratio_cell(x, g.position_ratio_multi_ci95))
+            },
+        ),
+        (
+            "model + imprint proposals / baseline [95 % interval]",
+            r.model_combined.is_some(),
+            |g| {
+                g.position_ratio_combined
+                    .map(|x| ratio_cell(x, g.position_ratio_combined_ci95))
+            },
+        ),
+    ];
+    let shown: Vec<_> = columns.iter().filter(|(_, on, _)| *on).collect();
     let mut s = String::new();
     for (title, groups) in [
         ("contact size", &r.breakdown.contact_size),
         ("object", &r.breakdown.object),
     ] {
-        let _ = writeln!(
-            s,
-            "| {title} | pairs | model position [mm] |{} baseline position [mm] |{} model / baseline [95 % interval] |{}",
-            if multi { " multi-sample position [mm] |" } else { "" },
-            if checked { " baseline + check [mm] |" } else { "" },
-            if multi {
-                " multi-sample / baseline [95 % interval] |"
-            } else {
-                ""
-            }
-        );
-        let columns = 5 + 2 * usize::from(multi) + usize::from(checked);
-        let _ = writeln!(s, "|{}", " --- |".repeat(columns));
+        let _ = write!(s, "| {title} | pairs |");
+        for (header, _, _) in &shown {
+            let _ = write!(s, " {header} |");
+        }
+        let _ = writeln!(s, "\n|{}", " --- |".repeat(2 + shown.len()));
         for g in groups {
-            let m = g.model_multi.as_ref().map(|m| median_cell(&m.position_mm));
-            let c = g
-                .baseline_checked
-                .as_ref()
-                .map(|b| median_cell(&b.position_mm));
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} |{} {} |{} {} |{}",
-                g.label,
-                g.pairs,
-                median_cell(&g.model.position_mm),
-                m.map(|c| format!(" {c} |")).unwrap_or_default(),
-                median_cell(&g.baseline.position_mm),
-                c.map(|c| format!(" {c} |")).unwrap_or_default(),
-                ratio_cell(g.position_ratio, g.position_ratio_ci95),
-                g.position_ratio_multi
-                    .map(|x| format!(" {} |", ratio_cell(x, g.position_ratio_multi_ci95)))
-                    .unwrap_or_default(),
-            );
+            let _ = write!(s, "| {} | {} |", g.label, g.pairs);
+            for (_, _, cell) in &shown {
+                let _ = write!(s, " {} |", cell(g).unwrap_or_else(|| "–".into()));
+            }
+            s.push('\n');
         }
         s.push('\n');
     }

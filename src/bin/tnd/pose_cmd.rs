@@ -47,6 +47,11 @@ pub struct PoseArgs {
     /// signature (the check needs --signature; on by default).
     #[arg(long)]
     pub no_signature_check: bool,
+    /// Check only the sample's hypotheses, without the imprint's threshold contact as further proposals (on by
+    /// default with the check: where the imprint says more than the sample, on small or shallow contacts, its
+    /// pose can win).
+    #[arg(long)]
+    pub no_imprint_proposals: bool,
     /// The true pose X,Y,THETA (metres, metres, radians; errors are measured against it, otherwise against the
     /// estimate).
     #[arg(long)]
@@ -109,6 +114,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let signature = a.signature.as_ref().map(|p| read(p, res)).transpose()?;
     let eval = EvalConfig {
         check_signature: !a.no_signature_check,
+        imprint_proposals: !a.no_imprint_proposals,
         ..EvalConfig::default()
     };
     let (generator, samples, probability) = if a.model == "ground-truth" {
@@ -229,6 +235,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let summary = json!({"object": object.name, "generator": generator, "rerun": rerun, "samples": report.samples.len(),
         "seed": a.derender.seed, "estimate": estimate.best(),
         "signature_checked": estimate.checked.is_some(),
+        "checked_from_imprint": estimate.checked_from_imprint,
         "best_hypothesis": estimate.hypotheses.first().map(|h| h.pose),
         "estimate_multi_sample": report.multi_sample.map(|m| m.pose),
         "truth": truth, "baseline": report.baseline, "multi_sample": report.multi_sample,

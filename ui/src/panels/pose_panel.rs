@@ -149,7 +149,9 @@ fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, heigh
                 }
             };
             if let Some(best) = r.single_estimate() {
-                let name = if r.checked.is_some() {
+                let name = if r.checked_from_imprint {
+                    "single-sample estimate (signature-checked; the imprint's proposal)"
+                } else if r.checked.is_some() {
                     "single-sample estimate (signature-checked)"
                 } else {
                     "best hypothesis"
@@ -207,8 +209,13 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
                 )
             })
             .unwrap_or_default();
+        let source = if r.checked_from_imprint {
+            " — the imprint's proposal"
+        } else {
+            " — the sample's proposal"
+        };
         ui.label(format!(
-            "signature check: x {:.2} mm, y {:.2} mm, θ {:.1}°{error}",
+            "signature check: x {:.2} mm, y {:.2} mm, θ {:.1}°{error}{source}",
             c.x * 1e3,
             c.y * 1e3,
             c.theta.to_degrees()
@@ -216,7 +223,9 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
         .on_hover_text(
             "Each hypothesis predicts the signature the sensor would have measured (object rendered at that pose, \
              contact where it reaches past the membrane, tactile shadow); the best explanation of the measured \
-             signature is refined and drawn as the single-sample estimate.",
+             signature is refined and drawn as the single-sample estimate. The hypotheses are the sample's \
+             (listed below) and the imprint's threshold contact's, registered the same way: on small or shallow \
+             contacts the imprint can say more than one sample.",
         );
     }
     egui::ScrollArea::vertical()
