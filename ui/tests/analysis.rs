@@ -403,6 +403,13 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
         "{checked:?}"
     );
     assert!(h.query_by_label_contains("signature check: x").is_some());
+    // It says whose hypothesis won: the sample's or the imprint's threshold contact's.
+    let source = if r.checked_from_imprint {
+        "the imprint's proposal"
+    } else {
+        "the sample's proposal"
+    };
+    assert!(h.query_by_label_contains(source).is_some());
     // Depth anchoring ran (the scene has a signature) and says what it did to the registered sample.
     assert_eq!(r.anchor_shift_m.len(), 4);
     assert!(
