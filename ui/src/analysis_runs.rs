@@ -66,6 +66,8 @@ pub struct PoseView {
     pub highlight: Option<usize>,
     /// Register without the signature check (the registration's best hypothesis is the estimate).
     pub no_signature_check: bool,
+    /// Check only the sample's hypotheses, without the imprint's threshold contact's.
+    pub no_imprint_proposals: bool,
 }
 
 /// Live state of the analysis tabs.
@@ -485,6 +487,7 @@ impl WorkbenchApp {
             samples: r.samples.clone(),
             seed: r.config.seed,
             check_signature: !view.no_signature_check,
+            imprint_proposals: !view.no_imprint_proposals,
         };
         raise_cancel(&mut view.cancel);
         let cancel = Arc::new(AtomicBool::new(false));

@@ -80,6 +80,8 @@ pub enum Command {
     HighlightSample(Option<usize>),
     /// Turn the signature check of the next registration on or off.
     SetSignatureCheck(bool),
+    /// Give the signature check the imprint's threshold-contact hypotheses too (on) or only the sample's (off).
+    SetImprintProposals(bool),
     /// Undo the last scene, sensor or elastomer edit.
     Undo,
     /// Redo the last undone edit.
@@ -254,6 +256,7 @@ impl WorkbenchApp {
             }
             Command::HighlightSample(k) => self.analysis.pose.highlight = k,
             Command::SetSignatureCheck(on) => self.analysis.pose.no_signature_check = !on,
+            Command::SetImprintProposals(on) => self.analysis.pose.no_imprint_proposals = !on,
             Command::ZoomImage(target) => self.analysis.zoom = target,
             Command::OpenRecording(path) => {
                 self.state.recording = crate::recording_view::RecordingSettings {

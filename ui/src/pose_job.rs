@@ -29,6 +29,8 @@ pub struct PoseRequest {
     pub seed: u64,
     /// Judge the registration's hypotheses by the signature each predicts (the signature check).
     pub check_signature: bool,
+    /// Pool the imprint's threshold-contact hypotheses with the sample's before the check.
+    pub imprint_proposals: bool,
 }
 
 /// Register the samples and the baseline ([`pipeline::estimate_pose`], as `tnd pose` does), reporting
@@ -54,6 +56,7 @@ pub fn run(
         &input,
         &EvalConfig {
             check_signature: req.check_signature,
+            imprint_proposals: req.imprint_proposals,
             ..EvalConfig::default()
         },
         req.seed,

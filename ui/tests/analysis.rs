@@ -514,6 +514,21 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     assert!(r.checked.is_none());
     assert_eq!(r.single_estimate(), r.hypotheses.first().map(|h| h.pose));
     assert!(h.query_by_label_contains("signature check: x").is_none());
+
+    // With the check back on and the imprint's proposals off, the check judges the sample's hypotheses alone, so
+    // its pick cannot come from the imprint.
+    h.get_by_label("signature check").click();
+    h.run_ok();
+    h.get_by_label("imprint proposals").click();
+    h.run_ok();
+    assert!(h.state().analysis.pose.no_imprint_proposals);
+    h.get_by_label("Register samples").click();
+    wait_for(&mut h, "the registration without imprint proposals", |a| {
+        !a.analysis.pose.running && a.analysis.pose.result.is_some()
+    });
+    let r = h.state().analysis.pose.result.as_ref().unwrap();
+    assert!(r.checked.is_some() && !r.checked_from_imprint);
+    assert!(h.query_by_label_contains("the sample's proposal").is_some());
 }
 
 #[test]

@@ -58,6 +58,16 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
             if check == pose.no_signature_check {
                 cmds.push(Command::SetSignatureCheck(check));
             }
+            let mut proposals = !pose.no_imprint_proposals;
+            ui.add_enabled(check, egui::Checkbox::new(&mut proposals, "imprint proposals"))
+                .on_hover_text(
+                    "also register the imprint's own thresholded contact and let the signature check judge its \
+                     hypotheses beside the sample's (on small or shallow contacts the imprint can say more than \
+                     one sample); off: only the sample's. Applies to the next registration.",
+                );
+            if proposals == pose.no_imprint_proposals {
+                cmds.push(Command::SetImprintProposals(proposals));
+            }
         }
         if pose.result.is_some()
             && ui
