@@ -6,7 +6,8 @@
 #   b: the wider architecture of wide_config.json here (wide1 with every other setting spelled out), from scratch.
 # Everything ends by BUDGET_S seconds after the start; the EMA checkpoints and logs go to OUT.
 #
-#     [PAIRS=300000] [INFLATION=0.027,0.033] [MODELS="a b"|a] [SAVE_EVERY_S=120] assets/models/gpu/device_run.sh TND OUT BUDGET_S
+#     [PAIRS=300000] [INFLATION=0.027,0.033] [MODELS="a b"|a|b] [B_INIT=b.safetensors] [SAVE_EVERY_S=120] \
+#         assets/models/gpu/device_run.sh TND OUT BUDGET_S
 set -u
 tnd=$1 out=$2 budget=$3
 t0=$(date +%s)
@@ -32,12 +33,18 @@ nice -n 5 "$tnd" dataset gen --out "$w/train" --pairs "${PAIRS:-300000}" --seed 
 gen=$!
 left=$(( budget - ($(date +%s) - t0) - 25 ))
 save=${SAVE_EVERY_S:-120}
-python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" --init "$here/../default.safetensors" \
-    --out "$out/a" --deadline-s "$left" --lr 2e-4 --seed 1 --batch "${BATCH:-256}" --capacity 300000 \
-    --save-every-s "$save" > "$out/a.out" 2>&1 &
-pa=$! pb=
-if [ "${MODELS:-a b}" = "a b" ]; then
-    python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" --config "$here/wide_config.json" \
+models=${MODELS:-a b}
+pa= pb=
+if [ "$models" != b ]; then
+    python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" --init "$here/../default.safetensors" \
+        --out "$out/a" --deadline-s "$left" --lr 2e-4 --seed 1 --batch "${BATCH:-256}" --capacity 300000 \
+        --save-every-s "$save" > "$out/a.out" 2>&1 &
+    pa=$!
+fi
+if [ "$models" != a ]; then
+    # B_INIT continues an earlier run b (its checkpoint holds the wide config); otherwise b starts from scratch.
+    if [ -n "${B_INIT:-}" ]; then start=(--init "$B_INIT"); else start=(--config "$here/wide_config.json"); fi
+    python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" "${start[@]}" \
         --out "$out/b" --deadline-s "$left" --lr 3e-4 --seed 2 --batch "${BATCH:-256}" --capacity 300000 \
         --save-every-s "$save" > "$out/b.out" 2>&1 &
     pb=$!
