@@ -457,33 +457,8 @@ impl Evaluator {
         }
     }
 
-    /// Score one in-contact depth estimate of `pair`.
-    pub fn score(
-        &self,
-        pair: &EvalPair,
-        estimate: &Image,
-        ctx: &EvalContext,
-        seed: u64,
-    ) -> Result<MethodResult, EvalError> {
-        self.score_pooled(pair, estimate, std::slice::from_ref(estimate), ctx, seed)
-    }
-
-    /// Score the depth estimate `depth` of `pair`, with the pose from the hypotheses of registering every image of
-    /// `registered` (each anchored as [`Self::anchor`]): without the signature check the best hypothesis of the
-    /// first image with contact, with it the pooled hypotheses' best explanation of the signature ([`Self::choose`]).
-    pub fn score_pooled(
-        &self,
-        pair: &EvalPair,
-        depth: &Image,
-        registered: &[Image],
-        ctx: &EvalContext,
-        seed: u64,
-    ) -> Result<MethodResult, EvalError> {
-        let r = self.register_pair(pair, depth, registered, ctx, seed)?;
-        self.pose_result(pair, ctx, &r, true)
-    }
-
-    /// The depth metrics of `depth` and the pooled hypotheses of `registered` (see [`Self::score_pooled`]).
+    /// The depth metrics of `depth` and the hypotheses of registering every image of `registered` (each anchored as
+    /// [`Self::anchor`]), pooled in that order.
     fn register_pair(
         &self,
         pair: &EvalPair,
@@ -536,7 +511,8 @@ impl Evaluator {
             .map_err(|source| EvalError::Pose {
                 object: pair.object.clone(),
                 source,
-            })?;
+            })?
+            .map(|(pose, _)| pose);
         let pose = estimate
             .map(|e| pose_errors(e, pair.object_pose, &r.object.symmetry, &r.object.cloud))
             .transpose()?;
@@ -580,7 +556,17 @@ impl Evaluator {
         let model = self
             .pose_result(&pair, ctx, &model_reg, true)
             .map_err(fail)?;
+        // The baseline as the paper defines it (its registration's best hypothesis), and with the signature check.
         let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.baseline);
+        let base = self
+            .register_pair(
+                &pair,
+                &base_x0,
+                std::slice::from_ref(&base_x0),
+                ctx,
+                pair_seed,
+            )
+            .map_err(fail)?;
         let model_multi = if samples.len() > 1 {
             let consensus =
                 consensus_depth(&samples, self.config.consensus_probability).map_err(|source| {
@@ -592,27 +578,18 @@ impl Evaluator {
             let mut registered = vec![consensus.clone()];
             if self.config.check_signature {
                 registered.extend(samples.iter().cloned());
-                if self.config.imprint_proposals {
-                    registered.push(base_x0.clone());
-                }
             }
-            Some(
-                self.score_pooled(&pair, &consensus, &registered, ctx, pair_seed)
-                    .map_err(fail)?,
-            )
+            let mut pooled = self
+                .register_pair(&pair, &consensus, &registered, ctx, pair_seed)
+                .map_err(fail)?;
+            // The imprint's hypotheses as registered for the baseline (same starts, same seed) close the pool.
+            if self.config.check_signature && self.config.imprint_proposals {
+                pooled.hypotheses.extend_from_slice(&base.hypotheses);
+            }
+            Some(self.pose_result(&pair, ctx, &pooled, true).map_err(fail)?)
         } else {
             None
         };
-        // The baseline as the paper defines it (its registration's best hypothesis), and with the signature check.
-        let base = self
-            .register_pair(
-                &pair,
-                &base_x0,
-                std::slice::from_ref(&base_x0),
-                ctx,
-                pair_seed,
-            )
-            .map_err(fail)?;
         let baseline = self.pose_result(&pair, ctx, &base, false).map_err(fail)?;
         let checks = self.config.check_signature && ctx.signature_model.is_some();
         let combine = checks && self.config.imprint_proposals;

@@ -56,23 +56,9 @@ impl Evaluator {
 
     /// The pose from a registration's `hypotheses`: the first one (the best of a single registration), or, with
     /// [`EvalConfig::check_signature`], a `measured` (signature, imprint) and the sensor's signature model, the one the
-    /// signature check picks and refines ([`SignatureCheck::select`]). `None` without hypotheses.
+    /// signature check picks and refines ([`SignatureCheck::select`]), with the index in `hypotheses` of the one it came
+    /// from (0 without the check). `None` without hypotheses.
     pub fn choose(
-        &self,
-        object: &ObjectModel,
-        hypotheses: &[Hypothesis],
-        ctx: &EvalContext,
-        t_world_camera: &DAffine3,
-        measured: Option<(&Image, &Image)>,
-    ) -> Result<Option<Se2>, PoseError> {
-        Ok(self
-            .choose_indexed(object, hypotheses, ctx, t_world_camera, measured)?
-            .map(|(pose, _)| pose))
-    }
-
-    /// [`Self::choose`], with the index in `hypotheses` of the hypothesis the pose came from (0 without the
-    /// check).
-    pub fn choose_indexed(
         &self,
         object: &ObjectModel,
         hypotheses: &[Hypothesis],

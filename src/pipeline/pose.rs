@@ -131,7 +131,7 @@ pub fn estimate_pose(
                     &strategy,
                 )?);
             }
-            match evaluator.choose_indexed(&model, &pool, &ctx, &input.t_world_camera, Some(m))? {
+            match evaluator.choose(&model, &pool, &ctx, &input.t_world_camera, Some(m))? {
                 Some((pose, from)) => (Some(pose), from >= hypotheses.len()),
                 None => (None, false),
             }

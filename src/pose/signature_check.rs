@@ -266,25 +266,23 @@ impl SignatureCheck<'_> {
         candidates.extend(scored.iter().filter(|c| c.0 != first.0).take(others));
         // Each refinement is its own pattern search: in parallel, collected in order (the same pick on any
         // number of threads).
-        let refined: Vec<(Checked, usize)> = candidates
+        let refined: Vec<Checked> = candidates
             .par_iter()
             .map(|&(from, p, c)| {
-                let (pose, cost, used) = if self.config.refine > 0 {
+                let (pose, cost, evaluations) = if self.config.refine > 0 {
                     self.refine(p)
                 } else {
                     (p, c, 0)
                 };
-                let checked = Checked {
+                Checked {
                     pose,
                     cost,
                     from,
-                    evaluations: 0,
-                };
-                (checked, used)
+                    evaluations,
+                }
             })
             .collect();
-        evaluations += refined.iter().map(|(_, used)| used).sum::<usize>();
-        let refined: Vec<Checked> = refined.into_iter().map(|(c, _)| c).collect();
+        evaluations += refined.iter().map(|c| c.evaluations).sum::<usize>();
         // A cost difference ΔC over n pixels is n·ΔC/σ² nats of Gaussian log-likelihood.
         let n = self.measured_pixels().max(1) as f64;
         let margin = self.config.margin_nats * self.model.noise_std * self.model.noise_std / n;

@@ -191,8 +191,10 @@ pub fn analyse_with_progress(
 }
 
 /// The multi-sample estimate of `sig`: the samples' consensus contact registered from `strategy`'s starts; with the
-/// signature check ([`Evaluator::choose`]) every sample (and, with [`crate::metrics::evaluate::EvalConfig::imprint_proposals`], the threshold
-/// baseline's contact) is registered from them too and the check picks among all those hypotheses. Returns the pose with its registration cost (NaN for a pose the check refined).
+/// signature check ([`Evaluator::choose`]) every sample (and, with
+/// [`crate::metrics::evaluate::EvalConfig::imprint_proposals`], the threshold baseline's contact) is registered from
+/// them too and the check picks among all those hypotheses. Returns the pose with its registration cost (NaN for a
+/// pose the check refined).
 pub fn multi_sample_estimate(
     evaluator: &Evaluator,
     object: &ObjectModel,
@@ -219,7 +221,9 @@ pub fn multi_sample_estimate(
         None,
         strategy,
     )?;
-    let pose = evaluator.choose(object, &hypotheses, ctx, &sig.t_world_camera, sig.measured)?;
+    let pose = evaluator
+        .choose(object, &hypotheses, ctx, &sig.t_world_camera, sig.measured)?
+        .map(|(pose, _)| pose);
     Ok(pose.map(|p| {
         let cost = hypotheses
             .iter()

@@ -19,6 +19,7 @@ use tactile_derender::metrics::paper_table::{paper_tables, PaperEntry};
 use tactile_derender::metrics::sources::DatasetSource;
 use tactile_derender::metrics::MeanStd;
 use tactile_derender::model::{DiffusionModel, SamplerConfig};
+use tactile_derender::pose::signature_check::SignatureCheckConfig;
 use tactile_derender::pose::threshold_contact;
 use tactile_derender::uncertainty::analysis::{analyse, Signature};
 
@@ -79,7 +80,7 @@ pub struct EvalArgs {
     pub no_imprint_proposals: bool,
     /// Hypotheses the signature check refines besides the registration's best (the lowest-scoring distinct
     /// ones; default 20): more cost more time and find poses further from the best one.
-    #[arg(long, default_value_t = tactile_derender::pose::signature_check::SignatureCheckConfig::default().refine)]
+    #[arg(long, default_value_t = SignatureCheckConfig::default().refine)]
     pub check_refine: usize,
     /// Random starts per registration (the paper's K = 10); with the signature check more starts give it more
     /// hypotheses to choose from.
@@ -140,7 +141,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         check_signature: !a.no_signature_check,
         imprint_proposals: !a.no_imprint_proposals,
         inits: a.inits,
-        signature_check: tactile_derender::pose::signature_check::SignatureCheckConfig {
+        signature_check: SignatureCheckConfig {
             refine: a.check_refine,
             ..Default::default()
         },
