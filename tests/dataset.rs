@@ -679,3 +679,38 @@ fn cli_stats_and_show_describe_the_dataset() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("out of range"), "{err}");
 }
+
+#[test]
+fn cli_objects_generate_picks_kinds_and_names_a_bad_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("objects");
+    let tnd = env!("CARGO_BIN_EXE_tnd");
+    let o = std::process::Command::new(tnd)
+        .args(["-q", "objects", "generate", "--count", "12", "--seed", "3"])
+        .args(["--builtin-share", "0", "--kinds", "plate,limbs"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let set = tactile_derender::objects::ObjectSet::open(dir.to_str().unwrap()).unwrap();
+    assert_eq!(set.entries().len(), 12);
+    for e in set.entries() {
+        assert!(
+            e.name.starts_with("proc_plate_") || e.name.starts_with("proc_limbs_"),
+            "{}",
+            e.name
+        );
+        let (lo, hi) = set.mesh(&e.name).unwrap().aabb();
+        assert!(lo.z.abs() < 1e-6 && (hi - lo).max_element() <= 0.065 + 1e-6);
+    }
+    let o = std::process::Command::new(tnd)
+        .args(["objects", "generate", "--kinds", "plate,bogus"])
+        .arg(tmp.path().join("other"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("unknown kind 'bogus'"),
+        "{err}"
+    );
+}

@@ -7,7 +7,7 @@
 //! out by [`ObjectSet::mesh`] is in metres, in its resting pose, with its lowest point at z = 0 and its bounding box
 //! centred on the z axis (the object frame whose SE(2) pose on the table the pose estimator recovers).
 //!
-//! Files: [`shapes`] (procedural closed meshes), [`procedural`] (thousands of seeded random training objects), [`triangulate`] (ear clipping for extruded caps), `builtin.rs` (the
+//! Files: [`shapes`] (procedural closed meshes), [`procedural`] (thousands of seeded random training objects), [`sweeps`] (holed plates and swept tubes), [`triangulate`] (ear clipping for extruded caps), `builtin.rs` (the
 //! built-in catalogue), `set.rs` ([`ObjectSet`]: loading, validation, export).
 
 mod builtin;
@@ -15,6 +15,7 @@ pub mod inspect;
 pub mod procedural;
 mod set;
 pub mod shapes;
+pub mod sweeps;
 pub mod triangulate;
 
 pub use set::{ObjectSet, MANIFEST_FILE};

@@ -6,7 +6,8 @@
 //! Kinds ([`Kind`]): superquadrics (boxes to diamonds to pills), random convex polytopes (flat faces, sharp corners),
 //! smooth noise-displaced blobs, creased rocks, random outlines extruded upright with a chamfered or filleted top rim,
 //! random profiles extruded lying down, unions of overlapping primitives (a self-intersecting soup, like a convex
-//! decomposition), thin fins standing on edge, and blocks with small bumps (1–5 mm) on top. Each object's largest
+//! decomposition), thin fins standing on edge, blocks with small bumps (1–5 mm) on top, and (module [`super::sweeps`])
+//! plates with through-holes and stepped hubs, and swept limbs (knots, rods, bodies with legs). Each object's largest
 //! extent is drawn in [`ProceduralConfig::extent_m`]; about a third are tilted at random before resting on the table.
 //!
 //! Object `i` of a set depends only on `(seed, i)`, so sets are reproducible and can be extended. Meshes are in
@@ -22,6 +23,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::shapes::{extrude_z, icosphere_directions, sphere};
+use super::sweeps;
 use super::triangulate::{signed_area, simplify, triangulate};
 use super::{ObjectEntry, ObjectError, RotationSymmetry, Split, Symmetry};
 use crate::dataset::split::mix64;
@@ -38,6 +40,9 @@ pub struct ProceduralConfig {
     /// Range of each object's largest bounding-box extent, metres (default 0.015..0.065; the camera sees about
     /// 70 x 55 mm at the membrane).
     pub extent_m: [f64; 2],
+    /// The kinds drawn, each with its [`Kind::WEIGHTED`] frequency (default: all of [`Kind::ALL`]). The nine kinds
+    /// of [`Kind::V1`] reproduce the sets made before plates and limbs existed, object for object.
+    pub kinds: Vec<Kind>,
 }
 
 impl Default for ProceduralConfig {
@@ -46,6 +51,7 @@ impl Default for ProceduralConfig {
             count: 2000,
             seed: 0,
             extent_m: [0.015, 0.065],
+            kinds: Kind::ALL.to_vec(),
         }
     }
 }
@@ -63,11 +69,42 @@ pub enum Kind {
     Union,
     Fin,
     Bumps,
+    Plate,
+    Limbs,
 }
 
 impl Kind {
+    /// Every kind, in [`Kind::WEIGHTED`] order.
+    pub const ALL: [Kind; 11] = [
+        Kind::Superquadric,
+        Kind::Polytope,
+        Kind::Blob,
+        Kind::Rock,
+        Kind::Extrusion,
+        Kind::LyingExtrusion,
+        Kind::Union,
+        Kind::Fin,
+        Kind::Bumps,
+        Kind::Plate,
+        Kind::Limbs,
+    ];
+
+    /// The nine kinds of the first procedural sets (2026-11-24 to 26): with these, `(seed, i)` gives the objects it
+    /// gave then.
+    pub const V1: [Kind; 9] = [
+        Kind::Superquadric,
+        Kind::Polytope,
+        Kind::Blob,
+        Kind::Rock,
+        Kind::Extrusion,
+        Kind::LyingExtrusion,
+        Kind::Union,
+        Kind::Fin,
+        Kind::Bumps,
+    ];
+
     /// All kinds with their relative frequency.
-    pub const WEIGHTED: [(Kind, u32); 9] = [
+    pub const WEIGHTED: [(Kind, u32); 11] = [
         (Kind::Superquadric, 3),
         (Kind::Polytope, 3),
         (Kind::Blob, 2),
@@ -77,6 +114,8 @@ impl Kind {
         (Kind::Union, 3),
         (Kind::Fin, 1),
         (Kind::Bumps, 2),
+        (Kind::Plate, 3),
+        (Kind::Limbs, 3),
     ];
 
     /// Snake-case name, used in object names (`proc_<kind>_<index>`).
@@ -91,13 +130,26 @@ impl Kind {
             Kind::Union => "union",
             Kind::Fin => "fin",
             Kind::Bumps => "bumps",
+            Kind::Plate => "plate",
+            Kind::Limbs => "limbs",
         }
     }
 
-    fn draw(rng: &mut ChaCha8Rng) -> Kind {
-        let total: u32 = Self::WEIGHTED.iter().map(|(_, w)| w).sum();
-        let mut r = rng.random_range(0..total);
-        for (kind, w) in Self::WEIGHTED {
+    /// Parse a snake-case kind name.
+    pub fn parse(name: &str) -> Option<Kind> {
+        Self::ALL.into_iter().find(|k| k.as_str() == name)
+    }
+
+    /// One of `kinds` (in [`Kind::WEIGHTED`] order, whatever order they are listed in), by weight.
+    fn draw(rng: &mut ChaCha8Rng, kinds: &[Kind]) -> Kind {
+        let chosen = || {
+            Self::WEIGHTED
+                .into_iter()
+                .filter(|(k, _)| kinds.contains(k))
+        };
+        let total: u32 = chosen().map(|(_, w)| w).sum();
+        let mut r = rng.random_range(0..total.max(1));
+        for (kind, w) in chosen() {
             if r < w {
                 return kind;
             }
@@ -123,8 +175,14 @@ pub fn generate(config: &ProceduralConfig, index: usize) -> Result<ProceduralObj
             message: format!("extent range [{lo}, {hi}] m must satisfy 0 < min <= max"),
         });
     }
+    if config.kinds.is_empty() {
+        return Err(ObjectError::BadShape {
+            shape: "procedural",
+            message: "no kinds to draw from; list at least one".into(),
+        });
+    }
     let mut rng = ChaCha8Rng::seed_from_u64(mix64(mix64(config.seed) ^ index as u64));
-    let kind = Kind::draw(&mut rng);
+    let kind = Kind::draw(&mut rng, &config.kinds);
     let extent = lo + (hi - lo) * rng.random::<f64>();
     let (mesh, mut symmetry) = match kind {
         Kind::Superquadric => superquadric(&mut rng)?,
@@ -136,6 +194,8 @@ pub fn generate(config: &ProceduralConfig, index: usize) -> Result<ProceduralObj
         Kind::Union => (union(&mut rng)?, Symmetry::default()),
         Kind::Fin => (fin(&mut rng)?, Symmetry::default()),
         Kind::Bumps => (bumps(&mut rng)?, Symmetry::default()),
+        Kind::Plate => (sweeps::plate(&mut rng)?, Symmetry::default()),
+        Kind::Limbs => (sweeps::limbs(&mut rng)?, Symmetry::default()),
     };
     // Tilt a third of the compact shapes (long lying ones keep their axis on the table).
     let tilt = kind != Kind::LyingExtrusion && rng.random::<f64>() < 0.33;
@@ -189,15 +249,15 @@ fn scale_to_extent(mesh: &Mesh, extent: f64) -> Mesh {
     )))
 }
 
-fn uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
+pub(super) fn uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
     lo + (hi - lo) * rng.random::<f64>()
 }
 
-fn log_uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
+pub(super) fn log_uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
     (lo.ln() + (hi.ln() - lo.ln()) * rng.random::<f64>()).exp()
 }
 
-fn unit_vector(rng: &mut ChaCha8Rng) -> DVec3 {
+pub(super) fn unit_vector(rng: &mut ChaCha8Rng) -> DVec3 {
     let z = uniform(rng, -1.0, 1.0);
     let phi = uniform(rng, 0.0, TAU);
     let r = (1.0 - z * z).max(0.0).sqrt();
@@ -316,7 +376,7 @@ fn blob(rng: &mut ChaCha8Rng, creased: bool) -> Result<Mesh, ObjectError> {
 
 /// A random star-shaped outline about the origin with 3–12 corners, optionally rounded by Chaikin corner cutting
 /// (in-plane fillets), counter-clockwise, radius about 1.
-fn outline(rng: &mut ChaCha8Rng) -> Vec<Vec2> {
+pub(super) fn outline(rng: &mut ChaCha8Rng) -> Vec<Vec2> {
     let n = rng.random_range(3..=12);
     let mut angles: Vec<f64> = (0..n)
         .map(|k| (k as f64 + uniform(rng, -0.35, 0.35)) * TAU / n as f64)
@@ -568,6 +628,32 @@ mod tests {
         )
         .unwrap();
         assert_ne!(other.mesh, generate(&config, 0).unwrap().mesh);
+    }
+
+    #[test]
+    fn kinds_restrict_the_draw() {
+        let v1 = ProceduralConfig {
+            count: 60,
+            seed: 2,
+            kinds: Kind::V1.to_vec(),
+            ..Default::default()
+        };
+        for i in 0..v1.count {
+            let kind = generate(&v1, i).unwrap().kind;
+            assert!(Kind::V1.contains(&kind), "object {i}: {kind:?}");
+        }
+        let only = ProceduralConfig {
+            kinds: vec![Kind::Limbs, Kind::Plate],
+            ..v1.clone()
+        };
+        let kinds: std::collections::BTreeSet<Kind> =
+            (0..20).map(|i| generate(&only, i).unwrap().kind).collect();
+        assert_eq!(kinds, [Kind::Plate, Kind::Limbs].into());
+        let none = ProceduralConfig {
+            kinds: vec![],
+            ..v1
+        };
+        assert!(generate(&none, 0).is_err());
     }
 
     #[test]

@@ -20,9 +20,11 @@ nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv -l 20 > "$out/sm
 smi=$!
 objs="--press 0.001,0.015 --min-contact 0.004"
 # Validation objects and pairs: the same commands as data/proc_val in the model card (never trained on).
-"$tnd" objects generate "$w/val_objects" --count 300 --seed 1 --builtin-share 0 >> "$out/gen.log" 2>&1
+# --kinds v1: the validation objects of every earlier run (logged validation losses stay comparable).
+"$tnd" objects generate "$w/val_objects" --count 300 --seed 1 --builtin-share 0 --kinds v1 >> "$out/gen.log" 2>&1
 "$tnd" dataset gen --out "$w/val" --pairs 1000 --seed 12 --objects "$w/val_objects" $objs >> "$out/gen.log" 2>&1
-# Training objects: 6 000 procedural objects (seed 2) + the built-in set (a quarter of the draws); inflation drawn
+# Training objects: 6 000 procedural objects of every kind (seed 2; plates with holes and swept limbs since
+# 2026-11-26, session 9) + the built-in set (a quarter of the draws); inflation drawn
 # per pair in 27-33 mm.
 "$tnd" objects generate "$w/objects" --count 6000 --seed 2 >> "$out/gen.log" 2>&1
 echo "data ready to stream after $(( $(date +%s) - t0 )) s" >> "$out/gen.log"

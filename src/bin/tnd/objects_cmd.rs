@@ -7,7 +7,7 @@ use anyhow::{anyhow, bail, Result};
 use clap::{Args, Subcommand};
 use tactile_derender::mesh::{LoadOptions, Units};
 use tactile_derender::objects::inspect::{self, ImportOptions};
-use tactile_derender::objects::procedural::ProceduralConfig;
+use tactile_derender::objects::procedural::{Kind, ProceduralConfig};
 use tactile_derender::objects::{ObjectSet, Split, MANIFEST_FILE};
 
 #[derive(Args, Debug)]
@@ -58,7 +58,8 @@ pub enum ObjectsCommand {
     },
     /// Generate a procedural training set into DIR (OBJ meshes in metres + objects.json): superquadrics, convex
     /// polytopes, blobs, rocks, extrusions with chamfered or filleted rims, lying profiles, unions of primitives,
-    /// thin fins and blocks with small bumps, plus (by default) the built-in catalogue.
+    /// thin fins, blocks with small bumps, plates with through-holes and swept limbs (knots, rods, bodies with legs),
+    /// plus (by default) the built-in catalogue.
     Generate {
         /// Directory to write the meshes and objects.json into (created if missing).
         dir: PathBuf,
@@ -74,6 +75,11 @@ pub enum ObjectsCommand {
         /// Share of a generated dataset's pairs that go to the built-in catalogue's objects (0 leaves them out).
         #[arg(long, default_value_t = 0.25)]
         builtin_share: f64,
+        /// Kinds to draw, comma-separated (superquadric, polytope, blob, rock, extrusion, lying_extrusion, union,
+        /// fin, bumps, plate, limbs), or `all`, or `v1` (the first nine: reproduces sets made before plates and
+        /// limbs, object for object).
+        #[arg(long, default_value = "all", value_parser = parse_kinds)]
+        kinds: KindList,
     },
 }
 
@@ -179,11 +185,13 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
             seed,
             extent,
             builtin_share,
+            kinds,
         } => {
             let config = ProceduralConfig {
                 count,
                 seed,
                 extent_m: [extent[0], extent[1]],
+                kinds: kinds.0,
             };
             let set = ObjectSet::procedural(&config, builtin_share)?;
             set.export(&dir)?;
@@ -194,4 +202,32 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The `--kinds` list of `tnd objects generate`.
+#[derive(Clone, Debug)]
+pub struct KindList(Vec<Kind>);
+
+fn parse_kinds(text: &str) -> Result<KindList, String> {
+    match text {
+        "all" => return Ok(KindList(Kind::ALL.to_vec())),
+        "v1" => return Ok(KindList(Kind::V1.to_vec())),
+        _ => {}
+    }
+    let kinds = text
+        .split(',')
+        .map(|name| {
+            Kind::parse(name.trim()).ok_or_else(|| {
+                let known: Vec<&str> = Kind::ALL.iter().map(|k| k.as_str()).collect();
+                format!(
+                    "unknown kind '{name}' (known: {}, all, v1)",
+                    known.join(", ")
+                )
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    if kinds.is_empty() {
+        return Err("list at least one kind".into());
+    }
+    Ok(KindList(kinds))
 }
