@@ -515,7 +515,7 @@ fn resuming_with_another_configuration_is_refused() {
 }
 
 #[test]
-fn impossible_rejection_rule_fails_with_the_object_named() {
+fn impossible_rejection_rule_fails_saying_what_to_change() {
     let tmp = tempfile::tempdir().unwrap();
     let set = small_set(&tmp.path().join("set"));
     let cfg = GenConfig {
@@ -525,9 +525,58 @@ fn impossible_rejection_rule_fails_with_the_object_named() {
     };
     let err = generate(&tmp.path().join("d"), &sim_config(), &set, &cfg, &|_| {}).unwrap_err();
     assert!(
-        matches!(err, DatasetError::NoContact { attempts: 3, .. }),
+        matches!(err, DatasetError::NoPressableObject { attempts: 3, .. }),
         "{err}"
     );
+    assert!(err.to_string().contains("lower --min-contact"), "{err}");
+}
+
+#[test]
+fn objects_that_cannot_make_a_contact_are_left_out_and_named() {
+    // A 2 mm copy of a sphere covers a few pixels at most: below the 1 % (41 px) rule whatever the press.
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("set");
+    small_set(&dir);
+    let path = dir.join("objects.json");
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let objects = m["objects"].as_array_mut().unwrap();
+    let mut speck = objects
+        .iter()
+        .find(|o| o["name"] == "sphere_r20")
+        .unwrap()
+        .clone();
+    speck["name"] = "speck".into();
+    speck["scale_to_m"] = (speck["scale_to_m"].as_f64().unwrap() * 0.05).into();
+    objects.push(speck);
+    std::fs::write(&path, serde_json::to_string_pretty(&m).unwrap()).unwrap();
+    let set = ObjectSet::load_dir(&dir).unwrap();
+    let out = tmp.path().join("d");
+    let cfg = GenConfig {
+        max_attempts: 20,
+        ..gen_config(40)
+    };
+    let report = generate(&out, &sim_config(), &set, &cfg, &|_| {}).unwrap();
+    assert_eq!(report.excluded_objects, vec!["speck".to_string()]);
+    let ds = Dataset::open(&out).unwrap();
+    let mut pairs = 0;
+    for split in [
+        SplitName::Train,
+        SplitName::UnseenPoses,
+        SplitName::UnseenObjects,
+    ] {
+        for i in 0..ds.len(split) {
+            let pair = ds.pair(split, i).unwrap();
+            assert_ne!(pair.meta.object, "speck");
+            assert!(pair.meta.contact_pixels >= 41);
+            pairs += 1;
+        }
+    }
+    assert_eq!(pairs, 40);
+    // Resuming the finished run plans the same pairs (the exclusion is part of the plan).
+    let again = generate(&out, &sim_config(), &set, &cfg, &|_| {}).unwrap();
+    assert!(again.already_complete);
+    assert_eq!(again.excluded_objects, report.excluded_objects);
 }
 
 /// Writes `<CARGO_TARGET_TMPDIR>/tnd-dataset-numpy/{dataset, expected.json}` for `tests/dataset_numpy_check.py`:

@@ -64,6 +64,8 @@ pub enum DatasetError {
     },
     #[error("invalid generation configuration: {0}")]
     Config(String),
+    #[error("no object of the set makes a contact of at least {min_pixels} pixels in {attempts} draws of pose and press; lower --min-contact or widen --press")]
+    NoPressableObject { min_pixels: usize, attempts: usize },
     #[error("pair {index} (object '{object}'): no contact of at least {min_pixels} pixels in {attempts} draws; lower --min-contact or widen --press")]
     NoContact {
         index: usize,

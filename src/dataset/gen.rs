@@ -28,6 +28,9 @@ use super::{DatasetError, GenConfig, SplitName};
 use crate::objects::ObjectSet;
 use crate::sim::{PreparedObject, SimConfig, Simulator};
 
+/// Mixed into the dataset seed for the streams that check each object can make a contact (apart from the pairs').
+const PROBE_SALT: u64 = 0x7072_6f62_655f_6f62;
+
 /// What a generation run did.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct GenReport {
@@ -42,6 +45,9 @@ pub struct GenReport {
     pub counts: SplitCounts,
     /// True when the directory already held the finished dataset.
     pub already_complete: bool,
+    /// Objects left out of the draw: none of `max_attempts` draws of pose and press gave them a contact of the
+    /// minimum size ([`Sampler::can_contact`]).
+    pub excluded_objects: Vec<String>,
     /// Wall time of this run, seconds.
     pub elapsed_s: f64,
 }
@@ -88,8 +94,38 @@ pub fn generate(
             })
             .collect::<Result<_, _>>()?,
     };
+    let names: Vec<String> = set.entries().iter().map(|e| e.name.clone()).collect();
+    let objects: Vec<PreparedObject> = names
+        .par_iter()
+        .map(|n| Ok(PreparedObject::new(set.mesh(n)?)?))
+        .collect::<Result<_, DatasetError>>()?;
+    // Objects that cannot make a large enough contact are left out of the draw (weight 0) before planning, so
+    // that the plan, its splits and a resumed run agree, and one such object does not end a long run.
+    let probe_draw = split::ObjectDraw::uniform(objects.len());
+    let probe = Sampler::new(&sims, &objects, &names, &probe_draw, config);
+    let pressable: Vec<bool> = (0..objects.len())
+        .into_par_iter()
+        .map(|i| probe.can_contact(i, split::mix64(config.seed ^ PROBE_SALT ^ i as u64)))
+        .collect();
+    if !pressable.contains(&true) {
+        return Err(DatasetError::NoPressableObject {
+            min_pixels: probe.min_pixels,
+            attempts: config.max_attempts,
+        });
+    }
+    let excluded_objects: Vec<String> = names
+        .iter()
+        .zip(&pressable)
+        .filter(|(_, &ok)| !ok)
+        .map(|(n, _)| n.clone())
+        .collect();
     let object_splits: Vec<_> = set.entries().iter().map(|e| e.split).collect();
-    let weights: Vec<f64> = set.entries().iter().map(|e| e.weight).collect();
+    let weights: Vec<f64> = set
+        .entries()
+        .iter()
+        .zip(&pressable)
+        .map(|(e, &ok)| if ok { e.weight } else { 0.0 })
+        .collect();
     let draw = split::ObjectDraw::new(&weights);
     let plan = split::plan(
         config.seed,
@@ -106,6 +142,7 @@ pub fn generate(
         redraws: 0,
         counts: dataset.counts,
         already_complete: false,
+        excluded_objects,
         elapsed_s: 0.0,
     };
     if out.join(MANIFEST_FILE).exists() {
@@ -123,11 +160,6 @@ pub fn generate(
     let todo = keep_intact_chunks(out, config, &mut state, progress);
     report.kept_chunks = config.chunks() - todo.len();
 
-    let names: Vec<String> = set.entries().iter().map(|e| e.name.clone()).collect();
-    let objects: Vec<PreparedObject> = names
-        .par_iter()
-        .map(|n| Ok(PreparedObject::new(set.mesh(n)?)?))
-        .collect::<Result<_, DatasetError>>()?;
     let sampler = Sampler::new(&sims, &objects, &names, &draw, config);
     let state = simulate_and_write(out, &plan, &todo, &sampler, state, &mut report, progress)?;
 

@@ -11,7 +11,8 @@
 //! the signature's noise seed — so the pair seed reproduces the pair exactly.
 
 use glam::DVec3;
-use rand::Rng;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::shard::Record;
@@ -117,7 +118,6 @@ impl<'a> Sampler<'a> {
             .objects
             .get(object_index)
             .ok_or_else(|| DatasetError::Config("the object set is empty".into()))?;
-        let [p0, p1] = self.config.press_range;
         let level = match (&self.config.inflation, self.sims.len()) {
             (Some(v), n) if n > 1 => v.level(plan.seed).min(n - 1),
             _ => 0,
@@ -133,49 +133,32 @@ impl<'a> Sampler<'a> {
         let sim_cfg = sim.config();
         let spacing = sim.intrinsics().pixel_size_in(&sim_cfg.camera.native);
         for attempt in 1..=self.config.max_attempts {
-            let u: f64 = rng.random();
-            let v: f64 = rng.random();
-            let theta = rng.random::<f64>() * std::f64::consts::TAU;
-            let press = p0 + (p1 - p0) * rng.random::<f64>();
-            let noise_seed: u64 = rng.random();
-            let pose = Se2::new(
-                b.x[0] + (b.x[1] - b.x[0]) * u,
-                b.y[0] + (b.y[1] - b.y[0]) * v,
-                theta,
-            );
-            let sensor = sim.pressing_pose(object, 0.0, 0.0, 0.0, press);
-            let scene = Scene {
-                object: pose,
-                sensor,
-            };
-            let depth = sim.render_depth(object, &scene);
-            let (mask, target) = sim.contact(&depth);
-            let contact_pixels = mask.count_nonzero();
-            if contact_pixels < self.min_pixels {
+            let d = draw_contact(&mut rng, sim, b, object, self.config.press_range);
+            if d.contact_pixels < self.min_pixels {
                 continue;
             }
             let sig = signature::synthesize(
-                &depth,
+                &d.depth,
                 sim.nominal_depth(),
-                &mask,
+                &d.mask,
                 &sim_cfg.signature,
                 spacing,
-                noise_seed,
+                d.noise_seed,
             );
             let record = Record {
                 index: plan.index,
                 seed: plan.seed,
                 object: object_index,
                 split: plan.split,
-                pose,
-                sensor,
-                press,
-                contact_pixels,
+                pose: d.pose,
+                sensor: d.sensor,
+                press: d.press,
+                contact_pixels: d.contact_pixels,
                 imprint: sig.imprint,
-                target,
+                target: d.target,
                 signature: sig.signature,
                 reference: sig.reference,
-                mask,
+                mask: d.mask,
             };
             return Ok((record, attempt));
         }
@@ -185,6 +168,75 @@ impl<'a> Sampler<'a> {
             min_pixels: self.min_pixels,
             attempts: self.config.max_attempts,
         })
+    }
+
+    /// Whether object `object_index` makes a contact of at least the minimum size in any of `max_attempts` draws of
+    /// position, θ and press (the pairs' distribution, on the first simulator, from a stream seeded with `seed`).
+    /// Objects that cannot (a 2 mm screw, a needle tip at the top) are left out of a dataset's object draw up front,
+    /// instead of failing the run at the first pair that draws them.
+    pub fn can_contact(&self, object_index: usize, seed: u64) -> bool {
+        let (Some(object), Some(sim), Some(b)) = (
+            self.objects.get(object_index),
+            self.sims.first(),
+            self.offsets.first(),
+        ) else {
+            return false;
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..self.config.max_attempts).any(|_| {
+            draw_contact(&mut rng, sim, b, object, self.config.press_range).contact_pixels
+                >= self.min_pixels
+        })
+    }
+}
+
+/// One draw of a contact: the object's pose, the press and the signature's noise seed, rendered.
+struct Contact {
+    pose: Se2,
+    sensor: crate::sensor::SensorPose,
+    press: f64,
+    noise_seed: u64,
+    depth: crate::image::Image,
+    mask: crate::image::Image,
+    target: crate::image::Image,
+    contact_pixels: usize,
+}
+
+/// Draw `u, v` (position in `b`), `θ`, press and noise seed from `rng`, in that order, and render the contact.
+fn draw_contact(
+    rng: &mut ChaCha8Rng,
+    sim: &Simulator,
+    b: &OffsetBox,
+    object: &PreparedObject,
+    [p0, p1]: [f64; 2],
+) -> Contact {
+    let u: f64 = rng.random();
+    let v: f64 = rng.random();
+    let theta = rng.random::<f64>() * std::f64::consts::TAU;
+    let press = p0 + (p1 - p0) * rng.random::<f64>();
+    let noise_seed: u64 = rng.random();
+    let pose = Se2::new(
+        b.x[0] + (b.x[1] - b.x[0]) * u,
+        b.y[0] + (b.y[1] - b.y[0]) * v,
+        theta,
+    );
+    let sensor = sim.pressing_pose(object, 0.0, 0.0, 0.0, press);
+    let scene = Scene {
+        object: pose,
+        sensor,
+    };
+    let depth = sim.render_depth(object, &scene);
+    let (mask, target) = sim.contact(&depth);
+    let contact_pixels = mask.count_nonzero();
+    Contact {
+        pose,
+        sensor,
+        press,
+        noise_seed,
+        depth,
+        mask,
+        target,
+        contact_pixels,
     }
 }
 

@@ -207,6 +207,17 @@ fn gen(a: GenArgs) -> Result<()> {
     let report = pool.install(|| dataset::generate(&a.out, &sim, &set, &config, &|n| tick(&pb, n)));
     finish(&pb);
     let report = report?;
+    if !report.excluded_objects.is_empty() {
+        eprintln!(
+            "warning: {} of {} objects left out: none of {} draws of pose and press gave a contact of at least {:.1} % \
+             of the image (lower --min-contact or widen --press to keep them): {}",
+            report.excluded_objects.len(),
+            set.entries().len(),
+            config.max_attempts,
+            100.0 * config.min_contact_fraction,
+            report.excluded_objects.join(", ")
+        );
+    }
     println!(
         "{}",
         json!({
@@ -216,6 +227,7 @@ fn gen(a: GenArgs) -> Result<()> {
             "kept_chunks": report.kept_chunks,
             "redraws": report.redraws,
             "already_complete": report.already_complete,
+            "excluded_objects": report.excluded_objects,
             "counts": report.counts,
             "elapsed_s": report.elapsed_s,
             "pairs_per_s": report.generated as f64 / report.elapsed_s.max(1e-9),
