@@ -264,7 +264,7 @@ pub(super) fn unit_vector(rng: &mut ChaCha8Rng) -> DVec3 {
     DVec3::new(r * phi.cos(), r * phi.sin(), z)
 }
 
-fn mesh_error(shape: &'static str) -> impl Fn(crate::mesh::MeshError) -> ObjectError {
+pub(super) fn mesh_error(shape: &'static str) -> impl Fn(crate::mesh::MeshError) -> ObjectError {
     move |source| ObjectError::Mesh {
         name: shape.to_string(),
         source,

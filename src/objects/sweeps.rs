@@ -16,18 +16,11 @@ use glam::{Affine3A, DVec2, DVec3, Vec2, Vec3};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use super::procedural::{log_uniform, outline, uniform, unit_vector};
+use super::procedural::{log_uniform, mesh_error, outline, uniform, unit_vector};
 use super::shapes::sphere;
 use super::triangulate::{signed_area, simplify};
 use super::ObjectError;
 use crate::mesh::Mesh;
-
-fn mesh_error(shape: &'static str) -> impl Fn(crate::mesh::MeshError) -> ObjectError {
-    move |source| ObjectError::Mesh {
-        name: shape.to_string(),
-        source,
-    }
-}
 
 /// A regular `segments`-gon approximating a circle of `radius` about `centre`, counter-clockwise.
 pub fn circle(centre: DVec2, radius: f64, segments: usize) -> Vec<Vec2> {
