@@ -5,6 +5,10 @@
 //! run by `.ci/run`) reads back.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod dataset_common;
+
+use dataset_common::{gen_config, run, sim_config, small_set};
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -12,61 +16,9 @@ use tactile_derender::dataset::manifest::{MANIFEST_FILE, PROGRESS_FILE};
 use tactile_derender::dataset::npz::{self, ArrayData};
 use tactile_derender::dataset::shard::{sha256_hex, IMAGE_ARRAYS};
 use tactile_derender::dataset::{generate, Dataset, DatasetError, GenConfig, SplitName};
-use tactile_derender::objects::{ObjectSet, Split};
+use tactile_derender::objects::Split;
 use tactile_derender::sensor::Scene;
-use tactile_derender::sim::{PreparedObject, SimConfig, Simulator};
-
-/// A 5-object set (3 seen, 2 unseen) exported from the built-in library into `dir`.
-fn small_set(dir: &Path) -> ObjectSet {
-    ObjectSet::builtin().export(dir).unwrap();
-    let path = dir.join("objects.json");
-    let mut m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    let keep = [
-        "sphere_r20",
-        "cylinder_r12",
-        "cross_w12_s50",
-        "sphere_r15",
-        "cylinder_r15",
-    ];
-    let objects = m["objects"].as_array().unwrap().clone();
-    m["objects"] = objects
-        .into_iter()
-        .filter(|o| keep.contains(&o["name"].as_str().unwrap()))
-        .collect();
-    std::fs::write(&path, serde_json::to_string_pretty(&m).unwrap()).unwrap();
-    let set = ObjectSet::load_dir(dir).unwrap();
-    assert_eq!(
-        set.entries_in(Split::Unseen).count(),
-        2,
-        "sphere_r15 and cylinder_r15 are unseen"
-    );
-    set
-}
-
-fn sim_config() -> SimConfig {
-    let mut c = SimConfig::default();
-    c.camera.resolution = (32, 24);
-    c
-}
-
-fn gen_config(pairs: usize) -> GenConfig {
-    GenConfig {
-        pairs,
-        seed: 11,
-        shard_pairs: 16,
-        ..GenConfig::default()
-    }
-}
-
-fn run(out: &Path, set: &ObjectSet, cfg: &GenConfig, threads: usize) {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(|| generate(out, &sim_config(), set, cfg, &|_| {}))
-        .unwrap();
-}
+use tactile_derender::sim::{PreparedObject, Simulator};
 
 /// Every file under `dir`: relative path -> bytes.
 fn tree(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
@@ -514,71 +466,6 @@ fn resuming_with_another_configuration_is_refused() {
     assert!(matches!(err, DatasetError::NotADataset { .. }), "{err}");
 }
 
-#[test]
-fn impossible_rejection_rule_fails_saying_what_to_change() {
-    let tmp = tempfile::tempdir().unwrap();
-    let set = small_set(&tmp.path().join("set"));
-    let cfg = GenConfig {
-        min_contact_fraction: 0.99,
-        max_attempts: 3,
-        ..gen_config(4)
-    };
-    let err = generate(&tmp.path().join("d"), &sim_config(), &set, &cfg, &|_| {}).unwrap_err();
-    assert!(
-        matches!(err, DatasetError::NoPressableObject { attempts: 3, .. }),
-        "{err}"
-    );
-    assert!(err.to_string().contains("lower --min-contact"), "{err}");
-}
-
-#[test]
-fn objects_that_cannot_make_a_contact_are_left_out_and_named() {
-    // A 2 mm copy of a sphere covers a few pixels at most: below the 1 % (41 px) rule whatever the press.
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("set");
-    small_set(&dir);
-    let path = dir.join("objects.json");
-    let mut m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    let objects = m["objects"].as_array_mut().unwrap();
-    let mut speck = objects
-        .iter()
-        .find(|o| o["name"] == "sphere_r20")
-        .unwrap()
-        .clone();
-    speck["name"] = "speck".into();
-    speck["scale_to_m"] = (speck["scale_to_m"].as_f64().unwrap() * 0.05).into();
-    objects.push(speck);
-    std::fs::write(&path, serde_json::to_string_pretty(&m).unwrap()).unwrap();
-    let set = ObjectSet::load_dir(&dir).unwrap();
-    let out = tmp.path().join("d");
-    let cfg = GenConfig {
-        max_attempts: 20,
-        ..gen_config(40)
-    };
-    let report = generate(&out, &sim_config(), &set, &cfg, &|_| {}).unwrap();
-    assert_eq!(report.excluded_objects, vec!["speck".to_string()]);
-    let ds = Dataset::open(&out).unwrap();
-    let mut pairs = 0;
-    for split in [
-        SplitName::Train,
-        SplitName::UnseenPoses,
-        SplitName::UnseenObjects,
-    ] {
-        for i in 0..ds.len(split) {
-            let pair = ds.pair(split, i).unwrap();
-            assert_ne!(pair.meta.object, "speck");
-            assert!(pair.meta.contact_pixels >= 41);
-            pairs += 1;
-        }
-    }
-    assert_eq!(pairs, 40);
-    // Resuming the finished run plans the same pairs (the exclusion is part of the plan).
-    let again = generate(&out, &sim_config(), &set, &cfg, &|_| {}).unwrap();
-    assert!(again.already_complete);
-    assert_eq!(again.excluded_objects, report.excluded_objects);
-}
-
 /// Writes `<CARGO_TARGET_TMPDIR>/tnd-dataset-numpy/{dataset, expected.json}` for `tests/dataset_numpy_check.py`:
 /// the expected values are the re-simulated noise-free target and mask of two pairs plus each pair's stored
 /// metadata, so numpy's view of the shards is compared with values computed without the npz reader.
@@ -727,39 +614,4 @@ fn cli_stats_and_show_describe_the_dataset() {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("out of range"), "{err}");
-}
-
-#[test]
-fn cli_objects_generate_picks_kinds_and_names_a_bad_one() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("objects");
-    let tnd = env!("CARGO_BIN_EXE_tnd");
-    let o = std::process::Command::new(tnd)
-        .args(["-q", "objects", "generate", "--count", "12", "--seed", "3"])
-        .args(["--builtin-share", "0", "--kinds", "plate,limbs"])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let set = tactile_derender::objects::ObjectSet::open(dir.to_str().unwrap()).unwrap();
-    assert_eq!(set.entries().len(), 12);
-    for e in set.entries() {
-        assert!(
-            e.name.starts_with("proc_plate_") || e.name.starts_with("proc_limbs_"),
-            "{}",
-            e.name
-        );
-        let (lo, hi) = set.mesh(&e.name).unwrap().aabb();
-        assert!(lo.z.abs() < 1e-6 && (hi - lo).max_element() <= 0.065 + 1e-6);
-    }
-    let o = std::process::Command::new(tnd)
-        .args(["objects", "generate", "--kinds", "plate,bogus"])
-        .arg(tmp.path().join("other"))
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        !o.status.success() && err.contains("unknown kind 'bogus'"),
-        "{err}"
-    );
 }

@@ -91,17 +91,7 @@ impl Kind {
 
     /// The nine kinds of the first procedural sets (2026-11-24 to 26): with these, `(seed, i)` gives the objects it
     /// gave then.
-    pub const V1: [Kind; 9] = [
-        Kind::Superquadric,
-        Kind::Polytope,
-        Kind::Blob,
-        Kind::Rock,
-        Kind::Extrusion,
-        Kind::LyingExtrusion,
-        Kind::Union,
-        Kind::Fin,
-        Kind::Bumps,
-    ];
+    pub const V1: &'static [Kind] = Kind::ALL.split_at(9).0;
 
     /// All kinds with their relative frequency.
     pub const WEIGHTED: [(Kind, u32); 11] = [
@@ -485,13 +475,7 @@ fn box_mesh(size: DVec3) -> Result<Mesh, ObjectError> {
 }
 
 fn cylinder_upright(radius: f64, height: f64) -> Result<Mesh, ObjectError> {
-    let circle: Vec<Vec2> = (0..48)
-        .map(|k| {
-            let a = TAU * f64::from(k) / 48.0;
-            Vec2::new((radius * a.cos()) as f32, (radius * a.sin()) as f32)
-        })
-        .collect();
-    extrude_z(&circle, height)
+    extrude_z(&sweeps::circle(glam::DVec2::ZERO, radius, 48), height)
 }
 
 /// A random primitive of size about `s`, centred on the origin.
