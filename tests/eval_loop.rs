@@ -206,9 +206,10 @@ fn dataset_split_source_feeds_the_loop() {
 fn the_diffusion_model_is_a_generator() {
     use glam::DAffine3;
     use tactile_derender::image::Image;
-    use tactile_derender::metrics::evaluate::{EvalPair, Generator};
+    use tactile_derender::metrics::evaluate::{EvalContext, EvalPair, Generator};
     use tactile_derender::metrics::model_generator::ModelGenerator;
-    use tactile_derender::model::{DiffusionModel, SamplerKind};
+    use tactile_derender::model::{DiffusionModel, GuidanceConfig, SamplerKind};
+    use tactile_derender::pose::signature_check::SignatureModel;
     // The model team's tiny 8x8 reference checkpoint (untrained weights): this checks the wiring, not the quality.
     let path = std::path::Path::new("tests/fixtures/unet_small/unet_ref.safetensors");
     let sampler = SamplerKind::Ddim {
@@ -219,6 +220,14 @@ fn the_diffusion_model_is_a_generator() {
     let generator = ModelGenerator {
         model: DiffusionModel::load(path).unwrap(),
         sampler,
+        guidance: GuidanceConfig::default(),
+    };
+    // A context without the sensor's cloak: nothing to guide with, so the model's own samples.
+    let ctx = EvalContext {
+        intrinsics: SimConfig::default().camera.intrinsics().resized(8, 8),
+        membrane: Image::filled(8, 8, 0.09),
+        objects: ObjectSet::builtin(),
+        signature_model: None,
     };
     let imprint = Image::from_vec(8, 8, (0..64).map(|i| 0.0001 * i as f32).collect()).unwrap();
     let pair = EvalPair {
@@ -230,7 +239,7 @@ fn the_diffusion_model_is_a_generator() {
         signature: Image::filled(8, 8, 0.0),
         imprint: imprint.clone(),
     };
-    let a = generator.generate(&pair, 2, 9).unwrap();
+    let a = generator.generate(&pair, &ctx, 2, 9).unwrap();
     assert_eq!(a.len(), 2);
     assert!(a
         .iter()
@@ -247,8 +256,37 @@ fn the_diffusion_model_is_a_generator() {
         imprint: Image::filled(16, 16, 0.0),
         ..pair
     };
-    let err = generator.generate(&big, 1, 0).unwrap_err().to_string();
+    let err = generator
+        .generate(&big, &ctx, 1, 0)
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("unet_ref.safetensors"), "{err}");
+    // With the cloak known the samples are guided towards the imprint: reproducible, and not the unguided ones.
+    let guided_ctx = EvalContext {
+        signature_model: Some(SignatureModel {
+            shadow_px: 21.0,
+            spacing: (2.7, 2.2),
+            noise_std: 0.00138,
+        }),
+        ..ctx
+    };
+    let pair = EvalPair {
+        imprint: Image::from_vec(8, 8, (0..64).map(|i| 0.0002 * (i % 8) as f32).collect()).unwrap(),
+        signature: Image::filled(8, 8, 0.085),
+        ..big
+    };
+    let g1 = generator.generate(&pair, &guided_ctx, 2, 9).unwrap();
+    assert_eq!(g1, generator.generate(&pair, &guided_ctx, 2, 9).unwrap());
+    let unguided = ModelGenerator {
+        model: DiffusionModel::load(path).unwrap(),
+        sampler,
+        guidance: GuidanceConfig {
+            enabled: false,
+            ..GuidanceConfig::default()
+        },
+    };
+    assert_ne!(g1, unguided.generate(&pair, &guided_ctx, 2, 9).unwrap());
+    assert!(generator.name().contains("imprint-guided"));
 }
 
 /// The true X0 with every contact depth moved by `offset_m`: what a model trained on the nominal membrane
@@ -264,6 +302,7 @@ impl tactile_derender::metrics::evaluate::Generator for OffsetTruth {
     fn generate(
         &self,
         pair: &tactile_derender::metrics::evaluate::EvalPair,
+        _ctx: &tactile_derender::metrics::evaluate::EvalContext,
         n: usize,
         _seed: u64,
     ) -> Result<Vec<tactile_derender::image::Image>, EvalError> {
@@ -344,6 +383,7 @@ impl tactile_derender::metrics::evaluate::Generator for CornerContact {
     fn generate(
         &self,
         pair: &tactile_derender::metrics::evaluate::EvalPair,
+        _ctx: &tactile_derender::metrics::evaluate::EvalContext,
         n: usize,
         _seed: u64,
     ) -> Result<Vec<tactile_derender::image::Image>, EvalError> {

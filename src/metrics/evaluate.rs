@@ -101,11 +101,7 @@ impl EvalContext {
             intrinsics: *sim.intrinsics(),
             membrane: sim.nominal_depth().clone(),
             objects,
-            signature_model: Some(SignatureModel {
-                shadow_px: sim.config().signature.shadow_px,
-                spacing: sim.intrinsics().pixel_size_in(&sim.config().camera.native),
-                noise_std: sim.config().signature.noise_std,
-            }),
+            signature_model: Some(SignatureModel::of_simulator(sim)),
         }
     }
 }
@@ -128,8 +124,14 @@ pub trait PairSource: Sync {
 pub trait Generator: Sync {
     /// Name for reports.
     fn name(&self) -> String;
-    /// `n` samples of X̂0 (metres) for `pair`, reproducible from `seed`.
-    fn generate(&self, pair: &EvalPair, n: usize, seed: u64) -> Result<Vec<Image>, EvalError>;
+    /// `n` samples of X̂0 (metres) for `pair` of a source whose sensor is `ctx`, reproducible from `seed`.
+    fn generate(
+        &self,
+        pair: &EvalPair,
+        ctx: &EvalContext,
+        n: usize,
+        seed: u64,
+    ) -> Result<Vec<Image>, EvalError>;
 }
 
 /// The ideal generator: returns the true X0 (tests the rest of the pipeline; Table I becomes trivially perfect).
@@ -139,7 +141,13 @@ impl Generator for GroundTruthGenerator {
     fn name(&self) -> String {
         "ground-truth".into()
     }
-    fn generate(&self, pair: &EvalPair, n: usize, _seed: u64) -> Result<Vec<Image>, EvalError> {
+    fn generate(
+        &self,
+        pair: &EvalPair,
+        _ctx: &EvalContext,
+        n: usize,
+        _seed: u64,
+    ) -> Result<Vec<Image>, EvalError> {
         Ok(vec![pair.target.clone(); n])
     }
 }
@@ -545,7 +553,7 @@ impl Evaluator {
         };
         let ctx = source.context();
         let n = self.config.pose_samples.max(1);
-        let samples = generator.generate(&pair, n, pair_seed).map_err(fail)?;
+        let samples = generator.generate(&pair, ctx, n, pair_seed).map_err(fail)?;
         let first = samples
             .first()
             .ok_or_else(|| fail(EvalError::Generator("returned no sample".into())))?;

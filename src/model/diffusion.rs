@@ -11,6 +11,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::checkpoint::{assign, build, locate, ModelVars};
 use super::config::{TactileConfig, UNet2DConfig};
+use super::guidance::ImprintGuidance;
 use super::sampler::{self, SamplerKind};
 use super::schedule::NoiseSchedule;
 use super::unet::UNet2DModel;
@@ -100,6 +101,20 @@ impl DiffusionModel {
         seed: u64,
         progress: &mut dyn FnMut(usize, usize) -> bool,
     ) -> Result<Vec<Image>, ModelError> {
+        self.sample_guided(imprint, None, n, kind, seed, progress)
+    }
+
+    /// [`Self::sample`], with each sample's x̂0 corrected towards the measured imprint by `guidance` at the steps
+    /// it guides ([`super::guidance`]); `None` samples as [`Self::sample`] does.
+    pub fn sample_guided(
+        &self,
+        imprint: &Image,
+        guidance: Option<&ImprintGuidance>,
+        n: usize,
+        kind: SamplerKind,
+        seed: u64,
+        progress: &mut dyn FnMut(usize, usize) -> bool,
+    ) -> Result<Vec<Image>, ModelError> {
         let (w, h) = self.resolution();
         if imprint.width != w || imprint.height != h || imprint.data.len() != w * h {
             return Err(ModelError::Input(format!(
@@ -124,6 +139,12 @@ impl DiffusionModel {
             .collect();
         let c_out = self.config.out_channels;
         let c_cond = self.config.in_channels - c_out;
+        if guidance.is_some() && c_out != 1 {
+            return Err(ModelError::Input(format!(
+                "imprint guidance needs a model with one output channel, {} has {c_out}",
+                self.source.display()
+            )));
+        }
         let device = self.device().clone();
         let cond =
             Tensor::from_vec(cond, (1, 1, h, w), &device)?.broadcast_as((n, c_cond, h, w))?;
@@ -144,8 +165,12 @@ impl DiffusionModel {
                 .forward(&input, &[t as f32])?
                 .flatten_all()?
                 .to_vec1()?;
+            let (mut x0, eps) = sampler.predict(&out, t, &x)?;
+            if let Some(g) = guidance.filter(|g| g.guides(t, norm.num_train_timesteps)) {
+                g.correct(&mut x0, norm)?;
+            }
             let noise = sampler.needs_noise(t).then(|| normal(&mut rng));
-            x = sampler.step(&out, t, &x, noise.as_deref())?;
+            x = sampler.advance(&x0, &eps, t, &x, noise.as_deref())?;
             if !progress(i + 1, total) {
                 return Err(ModelError::Cancelled);
             }

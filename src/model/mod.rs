@@ -19,6 +19,7 @@ pub mod diffusers_folder;
 pub mod diffusion;
 pub mod embeddings;
 pub mod group_norm;
+pub mod guidance;
 pub mod init;
 pub mod kernels;
 pub mod normalise;
@@ -48,6 +49,7 @@ pub(crate) fn contiguous_f32<'a>(
 
 pub use config::{PredictionType, TactileConfig, UNet2DConfig};
 pub use diffusion::DiffusionModel;
+pub use guidance::{Cloak, GuidanceConfig, ImprintGuidance};
 pub use normalise::Normalisation;
 pub use sampler::{SamplerConfig, SamplerKind, SamplerName, TimestepSpacing};
 pub use schedule::NoiseSchedule;

@@ -8,8 +8,10 @@ use serde::{Deserialize, Serialize};
 
 use super::{PipelineError, Progress};
 use crate::image::Image;
-use crate::model::{DiffusionModel, ModelError, SamplerConfig};
+use crate::model::{DiffusionModel, GuidanceConfig, ImprintGuidance, ModelError, SamplerConfig};
 use crate::pose::from_depth::{consensus_depth, contact_probability};
+use crate::pose::signature_check::SignatureModel;
+use crate::sim::Simulator;
 
 /// Samples drawn per imprint unless asked otherwise: enough for the contact probability and the multi-sample pose
 /// (the paper's uncertainty KDEs use 50), few enough to stay interactive on a laptop CPU.
@@ -39,6 +41,9 @@ pub struct DerenderConfig {
     /// Device that runs the model: cpu, cuda, cuda:N or metal (GPU builds: `--features cuda` or `metal`).
     #[arg(long, default_value_t = default_device())]
     pub device: String,
+    /// Imprint guidance ([`crate::model::guidance`]); applied where the sensor is known.
+    #[command(flatten)]
+    pub guidance: GuidanceConfig,
 }
 
 fn default_device() -> String {
@@ -52,6 +57,7 @@ impl Default for DerenderConfig {
             sampler: SamplerConfig::default(),
             seed: 0,
             device: default_device(),
+            guidance: GuidanceConfig::default(),
         }
     }
 }
@@ -63,6 +69,7 @@ impl DerenderConfig {
             .validate(train_steps)
             .map_err(PipelineError::Settings)?;
         crate::model::device::check_device_name(&self.device).map_err(PipelineError::Settings)?;
+        self.guidance.validate().map_err(PipelineError::Settings)?;
         if !(1..=MAX_SAMPLES).contains(&self.samples) {
             return Err(PipelineError::Settings(format!(
                 "number of samples must be 1..={MAX_SAMPLES}, got {}",
@@ -92,10 +99,12 @@ pub struct Derendered {
 
 /// Draw `config.samples` samples of X0 for `imprint` (metres, the model's resolution) and summarise them;
 /// `consensus_probability` is the share of samples a consensus pixel needs
-/// ([`crate::metrics::evaluate::EvalConfig::consensus_probability`]).
+/// ([`crate::metrics::evaluate::EvalConfig::consensus_probability`]). With `guidance` (for this imprint, e.g.
+/// [`imprint_guidance`]) the samples are guided towards it.
 pub fn derender(
     model: &DiffusionModel,
     imprint: &Image,
+    guidance: Option<&ImprintGuidance>,
     config: &DerenderConfig,
     consensus_probability: f64,
     progress: Progress<'_>,
@@ -113,8 +122,9 @@ pub fn derender(
     }
     let t0 = Instant::now();
     let samples = model
-        .sample(
+        .sample_guided(
             imprint,
+            guidance,
             config.samples,
             config.sampler.sampler_kind(),
             config.seed,
@@ -135,6 +145,23 @@ pub fn derender(
         std,
         seconds,
     })
+}
+
+/// The guidance `config` asks for, towards `imprint` (metres) measured on `sim`'s sensor: on the membrane the
+/// measurement's reference frame shows when its signature S is known, else on the nominal membrane. `None` when
+/// `config.guidance` is off.
+pub fn imprint_guidance(
+    config: &DerenderConfig,
+    sim: &Simulator,
+    imprint: &Image,
+    signature: Option<&Image>,
+) -> Result<Option<ImprintGuidance>, PipelineError> {
+    Ok(SignatureModel::of_simulator(sim).guidance(
+        &config.guidance,
+        sim.nominal_depth(),
+        imprint,
+        signature,
+    )?)
 }
 
 /// Per-pixel mean and population standard deviation of equally sized images (`None` for an empty list or images

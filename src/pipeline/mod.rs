@@ -28,7 +28,7 @@ pub mod derender;
 pub mod object;
 pub mod pose;
 
-pub use derender::{derender, mean_std, DerenderConfig, Derendered};
+pub use derender::{derender, imprint_guidance, mean_std, DerenderConfig, Derendered};
 pub use object::{LoadedObject, ObjectSpec};
 pub use pose::{estimate_pose, write_fit_figure, write_pose_geometry, PoseEstimate, PoseInput};
 

@@ -97,6 +97,48 @@ pub struct SignatureModel {
     pub noise_std: f64,
 }
 
+impl SignatureModel {
+    /// The signature model of `sim`'s sensor.
+    pub fn of_simulator(sim: &crate::sim::Simulator) -> Self {
+        Self {
+            shadow_px: sim.config().signature.shadow_px,
+            spacing: sim.intrinsics().pixel_size_in(&sim.config().camera.native),
+            noise_std: sim.config().signature.noise_std,
+        }
+    }
+
+    /// Imprint guidance ([`crate::model::guidance`]) towards `imprint` Y on this sensor, whose undeformed membrane
+    /// is `nominal`: on the membrane the measurement's own reference frame R = S + Y shows ([`measured_membrane`])
+    /// when the signature S is known, else on `nominal`. `None` when `config` is off.
+    pub fn guidance(
+        &self,
+        config: &crate::model::GuidanceConfig,
+        nominal: &Image,
+        imprint: &Image,
+        signature: Option<&Image>,
+    ) -> Result<Option<crate::model::ImprintGuidance>, PoseError> {
+        if !config.active() {
+            return Ok(None);
+        }
+        let membrane = match signature {
+            Some(s) => measured_membrane(
+                nominal,
+                s,
+                imprint,
+                SignatureCheckConfig::default().reference_radius_px,
+            )?,
+            None => nominal.clone(),
+        };
+        let cloak = crate::model::Cloak {
+            width_native_px: self.shadow_px,
+            spacing: self.spacing,
+        };
+        crate::model::ImprintGuidance::new(*config, imprint, &membrane, cloak)
+            .map(Some)
+            .map_err(|e| PoseError::Config(crate::error::render(&e)))
+    }
+}
+
 /// One signature to explain: the camera, the undeformed membrane and the measurement.
 pub struct SignatureCheck<'a> {
     /// The object's ray caster, object frame (resting pose).

@@ -235,6 +235,8 @@ pub struct RunResult {
     pub scores: Vec<DepthMetrics>,
     /// Sampler wall time, seconds.
     pub seconds: f64,
+    /// Whether the samples were guided towards the imprint (asked for, and the input's sensor known).
+    pub guided: bool,
     /// The settings it ran with.
     pub config: DerenderConfig,
 }
@@ -254,9 +256,29 @@ pub fn run(
             &tactile_derender::model::device::open_device(&req.config.device)?,
         )?),
     };
+    // Guided towards the imprint where the sensor is known (scenes, dataset pairs, recordings).
+    let guidance = match &input.pose {
+        Some(pose) if req.config.guidance.active() => {
+            let sim = tactile_derender::sim::Simulator::new(pose.sim.clone())?;
+            let e = sim.nominal_depth();
+            if (e.width, e.height) == (input.imprint.width, input.imprint.height) {
+                pipeline::imprint_guidance(
+                    &req.config,
+                    &sim,
+                    &input.imprint,
+                    Some(&pose.signature),
+                )?
+            } else {
+                None
+            }
+        }
+        _ => None,
+    };
+    let guided = guidance.is_some();
     let out = pipeline::derender(
         &model,
         &input.imprint,
+        guidance.as_ref(),
         &req.config,
         EvalConfig::default().consensus_probability,
         &mut |done, total| {
@@ -283,6 +305,7 @@ pub fn run(
         consensus: out.consensus,
         scores,
         seconds: out.seconds,
+        guided,
         config: req.config,
     })
 }

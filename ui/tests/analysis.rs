@@ -194,7 +194,7 @@ fn de_rendering_a_dataset_pair_with_a_tiny_model_matches_the_core_sampler() {
     d.config.samples = 3;
     d.config.seed = 7;
     h.state_mut()
-        .apply(tnd_workbench::command::Command::SetDerender(d));
+        .apply(tnd_workbench::command::Command::SetDerender(d.clone()));
     h.run_ok();
     h.get_by_label("Run de-rendering").click();
     h.run_ok();
@@ -202,11 +202,24 @@ fn de_rendering_a_dataset_pair_with_a_tiny_model_matches_the_core_sampler() {
     assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
     let r = h.state().analysis.derender.result.as_ref().unwrap();
 
-    // The same samples as the core's sampler with the same model, input, sampler and seed.
+    // The same samples as the core's sampler with the same model, input, sampler and seed, guided towards the
+    // pair's imprint on the dataset's sensor (a dataset pair's sensor is known).
+    assert!(r.guided);
+    let ds = Dataset::open(&data).unwrap();
+    let sim = tactile_derender::sim::Simulator::new(ds.sim_config().clone()).unwrap();
+    let guidance = tactile_derender::pipeline::imprint_guidance(
+        &d.config,
+        &sim,
+        &pair.imprint,
+        Some(&pair.signature),
+    )
+    .unwrap();
+    assert!(guidance.is_some());
     let model = DiffusionModel::load(&model_path).unwrap();
     let want = model
-        .sample(
+        .sample_guided(
             &pair.imprint,
+            guidance.as_ref(),
             3,
             SamplerKind::Ddim {
                 steps: 4,

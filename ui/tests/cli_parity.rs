@@ -101,7 +101,14 @@ fn workbench_jobs_and_cli_commands_give_bit_identical_samples_and_poses() {
     let sample_dir = dir.path().join("sample");
     let mut args: Vec<String> = vec!["sample".into()];
     args.extend(common.iter().cloned());
-    args.extend(["--out".into(), sample_dir.display().to_string()]);
+    // With the signature, guided towards the imprint as the workbench's run was.
+    assert!(run.guided);
+    args.extend([
+        "--signature".into(),
+        signature.display().to_string(),
+        "--out".into(),
+        sample_dir.display().to_string(),
+    ]);
     tnd(&args.iter().map(String::as_str).collect::<Vec<_>>());
     let cli_samples = npy::read(&sample_dir.join("samples.npy")).unwrap();
     let wb: Vec<u32> = run

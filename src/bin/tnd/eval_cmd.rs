@@ -18,7 +18,7 @@ use tactile_derender::metrics::model_generator::ModelGenerator;
 use tactile_derender::metrics::paper_table::{paper_tables, PaperEntry};
 use tactile_derender::metrics::sources::DatasetSource;
 use tactile_derender::metrics::MeanStd;
-use tactile_derender::model::{DiffusionModel, SamplerConfig};
+use tactile_derender::model::{DiffusionModel, GuidanceConfig, SamplerConfig};
 use tactile_derender::pose::signature_check::SignatureCheckConfig;
 use tactile_derender::pose::threshold_contact;
 use tactile_derender::uncertainty::analysis::{analyse, Signature};
@@ -50,6 +50,8 @@ pub struct EvalArgs {
     pub breakdown: bool,
     #[command(flatten)]
     pub sampler: SamplerConfig,
+    #[command(flatten)]
+    pub guidance: GuidanceConfig,
     /// Seed of the sampler and the registration starts.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -104,15 +106,21 @@ pub struct EvalArgs {
 }
 
 /// The generator named by `--model`.
-pub fn generator(model: &str, sampler: &SamplerConfig) -> Result<Box<dyn Generator>> {
+pub fn generator(
+    model: &str,
+    sampler: &SamplerConfig,
+    guidance: &GuidanceConfig,
+) -> Result<Box<dyn Generator>> {
     if model == "ground-truth" {
         return Ok(Box::new(GroundTruthGenerator));
     }
     sampler.validate(None).map_err(anyhow::Error::msg)?;
+    guidance.validate().map_err(anyhow::Error::msg)?;
     let model = DiffusionModel::load(Path::new(model))?;
     Ok(Box::new(ModelGenerator {
         model,
         sampler: sampler.sampler_kind(),
+        guidance: *guidance,
     }))
 }
 
@@ -132,7 +140,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         .data
         .as_deref()
         .ok_or_else(|| anyhow!("--data DIR is needed (or --tables-from FILE)"))?;
-    let gen = generator(&a.model, &a.sampler)?;
+    let gen = generator(&a.model, &a.sampler, &a.guidance)?;
     let dataset = Dataset::open(data)?;
     let mut paper = Vec::new();
     let evaluator = Evaluator::new(EvalConfig {
@@ -534,7 +542,7 @@ fn uncertainty_plots(
     let ctx = source.context();
     for i in 0..a.report_pairs.min(source.len()) {
         let pair = source.pair(i)?;
-        let samples = gen.generate(&pair, a.samples, a.seed.wrapping_add(i as u64))?;
+        let samples = gen.generate(&pair, ctx, a.samples, a.seed.wrapping_add(i as u64))?;
         let (samples, _) = evaluator.anchor(&samples, Some(&pair.signature), &pair.imprint)?;
         let base = threshold_contact(&pair.signature, &pair.imprint, &evaluator.config.baseline);
         let object = evaluator.object(&ctx.objects, &pair.object)?;

@@ -44,7 +44,7 @@ enum Command {
     /// Diffusion model checkpoints: verify against a diffusers reference.
     Model(model_cmd::ModelArgs),
     /// De-render: draw N samples of the in-contact depth for one imprint (DDPM or DDIM).
-    Sample(sample_cmd::SampleArgs),
+    Sample(Box<sample_cmd::SampleArgs>),
     /// Train (or resume, or fine-tune) the conditional DDPM on a dataset.
     Train(Box<train_cmd::TrainArgs>),
     /// Real sensor recordings (MCAP, depth-frame folders): topics, reference, contact per frame; simulated ones.
@@ -77,7 +77,7 @@ fn main() -> std::process::ExitCode {
         Command::Eval(a) => eval_cmd::run(*a),
         Command::Pose(a) => pose_cmd::run(*a),
         Command::Model(a) => model_cmd::run(a),
-        Command::Sample(a) => sample_cmd::run(a),
+        Command::Sample(a) => sample_cmd::run(*a),
         Command::Recording(a) => recording_cmd::run(a),
         Command::Train(a) => train_cmd::run(*a),
     };

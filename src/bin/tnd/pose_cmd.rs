@@ -74,7 +74,8 @@ pub struct PoseArgs {
     pub rerun: crate::rerun_out::RerunArgs,
 }
 
-fn read(path: &Path, want: (usize, usize)) -> Result<Image> {
+/// An image file (.npy, metres) the sensor must render at `want` pixels.
+pub(crate) fn read(path: &Path, want: (usize, usize)) -> Result<Image> {
     let img = npy::read_metres_image(path)?;
     if (img.width, img.height) != want {
         bail!(
@@ -130,17 +131,24 @@ pub fn run(a: PoseArgs) -> Result<()> {
     } else {
         let device = tactile_derender::model::device::open_device(&a.derender.device)?;
         let model = DiffusionModel::load_on(Path::new(&a.model), &device)?;
+        let guidance = pipeline::imprint_guidance(&a.derender, &sim, &imprint, signature.as_ref())?;
         let mut bar = progress::bar("sampling", " steps", 0);
         let out = pipeline::derender(
             &model,
             &imprint,
+            guidance.as_ref(),
             &a.derender,
             eval.consensus_probability,
             &mut progress::callback(&mut bar),
         )?;
         progress::finish(&mut bar);
+        let guided = if guidance.is_some() {
+            ", imprint-guided"
+        } else {
+            ""
+        };
         (
-            format!("model {}", model.source().display()),
+            format!("model {}{guided}", model.source().display()),
             out.samples,
             Some(out.contact_probability),
         )

@@ -24,6 +24,12 @@ pub struct SampleArgs {
     /// Imprint Y as a 2-D .npy array in metres, at the model's resolution.
     #[arg(long)]
     pub imprint: PathBuf,
+    /// The signature S (.npy, metres) measured with the imprint: with it the samples are guided towards the imprint
+    /// on the sensor below (its membrane and tactile-shadow cloak); without it they are not.
+    #[arg(long)]
+    pub signature: Option<PathBuf>,
+    #[command(flatten)]
+    pub sensor: super::args::SensorArgs,
     #[command(flatten)]
     pub derender: DerenderConfig,
     /// Size of the grid figure (grid.svg, grid.png), pixels WxH.
@@ -43,9 +49,38 @@ pub fn run(a: SampleArgs) -> Result<()> {
     let imprint = npy::read_metres_image(&a.imprint)?;
     let rrd = a.rerun.open("tnd sample")?;
     let mut bar = super::progress::bar("sampling", " steps", 0);
+    // Imprint guidance needs the membrane the imprint was measured against: the signature says where it was.
+    let guidance = match &a.signature {
+        Some(path) => {
+            let sim = tactile_derender::sim::Simulator::new(a.sensor.sim_config()?)?;
+            let res = (sim.intrinsics().width, sim.intrinsics().height);
+            let signature = super::pose_cmd::read(path, res)?;
+            if (imprint.width, imprint.height) != res {
+                anyhow::bail!(
+                    "{}: image is {}x{}, the sensor renders {}x{}",
+                    a.imprint.display(),
+                    imprint.width,
+                    imprint.height,
+                    res.0,
+                    res.1
+                );
+            }
+            pipeline::imprint_guidance(&a.derender, &sim, &imprint, Some(&signature))?
+        }
+        None => {
+            if a.derender.guidance.active() {
+                eprintln!(
+                    "note: no --signature, so no imprint guidance (it needs the membrane the imprint was measured against)"
+                );
+            }
+            None
+        }
+    };
+    let guided = guidance.is_some();
     let out = pipeline::derender(
         &model,
         &imprint,
+        guidance.as_ref(),
         &a.derender,
         EvalConfig::default().consensus_probability,
         &mut super::progress::callback(&mut bar),
@@ -95,6 +130,7 @@ pub fn run(a: SampleArgs) -> Result<()> {
     println!(
         "{}",
         json!({"samples": samples.len(), "sampler": format!("{kind:?}"), "seed": a.derender.seed, "out": a.out,
+            "imprint_guided": guided,
             "seconds": out.seconds, "rerun": rerun,
             "mean_std_m": out.std.data.iter().map(|&v| f64::from(v)).sum::<f64>() / out.std.data.len() as f64})
     );

@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use super::{check_lengths, Sampler, TimestepSpacing};
+use super::{check_lengths, predict_x0_eps, Sampler, TimestepSpacing};
 use crate::model::config::PredictionType;
 use crate::model::schedule::NoiseSchedule;
 use crate::model::ModelError;
@@ -76,29 +76,37 @@ impl Sampler for Ddim {
         self.eta > 0.0
     }
 
-    fn step(
+    fn predict(
         &self,
         model_output: &[f32],
         t: usize,
         x: &[f32],
+    ) -> Result<(Vec<f32>, Vec<f32>), ModelError> {
+        predict_x0_eps(&self.schedule, self.prediction, model_output, t, x)
+    }
+
+    fn advance(
+        &self,
+        x0: &[f32],
+        eps: &[f32],
+        t: usize,
+        x: &[f32],
         noise: Option<&[f32]>,
     ) -> Result<Vec<f32>, ModelError> {
-        check_lengths(model_output, x, noise)?;
+        check_lengths(x0, x, noise)?;
+        check_lengths(eps, x, None)?;
         let a_t = self.schedule.alpha_bar(t as i64);
         let a_prev = self.schedule.alpha_bar(self.prev_timestep(t));
         let beta_t = 1.0 - a_t;
         let beta_prev = 1.0 - a_prev;
         let variance = (beta_prev / beta_t) * (1.0 - a_t / a_prev);
         let std = self.eta * variance.sqrt();
-        let (sb, sa, sa_prev) = (beta_t.sqrt(), a_t.sqrt(), a_prev.sqrt());
+        let sa_prev = a_prev.sqrt();
         let c_dir = (1.0 - a_prev - std * std).sqrt();
-        let mut out: Vec<f32> = model_output
+        let mut out: Vec<f32> = x0
             .iter()
-            .zip(x)
-            .map(|(&o, &xt)| {
-                let (x0, e) = self.prediction.x0_eps(o, xt, sa, sb);
-                sa_prev * x0.clamp(-1.0, 1.0) + c_dir * e
-            })
+            .zip(eps)
+            .map(|(&x0, &e)| sa_prev * x0 + c_dir * e)
             .collect();
         if self.eta > 0.0 {
             let noise = noise

@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use super::{check_lengths, Sampler};
+use super::{check_lengths, predict_x0_eps, Sampler};
 use crate::model::config::PredictionType;
 use crate::model::schedule::NoiseSchedule;
 use crate::model::ModelError;
@@ -44,30 +44,37 @@ impl Sampler for Ddpm {
         t > 0
     }
 
-    fn step(
+    fn predict(
         &self,
         model_output: &[f32],
         t: usize,
         x: &[f32],
+    ) -> Result<(Vec<f32>, Vec<f32>), ModelError> {
+        predict_x0_eps(&self.schedule, self.prediction, model_output, t, x)
+    }
+
+    /// The posterior mean of x_{t−1} given x̂0 and x_t (ε̂ is not used: a corrected x̂0 moves the mean directly).
+    fn advance(
+        &self,
+        x0: &[f32],
+        _eps: &[f32],
+        t: usize,
+        x: &[f32],
         noise: Option<&[f32]>,
     ) -> Result<Vec<f32>, ModelError> {
-        check_lengths(model_output, x, noise)?;
+        check_lengths(x0, x, noise)?;
         let a_t = self.schedule.alpha_bar(t as i64);
         let a_prev = self.schedule.alpha_bar(t as i64 - 1);
         let beta_t = 1.0 - a_t;
         let beta_prev = 1.0 - a_prev;
         let cur_alpha = a_t / a_prev;
         let cur_beta = 1.0 - cur_alpha;
-        let (sb, sa) = (beta_t.sqrt(), a_t.sqrt());
         let c_x0 = a_prev.sqrt() * cur_beta / beta_t;
         let c_xt = cur_alpha.sqrt() * beta_prev / beta_t;
-        let mut out: Vec<f32> = model_output
+        let mut out: Vec<f32> = x0
             .iter()
             .zip(x)
-            .map(|(&o, &xt)| {
-                let x0 = self.prediction.x0_eps(o, xt, sa, sb).0.clamp(-1.0, 1.0);
-                c_x0 * x0 + c_xt * xt
-            })
+            .map(|(&x0, &xt)| c_x0 * x0 + c_xt * xt)
             .collect();
         if t > 0 {
             let noise = noise

@@ -167,12 +167,31 @@ impl std::fmt::Display for TimestepSpacing {
     }
 }
 
-/// One reverse process over a fixed timestep sequence.
+/// One reverse process over a fixed timestep sequence. A step is [`Sampler::predict`] (the network output as a
+/// clipped x̂0 and its ε̂) then [`Sampler::advance`] (x_{t'} from them); [`Sampler::step`] does both. Between the two
+/// a caller may correct x̂0 ([`crate::model::guidance`]) and the step keeps the network's ε̂.
 pub trait Sampler: Send + Sync {
     /// The timesteps to visit, descending.
     fn timesteps(&self) -> &[usize];
-    /// Whether the step at `t` adds fresh noise (then `noise` must be given to [`Sampler::step`]).
+    /// Whether the step at `t` adds fresh noise (then `noise` must be given to [`Sampler::advance`]).
     fn needs_noise(&self, t: usize) -> bool;
+    /// The network output at `t` (ε or v, same length as `x`) as (x̂0 clipped to [-1, 1], ε̂), in model units.
+    fn predict(
+        &self,
+        model_output: &[f32],
+        t: usize,
+        x: &[f32],
+    ) -> Result<(Vec<f32>, Vec<f32>), ModelError>;
+    /// x_{t'} from x_t (`x`) and a prediction (`x0`, `eps`) of [`Sampler::predict`], with `noise` ~ N(0, 1) when
+    /// needed.
+    fn advance(
+        &self,
+        x0: &[f32],
+        eps: &[f32],
+        t: usize,
+        x: &[f32],
+        noise: Option<&[f32]>,
+    ) -> Result<Vec<f32>, ModelError>;
     /// x_{t'} from x_t (`x`) and the network output `model_output` (ε or v, same length), with `noise` ~ N(0, 1)
     /// when needed.
     fn step(
@@ -181,7 +200,11 @@ pub trait Sampler: Send + Sync {
         t: usize,
         x: &[f32],
         noise: Option<&[f32]>,
-    ) -> Result<Vec<f32>, ModelError>;
+    ) -> Result<Vec<f32>, ModelError> {
+        check_lengths(model_output, x, noise)?;
+        let (x0, eps) = self.predict(model_output, t, x)?;
+        self.advance(&x0, &eps, t, x, noise)
+    }
 }
 
 /// Build the sampler of `kind` over `schedule` for a network that predicts `prediction`.
@@ -198,6 +221,27 @@ pub fn make(
             spacing,
         } => Box::new(ddim::Ddim::new(schedule, steps, eta, spacing, prediction)?),
     })
+}
+
+/// The network output at `t` as (x̂0 clipped to [-1, 1], ε̂): what DDPM and DDIM alike take from it.
+pub(crate) fn predict_x0_eps(
+    schedule: &NoiseSchedule,
+    prediction: PredictionType,
+    model_output: &[f32],
+    t: usize,
+    x: &[f32],
+) -> Result<(Vec<f32>, Vec<f32>), ModelError> {
+    check_lengths(model_output, x, None)?;
+    let a_t = schedule.alpha_bar(t as i64);
+    let (sb, sa) = ((1.0 - a_t).sqrt(), a_t.sqrt());
+    Ok(model_output
+        .iter()
+        .zip(x)
+        .map(|(&o, &xt)| {
+            let (x0, e) = prediction.x0_eps(o, xt, sa, sb);
+            (x0.clamp(-1.0, 1.0), e)
+        })
+        .unzip())
 }
 
 pub(crate) fn check_lengths(

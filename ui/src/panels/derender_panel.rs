@@ -53,6 +53,12 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             );
         ui.add(egui::DragValue::new(&mut d.config.seed).prefix("seed "))
             .on_hover_text("seed of the sampler's noise and the registration starts: the same seed gives the same samples");
+        ui.checkbox(&mut d.config.guidance.enabled, "imprint guidance")
+            .on_hover_text(
+                "pull each sample towards the imprint it would leave on the sensor while sampling (scenes, dataset \
+                 pairs and recordings, whose sensor is known; not a bare .npy imprint): sharper contact outlines on \
+                 shapes unlike the training objects",
+            );
         egui::ComboBox::from_id_salt("derender_device")
             .selected_text(format!("device {}", d.config.device))
             .show_ui(ui, |ui| {
@@ -189,8 +195,9 @@ fn results(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
             spacing,
         } => format!("DDIM-{steps} η={eta} {spacing}"),
     };
+    let guided = if r.guided { " · imprint-guided" } else { "" };
     ui.label(format!(
-        "{} · {} samples · {sampler} · seed {} · {:.2} s ({})",
+        "{} · {} samples · {sampler}{guided} · seed {} · {:.2} s ({})",
         r.input.label,
         r.samples.len(),
         r.config.seed,
