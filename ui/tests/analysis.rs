@@ -205,6 +205,7 @@ fn de_rendering_a_dataset_pair_with_a_tiny_model_matches_the_core_sampler() {
     // The same samples as the core's sampler with the same model, input, sampler and seed, guided towards the
     // pair's imprint on the dataset's sensor (a dataset pair's sensor is known).
     assert!(r.guided);
+    assert!(h.query_by_label("imprint guidance").is_some());
     let ds = Dataset::open(&data).unwrap();
     let sim = tactile_derender::sim::Simulator::new(ds.sim_config().clone()).unwrap();
     let guidance = tactile_derender::pipeline::imprint_guidance(
