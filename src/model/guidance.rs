@@ -192,9 +192,11 @@ impl ImprintGuidance {
         x0.par_chunks_mut(per).for_each(|z| {
             let mut grad = vec![0.0f32; per];
             let mut trial = vec![0.0f32; per];
-            let mut loss = self.loss(z, norm);
+            // The forward pass of the current estimate, kept from the accepted trial (one pass per trial).
+            let mut current = self.forward(z, norm);
+            let mut loss = self.misfit(&current);
             for _ in 0..self.config.iterations {
-                self.loss_gradient(z, norm, &mut grad);
+                self.gradient_of(z, &current, norm, &mut grad);
                 let max = grad.iter().fold(0.0f32, |m, g| m.max(g.abs()));
                 if max <= 0.0 || !max.is_finite() {
                     break;
@@ -206,9 +208,11 @@ impl ImprintGuidance {
                     for ((t, v), g) in trial.iter_mut().zip(z.iter()).zip(&grad) {
                         *t = (*v - k * g).clamp(-1.0, 1.0);
                     }
-                    let l = self.loss(&trial, norm);
+                    let f = self.forward(&trial, norm);
+                    let l = self.misfit(&f);
                     if l < loss {
                         z.copy_from_slice(&trial);
+                        current = f;
                         loss = l;
                         moved = true;
                         break;
@@ -230,8 +234,11 @@ impl ImprintGuidance {
 
     /// ½ Σ (Ŷ − Y)² over the pixels where the membrane is seen, metres².
     pub fn loss(&self, z: &[f32], norm: &TactileConfig) -> f64 {
-        let f = self.forward(z, norm);
-        (0..z.len())
+        self.misfit(&self.forward(z, norm))
+    }
+
+    fn misfit(&self, f: &Forward) -> f64 {
+        (0..f.yhat.len())
             .filter(|&i| self.membrane[i] > 0.0)
             .map(|i| 0.5 * f64::from(f.yhat[i] - self.imprint[i]).powi(2))
             .sum()
@@ -285,8 +292,13 @@ impl ImprintGuidance {
     }
 
     /// ∂/∂z of ½ Σ (Ŷ − Y)² into `grad` (model units).
+    #[cfg(test)]
     fn loss_gradient(&self, z: &[f32], norm: &TactileConfig, grad: &mut [f32]) {
-        let f = self.forward(z, norm);
+        self.gradient_of(z, &self.forward(z, norm), norm, grad);
+    }
+
+    /// [`Self::loss_gradient`] from the forward pass `f` of `z`.
+    fn gradient_of(&self, z: &[f32], f: &Forward, norm: &TactileConfig, grad: &mut [f32]) {
         let n = z.len();
         let mut da = vec![0.0f32; n];
         let mut dp = vec![0.0f32; n];
