@@ -196,7 +196,7 @@ impl ImprintGuidance {
             let mut current = self.forward(z, norm);
             let mut loss = self.misfit(&current);
             for _ in 0..self.config.iterations {
-                self.gradient_of(z, &current, norm, &mut grad);
+                self.gradient_of(&current, norm, &mut grad);
                 let max = grad.iter().fold(0.0f32, |m, g| m.max(g.abs()));
                 if max <= 0.0 || !max.is_finite() {
                     break;
@@ -294,12 +294,12 @@ impl ImprintGuidance {
     /// ∂/∂z of ½ Σ (Ŷ − Y)² into `grad` (model units).
     #[cfg(test)]
     fn loss_gradient(&self, z: &[f32], norm: &TactileConfig, grad: &mut [f32]) {
-        self.gradient_of(z, &self.forward(z, norm), norm, grad);
+        self.gradient_of(&self.forward(z, norm), norm, grad);
     }
 
-    /// [`Self::loss_gradient`] from the forward pass `f` of `z`.
-    fn gradient_of(&self, z: &[f32], f: &Forward, norm: &TactileConfig, grad: &mut [f32]) {
-        let n = z.len();
+    /// [`Self::loss_gradient`] from the forward pass `f` of z.
+    fn gradient_of(&self, f: &Forward, norm: &TactileConfig, grad: &mut [f32]) {
+        let n = f.yhat.len();
         let mut da = vec![0.0f32; n];
         let mut dp = vec![0.0f32; n];
         for i in 0..n {
@@ -320,13 +320,9 @@ impl ImprintGuidance {
         let soft = self.config.contact_softness_m as f32;
         let scale = norm.target.scale_m;
         for i in 0..n {
-            let d = norm.target.inverse(z[i]);
             let dd_a = f.a[i] * (1.0 - f.a[i]) / soft;
-            let dd_p = if self.membrane[i] > 0.0 && self.membrane[i] - d > 0.0 {
-                -1.0
-            } else {
-                0.0
-            };
+            // p = max(E − d, 0): slope −1 where the membrane is seen and pressed in, else 0.
+            let dd_p = if f.p[i] > 0.0 { -1.0 } else { 0.0 };
             grad[i] = scale * (da[i] * dd_a + dp[i] * dd_p);
         }
     }

@@ -260,17 +260,7 @@ pub fn run(
     let guidance = match &input.pose {
         Some(pose) if req.config.guidance.active() => {
             let sim = tactile_derender::sim::Simulator::new(pose.sim.clone())?;
-            let e = sim.nominal_depth();
-            if (e.width, e.height) == (input.imprint.width, input.imprint.height) {
-                pipeline::imprint_guidance(
-                    &req.config,
-                    &sim,
-                    &input.imprint,
-                    Some(&pose.signature),
-                )?
-            } else {
-                None
-            }
+            pipeline::imprint_guidance(&req.config, &sim, &input.imprint, Some(&pose.signature))?
         }
         _ => None,
     };

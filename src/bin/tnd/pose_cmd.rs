@@ -77,6 +77,12 @@ pub struct PoseArgs {
 /// An image file (.npy, metres) the sensor must render at `want` pixels.
 pub(crate) fn read(path: &Path, want: (usize, usize)) -> Result<Image> {
     let img = npy::read_metres_image(path)?;
+    check_size(path, &img, want)?;
+    Ok(img)
+}
+
+/// The image read from `path` has the `want` pixels the sensor renders.
+pub(crate) fn check_size(path: &Path, img: &Image, want: (usize, usize)) -> Result<()> {
     if (img.width, img.height) != want {
         bail!(
             "{}: image is {}x{}, the sensor renders {}x{}",
@@ -87,7 +93,7 @@ pub(crate) fn read(path: &Path, want: (usize, usize)) -> Result<Image> {
             want.1
         );
     }
-    Ok(img)
+    Ok(())
 }
 
 pub fn run(a: PoseArgs) -> Result<()> {

@@ -55,16 +55,7 @@ pub fn run(a: SampleArgs) -> Result<()> {
             let sim = tactile_derender::sim::Simulator::new(a.sensor.sim_config()?)?;
             let res = (sim.intrinsics().width, sim.intrinsics().height);
             let signature = super::pose_cmd::read(path, res)?;
-            if (imprint.width, imprint.height) != res {
-                anyhow::bail!(
-                    "{}: image is {}x{}, the sensor renders {}x{}",
-                    a.imprint.display(),
-                    imprint.width,
-                    imprint.height,
-                    res.0,
-                    res.1
-                );
-            }
+            super::pose_cmd::check_size(&a.imprint, &imprint, res)?;
             pipeline::imprint_guidance(&a.derender, &sim, &imprint, Some(&signature))?
         }
         None => {

@@ -201,7 +201,6 @@ pub trait Sampler: Send + Sync {
         x: &[f32],
         noise: Option<&[f32]>,
     ) -> Result<Vec<f32>, ModelError> {
-        check_lengths(model_output, x, noise)?;
         let (x0, eps) = self.predict(model_output, t, x)?;
         self.advance(&x0, &eps, t, x, noise)
     }
