@@ -118,6 +118,8 @@ pub struct ImprintGuidance {
     membrane: Vec<f32>,
     /// Cloak cone: pixel offsets (du, dv), the centre left out, and weights in (0, 1).
     cone: Vec<(isize, isize, f32)>,
+    /// The cone's reach (rx, ry), pixels: the zero border the forward pass pads the image with.
+    reach: (usize, usize),
 }
 
 impl ImprintGuidance {
@@ -169,6 +171,7 @@ impl ImprintGuidance {
             imprint: imprint.data.clone(),
             membrane: membrane.data.clone(),
             cone,
+            reach: (rx.max(0) as usize, ry.max(0) as usize),
         })
     }
 
@@ -256,27 +259,25 @@ impl ImprintGuidance {
             let e = self.membrane[i];
             p[i] = if e > 0.0 { (e - d).max(0.0) } else { 0.0 };
         }
-        let (w, h) = (self.width as isize, self.height as isize);
-        let mut cloak = vec![0.0f32; n];
-        let mut from = vec![(usize::MAX, 0.0f32); n];
+        // The cloak: per pixel the largest a_j·p_j·k over the cone. The weighted presses sit in a zero-padded copy
+        // so that a row of pixels reads one contiguous run per cone offset (a zero never beats the running 0).
+        let (w, h) = (self.width, self.height);
+        let (rx, ry) = self.reach;
+        let pw = w + 2 * rx;
+        let mut src = vec![0.0f32; pw * (h + 2 * ry)];
         for v in 0..h {
+            let row = (v + ry) * pw + rx;
             for u in 0..w {
-                let i = (v * w + u) as usize;
-                let (mut best, mut arg) = (0.0f32, (usize::MAX, 0.0f32));
-                for &(du, dv, k) in &self.cone {
-                    let (uu, vv) = (u + du, v + dv);
-                    if uu < 0 || vv < 0 || uu >= w || vv >= h {
-                        continue;
-                    }
-                    let j = (vv * w + uu) as usize;
-                    let c = a[j] * p[j] * k;
-                    if c > best {
-                        best = c;
-                        arg = (j, k);
-                    }
+                src[row + u] = a[v * w + u] * p[v * w + u];
+            }
+        }
+        let mut cloak = vec![0.0f32; n];
+        for (v, best) in cloak.chunks_mut(w).enumerate() {
+            for &(du, dv, k) in &self.cone {
+                let run = &src[self.padded_start(v, du, dv, pw)..][..w];
+                for (b, s) in best.iter_mut().zip(run) {
+                    *b = b.max(s * k);
                 }
-                cloak[i] = best;
-                from[i] = arg;
             }
         }
         let yhat = (0..n)
@@ -285,10 +286,32 @@ impl ImprintGuidance {
         Forward {
             a,
             p,
+            src,
             cloak,
-            from,
             yhat,
         }
+    }
+
+    /// Where row `v`, column 0 of the image reads the cone offset (du, dv) in a padded copy `pw` pixels wide.
+    fn padded_start(&self, v: usize, du: isize, dv: isize, pw: usize) -> usize {
+        let (rx, ry) = self.reach;
+        (v as isize + dv + ry as isize) as usize * pw + (rx as isize + du) as usize
+    }
+
+    /// Which pixel's cone gave pixel (u, v) its cloak value in `f`, and its weight: the first offset of the cone
+    /// that reaches the maximum (None where no contact reaches the pixel).
+    fn cloak_source(&self, f: &Forward, u: usize, v: usize) -> Option<(usize, f32)> {
+        let best = f.cloak[v * self.width + u];
+        if best <= 0.0 {
+            return None;
+        }
+        let pw = self.width + 2 * self.reach.0;
+        self.cone.iter().find_map(|&(du, dv, k)| {
+            (f.src[self.padded_start(v, du, dv, pw) + u] * k == best).then(|| {
+                let j = (v as isize + dv) * self.width as isize + u as isize + du;
+                (j as usize, k)
+            })
+        })
     }
 
     /// ∂/∂z of ½ Σ (Ŷ − Y)² into `grad` (model units).
@@ -309,8 +332,7 @@ impl ImprintGuidance {
             let r = f.yhat[i] - self.imprint[i];
             da[i] += r * (f.p[i] - f.cloak[i]);
             dp[i] += r * f.a[i];
-            let (j, k) = f.from[i];
-            if j != usize::MAX {
+            if let Some((j, k)) = self.cloak_source(f, i % self.width, i / self.width) {
                 // The cloak term (1 − a_i)·a_j·p_j·k.
                 let dc = r * (1.0 - f.a[i]) * k;
                 da[j] += dc * f.p[j];
@@ -336,8 +358,8 @@ struct Forward {
     p: Vec<f32>,
     /// Cloak value, metres.
     cloak: Vec<f32>,
-    /// Which pixel's cone gave the cloak value, and its weight (`usize::MAX`: none).
-    from: Vec<(usize, f32)>,
+    /// a·p in a copy padded by the cone's reach with zeros, metres.
+    src: Vec<f32>,
     /// Ŷ, metres.
     yhat: Vec<f32>,
 }
