@@ -319,3 +319,36 @@ fn same_seed_same_output_and_noise_only_changes_with_seed() {
     assert_eq!(a.target, c.target, "the target is noise-free");
     let _: &Image = &a.imprint;
 }
+
+#[test]
+fn the_contact_hint_finds_a_high_point_outside_the_membrane() {
+    // A wide low plate (4 mm) with a pillar (12 mm) 45 mm off the bounding-box centre: pressing 3 mm into the
+    // object's top over the centre touches nothing, and the hint's pose brings the pillar under the apex.
+    let plate = box_on_table(Vec3::new(0.05, 0.01, 0.002));
+    let pillar = box_on_table(Vec3::new(0.003, 0.003, 0.006)).transformed(
+        &glam::Affine3A::from_translation(Vec3::new(0.045, 0.0, 0.0)),
+    );
+    let mesh = Mesh::merged(&[plate, pillar]).rest_on_table();
+    let object = PreparedObject::new(mesh).unwrap();
+    assert!((object.top_z - 0.012).abs() < 1e-6);
+    assert!((object.top_xy[0] - 0.045).abs() <= 0.0031 && object.top_xy[1].abs() <= 0.0031);
+    let sim = Simulator::new(SimConfig::default()).unwrap();
+    let at = |pose: Se2| Scene {
+        object: pose,
+        sensor: sim.pressing_pose(&object, 0.0, 0.0, 0.0, 0.003),
+    };
+    let pose = Se2::new(0.0, 0.0, 0.3);
+    assert_eq!(sim.simulate(&object, &at(pose), 0).contact_pixels, 0);
+    let hint = sim.contact_hint(&object, &at(pose));
+    assert!((hint.press_m - 0.003).abs() < 1e-9, "{hint:?}");
+    let top = glam::DVec2::from_array(object.top_xy).length();
+    assert!((hint.offset_m - top).abs() < 1e-9, "{hint:?}");
+    assert_eq!(hint.centred.theta, pose.theta);
+    assert!(sim.simulate(&object, &at(hint.centred), 0).contact_pixels > 20);
+    assert!(sim.contact_hint(&object, &at(hint.centred)).offset_m < 1e-9);
+    assert!(
+        hint.to_string()
+            .contains(&format!("{:.1} mm sideways", top * 1e3)),
+        "{hint}"
+    );
+}

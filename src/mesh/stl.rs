@@ -123,7 +123,8 @@ fn decode(bytes: &[u8]) -> Result<Vec<Vec3>, Problem> {
                 bytes.len()
             );
             if starts_with_solid {
-                format!("neither valid ASCII STL ({ascii}) nor binary STL ({binary})")
+                // The ASCII reader's complaint quotes the binary bytes it met; name what was read instead.
+                format!("truncated or corrupt binary STL (its header starts with 'solid', but it holds binary data): {binary}")
             } else {
                 format!("truncated or corrupt binary STL: {binary}")
             }
@@ -338,8 +339,14 @@ mod tests {
         let Err(Problem::Malformed(err)) = decode(&bytes[..bytes.len() - 7]) else {
             panic!("truncated binary accepted")
         };
+        // A binary file whose header starts with "solid": one readable line, not the ASCII reader's quote of
+        // binary bytes.
         assert!(
-            err.contains("ASCII") && err.contains("declares 2 triangles"),
+            err.contains("binary STL") && err.contains("declares 2 triangles"),
+            "{err}"
+        );
+        assert!(
+            !err.chars().any(char::is_control) && err.len() < 200,
             "{err}"
         );
         assert!(matches!(decode(b"not an stl"), Err(Problem::Malformed(_))));

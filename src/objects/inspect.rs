@@ -34,8 +34,8 @@ pub struct MeshCheck {
     pub non_manifold_edges: usize,
     /// Watertight and consistently oriented.
     pub closed: bool,
-    /// Enclosed volume, m³ (meaningful when closed; negative: inward-facing).
-    pub volume_m3: f64,
+    /// Enclosed volume, m³ (negative: inward-facing); `None` for an open mesh, which encloses nothing.
+    pub volume_m3: Option<f64>,
     /// Bounding-box size, metres.
     pub extent_m: [f64; 3],
     /// A likely unit when the extent is implausible in the given one (e.g. a millimetre file read as metres).
@@ -69,14 +69,9 @@ fn check_mesh(path: &Path, mesh: &Mesh, options: &LoadOptions) -> MeshCheck {
     } else {
         None
     };
-    let mut notes = Vec::new();
-    if let Some(u) = likely_units {
-        notes.push(format!(
-            "largest extent {largest:.4} m is implausible for a pressed object; the file is probably in {u} \
-             (--units {u} gives {:.1} mm)",
-            largest / options.units.to_metres() * u.to_metres() * 1e3
-        ));
-    }
+    let mut notes: Vec<String> = size_note(largest, options.units, options.fit_to_size)
+        .into_iter()
+        .collect();
     if shells > 1 {
         notes.push(format!(
             "{shells} separate shells (e.g. a convex decomposition or an assembly)"
@@ -106,11 +101,33 @@ fn check_mesh(path: &Path, mesh: &Mesh, options: &LoadOptions) -> MeshCheck {
         boundary_edges: report.boundary_edges,
         non_manifold_edges: report.bad_edges,
         closed: report.closed,
-        volume_m3: report.volume_m3,
+        volume_m3: report.closed.then_some(report.volume_m3),
         extent_m: size.to_array(),
         likely_units,
         notes,
     }
+}
+
+/// What to tell a user whose object's largest extent is `largest_m` metres (read in `units`, scaled to `fit_size`
+/// metres if given) when that is implausible for a pressed object: the unit that makes it plausible, or, when none
+/// does, that it needs scaling.
+pub fn size_note(largest_m: f64, units: Units, fit_size: Option<f64>) -> Option<String> {
+    if fit_size.is_some() || (PLAUSIBLE_EXTENT_M[0]..=PLAUSIBLE_EXTENT_M[1]).contains(&largest_m) {
+        return None;
+    }
+    Some(match likely_units(largest_m, units) {
+        Some(u) => format!(
+            "largest extent {largest_m:.4} m in {units} is implausible for a pressed object; the file is probably in \
+             {u} (--units {u} gives {:.1} mm)",
+            largest_m / units.to_metres() * u.to_metres() * 1e3
+        ),
+        None => format!(
+            "largest extent {largest_m:.4} m in {units} is implausible for a pressed object ({:.0} mm to {:.1} m), \
+             and no unit makes it plausible; scale it with --fit-size (e.g. --fit-size 0.05 for 50 mm)",
+            PLAUSIBLE_EXTENT_M[0] * 1e3,
+            PLAUSIBLE_EXTENT_M[1]
+        ),
+    })
 }
 
 /// The unit under which a largest extent of `largest_m` metres (read with `units`) becomes plausible, if the given

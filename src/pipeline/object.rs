@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::PipelineError;
 use crate::mesh::{self, LoadOptions, Mesh, Units};
-use crate::objects::inspect::likely_units;
+use crate::objects::inspect::size_note;
 use crate::objects::{ObjectSet, Symmetry};
 
 fn default_set() -> String {
@@ -97,14 +97,8 @@ impl ObjectSpec {
             let mut warnings = Vec::new();
             let (lo, hi) = mesh.aabb();
             let largest = f64::from((hi - lo).max_element());
-            if let Some(u) = likely_units(largest, self.units).filter(|_| self.fit_size.is_none()) {
-                warnings.push(format!(
-                    "{}: largest extent {largest:.4} m in {} is implausible for a pressed object; the file is \
-                     probably in {u} (--units {u} gives {:.1} mm)",
-                    path.display(),
-                    self.units,
-                    largest / self.units.to_metres() * u.to_metres() * 1e3
-                ));
+            if let Some(note) = size_note(largest, self.units, self.fit_size) {
+                warnings.push(format!("{}: {note}", path.display()));
             }
             let name = path
                 .file_stem()

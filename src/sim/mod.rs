@@ -20,7 +20,9 @@ use serde::{Deserialize, Serialize};
 use crate::image::Image;
 use crate::mesh::{Mesh, MeshError, RayCaster, SignedDistance};
 use crate::sensor::pose::CameraMount;
-use crate::sensor::{CameraConfig, ElastomerConfig, ElastomerError, Intrinsics, Scene, SensorPose};
+use crate::sensor::{
+    CameraConfig, ElastomerConfig, ElastomerError, Intrinsics, Scene, Se2, SensorPose,
+};
 pub use signature::SignatureConfig;
 
 /// Errors setting up or running the simulator.
@@ -52,18 +54,60 @@ pub struct PreparedObject {
     caster: RayCaster,
     /// Height of the object's highest point above the table in its resting pose, metres.
     pub top_z: f64,
+    /// Where that highest point is, object frame (x, y), metres.
+    pub top_xy: [f64; 2],
 }
 
 impl PreparedObject {
     /// Prepare a mesh in its resting pose (object frame, lowest point at z = 0).
     pub fn new(mesh: Mesh) -> Result<Self, MeshError> {
         let caster = RayCaster::new(&mesh)?;
-        let top_z = f64::from(mesh.aabb().1.z);
+        let top = mesh
+            .vertices()
+            .iter()
+            .copied()
+            .max_by(|a, b| a.z.total_cmp(&b.z))
+            .unwrap_or_default();
         Ok(Self {
             mesh,
             caster,
-            top_z,
+            top_z: f64::from(top.z),
+            top_xy: [f64::from(top.x), f64::from(top.y)],
         })
+    }
+}
+
+/// The object's highest point seen from the membrane's apex ([`Simulator::contact_hint`]): what to tell a user
+/// whose scene makes no contact.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactHint {
+    /// Horizontal distance from the apex to the object's highest point, metres.
+    pub offset_m: f64,
+    /// How far the apex sits below that point, metres (negative: above it).
+    pub press_m: f64,
+    /// The object pose, θ kept, that puts the highest point under the apex.
+    pub centred: Se2,
+}
+
+impl std::fmt::Display for ContactHint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.press_m <= 0.0 {
+            write!(
+                f,
+                "the membrane's apex is {:.1} mm above the object's highest point: press deeper",
+                self.press_m.abs() * 1e3
+            )
+        } else {
+            write!(
+                f,
+                "the object's highest point is {:.1} mm sideways of the membrane's apex, which sits {:.1} mm below \
+                 it; the object at x = {:.1} mm, y = {:.1} mm (θ kept) puts that point under the apex",
+                self.offset_m * 1e3,
+                self.press_m * 1e3,
+                self.centred.x * 1e3,
+                self.centred.y * 1e3
+            )
+        }
     }
 }
 
@@ -177,6 +221,26 @@ impl Simulator {
     /// Height of the membrane apex above its base, metres.
     pub fn apex_height(&self) -> f64 {
         self.apex_height
+    }
+
+    /// Why `scene` may show no contact: where the object's highest point lies from the membrane's apex, and the
+    /// object pose (same θ) that puts it right under the apex.
+    pub fn contact_hint(&self, object: &PreparedObject, scene: &Scene) -> ContactHint {
+        let apex = scene
+            .sensor
+            .t_world_sensor()
+            .transform_point3(glam::DVec3::new(0.0, 0.0, self.apex_height));
+        let [x, y] = object.top_xy;
+        let top = scene
+            .object
+            .to_affine()
+            .transform_point3(glam::DVec3::new(x, y, object.top_z));
+        let (dx, dy) = (apex.x - top.x, apex.y - top.y);
+        ContactHint {
+            offset_m: dx.hypot(dy),
+            press_m: top.z - apex.z,
+            centred: Se2::new(scene.object.x + dx, scene.object.y + dy, scene.object.theta),
+        }
     }
 
     /// Sensor pose above the sensor-frame origin `(x, y)` pressing the apex `press` metres into the object's top.

@@ -254,7 +254,8 @@ impl WorkbenchApp {
                 && !self.sim_failed_for_latest()
     }
 
-    fn sim_failed_for_latest(&self) -> bool {
+    /// True when the simulation of the current scene failed (its error is in the status bar).
+    pub fn sim_failed_for_latest(&self) -> bool {
         self.failed_generation == Some(self.generation)
     }
 

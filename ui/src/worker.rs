@@ -109,6 +109,8 @@ pub struct SimResult {
     /// Where the sensor was (world frame), and `t_world_camera` of its camera.
     pub sensor: tactile_derender::sensor::SensorPose,
     pub t_world_camera: glam::DAffine3,
+    /// Where the object's highest point lies from the membrane's apex (why there may be no contact).
+    pub contact_hint: tactile_derender::sim::ContactHint,
 }
 
 /// Load the object mesh named by `source` in its resting pose (as `tnd` does: [`ObjectSource::spec`]).
@@ -172,6 +174,7 @@ impl SimCache {
             geometry,
             sensor: scene.sensor,
             t_world_camera: sim.t_world_camera(&scene.sensor),
+            contact_hint: sim.contact_hint(object, &scene),
         })
     }
 }

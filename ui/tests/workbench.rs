@@ -282,6 +282,12 @@ fn a_typed_mesh_path_in_millimetres_replaces_the_object_and_a_missing_one_shows_
         "no error naming the file: {:?}",
         h.state().errors
     );
+    // The images on screen are the last good scene's, and the workbench says so instead of "simulating…".
+    assert!(h
+        .query_by_label_contains("The current scene could not be simulated")
+        .is_some());
+    assert!(h.query_by_label("simulating…").is_none());
+    assert!(h.query_by_label("simulation failed").is_some());
 }
 
 #[test]
@@ -348,4 +354,24 @@ fn a_dataset_pair_as_measurement_places_the_scene_and_calibrates_the_inflation()
         .click();
     settle(&mut h);
     assert!((h.state().state.sim.elastomer.inflation - 0.026).abs() < 1e-9);
+}
+
+#[test]
+fn moving_the_object_off_the_membrane_says_why_there_is_no_contact() {
+    let mut h = harness(WorkbenchApp::default());
+    settle(&mut h);
+    assert!(h.query_by_label_contains("No contact").is_none());
+    // The default cross is 50 mm across; 150 mm sideways its highest point is far outside the membrane.
+    h.get_by_role_and_label(Role::Slider, "object x (mm)")
+        .set_value_accesskit(150.0);
+    settle(&mut h);
+    assert_eq!(shown_contact_pixels(&h), 0);
+    let hint = h
+        .query_by_label_contains("No contact: the object's highest point is")
+        .expect("no hint for a scene without contact");
+    // The hint's pose puts the object back under the apex (x within the cross's half-extent of 0).
+    let text = format!("{hint:?}");
+    assert!(text.contains("x = "), "{text}");
+    let centred = h.state().sim.as_ref().unwrap().contact_hint.centred;
+    assert!(centred.x.abs() < 0.03, "{centred:?}");
 }

@@ -85,6 +85,18 @@ pub fn run(a: SimArgs) -> Result<()> {
         sensor: sim.pressing_pose(&object, 0.0, 0.0, a.sensor_yaw, a.press),
     };
     let (out, elapsed_s) = sim.simulate_timed(&object, &scene, a.seed);
+    if out.contact_pixels == 0 {
+        let hint = sim.contact_hint(&object, &scene);
+        let c = hint.centred;
+        eprintln!(
+            "warning: no contact: {hint}{}",
+            if hint.press_m > 0.0 {
+                format!(" (--pose {:.4},{:.4},{:.4})", c.x, c.y, c.theta)
+            } else {
+                String::new()
+            }
+        );
+    }
 
     for (file, title) in OUTPUTS {
         let img = image_of(&out, file);

@@ -18,9 +18,19 @@ const CARD_TEXT_H: f32 = 48.0;
 pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     toolbar(app, ui, cmds);
     let Some(result) = &app.sim else {
-        ui.label("simulating the scene…");
+        ui.label(if app.sim_failed_for_latest() {
+            "the scene could not be simulated: see the error below"
+        } else {
+            "simulating the scene…"
+        });
         return;
     };
+    if app.sim_failed_for_latest() && result.generation != app.generation {
+        ui.colored_label(
+            ui.visuals().warn_fg_color,
+            "The current scene could not be simulated (see the error below); these are the last scene's images.",
+        );
+    }
     let out = &result.output;
     let avail = ui.available_size();
     let spacing = ui.spacing().item_spacing;

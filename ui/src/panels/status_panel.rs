@@ -8,6 +8,13 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     for e in &app.errors {
         ui.colored_label(app.status_color(), format!("Error: {e}"));
     }
+    let current = app.sim.as_ref().filter(|_| !app.sim_failed_for_latest());
+    if let Some(s) = current.filter(|s| s.output.contact_pixels == 0) {
+        ui.colored_label(
+            ui.visuals().warn_fg_color,
+            format!("No contact: {}.", s.contact_hint),
+        );
+    }
     ui.horizontal(|ui| {
         if !app.errors.is_empty() && ui.button("Dismiss errors").clicked() {
             cmds.push(Command::DismissErrors);
@@ -19,6 +26,9 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         ));
         ui.separator();
         match &app.sim {
+            _ if app.sim_failed_for_latest() => {
+                ui.label("simulation failed");
+            }
             Some(s) => {
                 ui.label(format!("contact pixels: {}", s.output.contact_pixels));
                 ui.separator();
