@@ -52,7 +52,8 @@ impl Default for PanelStyle {
 /// Smallest colour span (metres) for automatic ranges: a flat surface shows as one colour, not as f32 jitter.
 pub const MIN_AUTO_SPAN_M: f32 = 1e-3;
 
-/// The colour range used for `image` under `style` (falls back to (0, 1) for empty images). Automatic ranges span at
+/// The colour range used for `image` under `style` (0 to [`MIN_AUTO_SPAN_M`] for an image with nothing to show, e.g.
+/// no contact: a bar of 0 to 1 mm, not 0 to 1 000 mm). Automatic ranges span at
 /// least [`MIN_AUTO_SPAN_M`] around their centre.
 pub fn display_range(image: &Image, style: &PanelStyle) -> (f32, f32) {
     if let Some((lo, hi)) = style.range_m {
@@ -62,7 +63,7 @@ pub fn display_range(image: &Image, style: &PanelStyle) -> (f32, f32) {
     }
     let (lo, hi) = image
         .range_where(|x| x.is_finite() && !(style.zero_is_missing && x == 0.0))
-        .unwrap_or((0.0, 1.0));
+        .unwrap_or((0.0, MIN_AUTO_SPAN_M));
     if hi - lo >= MIN_AUTO_SPAN_M {
         (lo, hi)
     } else {
@@ -221,5 +222,23 @@ mod tests {
         let p = render_panel(&img, &style);
         assert_eq!(p.height(), TITLE_HEIGHT + 6 + MARGIN);
         assert_eq!(p.get_pixel(MARGIN, TITLE_HEIGHT).0, MISSING);
+    }
+
+    #[test]
+    fn an_image_with_nothing_to_show_gets_a_millimetre_bar() {
+        // No contact: every pixel of the in-contact depth is 0, which the panel treats as missing.
+        let style = PanelStyle {
+            zero_is_missing: true,
+            ..Default::default()
+        };
+        assert_eq!(
+            display_range(&Image::filled(4, 3, 0.0), &style),
+            (0.0, MIN_AUTO_SPAN_M)
+        );
+        // Anything to show sets the range as before.
+        let mut img = Image::filled(4, 3, 0.0);
+        *img.get_mut(1, 1) = 0.08;
+        *img.get_mut(2, 1) = 0.09;
+        assert_eq!(display_range(&img, &style), (0.08, 0.09));
     }
 }

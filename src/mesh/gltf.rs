@@ -44,6 +44,19 @@ fn decode_unguarded(
     bytes: &[u8],
     dir: Option<&Path>,
 ) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
+    // Geometry behind a required extension (Draco or meshopt compression, quantised positions) is not plain
+    // accessors; validation would only report the accessors' missing data, one message per accessor.
+    if let Ok(raw) = gltf::Gltf::from_slice_without_validation(bytes) {
+        let required: Vec<&str> = raw.extensions_required().collect();
+        if !required.is_empty() {
+            return Err(format!(
+                "the file requires the glTF extension{} {}, which this reader does not support; export it without \
+                 (e.g. from Blender with mesh compression off)",
+                if required.len() > 1 { "s" } else { "" },
+                required.join(", ")
+            ));
+        }
+    }
     let doc = gltf::Gltf::from_slice(bytes).map_err(|e| e.to_string())?;
     let mut buffers = Vec::new();
     for buffer in doc.buffers() {
@@ -239,5 +252,27 @@ mod tests {
         let dangling =
             triangle_gltf(&triangle_buffer(), 42).replace(r#""POSITION":0"#, r#""POSITION":7"#);
         assert!(decode(dangling.as_bytes(), None).is_err());
+    }
+
+    #[test]
+    fn a_required_extension_is_named() {
+        // A Draco-compressed file: its accessors have no buffer views; the error names the extension once.
+        let draco = triangle_gltf(&triangle_buffer(), 42).replacen(
+            r#"{"asset""#,
+            r#"{"extensionsUsed":["KHR_draco_mesh_compression"],"extensionsRequired":["KHR_draco_mesh_compression"],"asset""#,
+            1,
+        );
+        let err = decode(draco.as_bytes(), None).unwrap_err();
+        assert!(
+            err.contains("requires the glTF extension KHR_draco_mesh_compression"),
+            "{err}"
+        );
+        // Used but not required: read as usual.
+        let used = triangle_gltf(&triangle_buffer(), 42).replacen(
+            r#"{"asset""#,
+            r#"{"extensionsUsed":["KHR_materials_unlit"],"asset""#,
+            1,
+        );
+        assert!(decode(used.as_bytes(), None).is_ok());
     }
 }

@@ -44,9 +44,6 @@ pub struct GuidanceConfig {
     /// Width of the soft contact edge of the predicted imprint, metres of depth.
     #[arg(skip = GuidanceConfig::default().contact_softness_m)]
     pub contact_softness_m: f64,
-    /// Cost of claiming a contact pixel, as the imprint misfit it must explain away, metres (0: none).
-    #[arg(long = "guidance-contact-cost", default_value_t = GuidanceConfig::default().contact_cost_m)]
-    pub contact_cost_m: f64,
 }
 
 impl Default for GuidanceConfig {
@@ -57,7 +54,6 @@ impl Default for GuidanceConfig {
             iterations: 8,
             from_fraction: 0.4,
             contact_softness_m: 0.01,
-            contact_cost_m: 0.0,
         }
     }
 }
@@ -245,12 +241,9 @@ impl ImprintGuidance {
     }
 
     fn misfit(&self, f: &Forward) -> f64 {
-        let cost = 0.5 * self.config.contact_cost_m.powi(2);
         (0..f.yhat.len())
             .filter(|&i| self.membrane[i] > 0.0)
-            .map(|i| {
-                0.5 * f64::from(f.yhat[i] - self.imprint[i]).powi(2) + cost * f64::from(f.a[i])
-            })
+            .map(|i| 0.5 * f64::from(f.yhat[i] - self.imprint[i]).powi(2))
             .sum()
     }
 
@@ -332,13 +325,12 @@ impl ImprintGuidance {
         let n = f.yhat.len();
         let mut da = vec![0.0f32; n];
         let mut dp = vec![0.0f32; n];
-        let cost = (0.5 * self.config.contact_cost_m.powi(2)) as f32;
         for i in 0..n {
             if self.membrane[i] <= 0.0 {
                 continue;
             }
             let r = f.yhat[i] - self.imprint[i];
-            da[i] += r * (f.p[i] - f.cloak[i]) + cost;
+            da[i] += r * (f.p[i] - f.cloak[i]);
             dp[i] += r * f.a[i];
             if let Some((j, k)) = self.cloak_source(f, i % self.width, i / self.width) {
                 // The cloak term (1 − a_i)·a_j·p_j·k.

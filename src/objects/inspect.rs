@@ -50,10 +50,7 @@ pub fn check(path: &Path, options: &LoadOptions) -> Result<MeshCheck, ObjectErro
 }
 
 fn load(path: &Path, options: &LoadOptions) -> Result<Mesh, ObjectError> {
-    mesh::load(path, options).map_err(|source| ObjectError::Mesh {
-        name: path.display().to_string(),
-        source,
-    })
+    mesh::load(path, options).map_err(ObjectError::MeshFile)
 }
 
 /// What `mesh`, read from `path` with `options`, holds.
@@ -115,14 +112,18 @@ pub fn size_note(largest_m: f64, units: Units, fit_size: Option<f64>) -> Option<
     if fit_size.is_some() || (PLAUSIBLE_EXTENT_M[0]..=PLAUSIBLE_EXTENT_M[1]).contains(&largest_m) {
         return None;
     }
+    let read = match units {
+        Units::Scale(s) => format!("read at scale {s}"),
+        u => format!("in {u}"),
+    };
     Some(match likely_units(largest_m, units) {
         Some(u) => format!(
-            "largest extent {largest_m:.4} m in {units} is implausible for a pressed object; the file is probably in \
+            "largest extent {largest_m:.4} m {read} is implausible for a pressed object; the file is probably in \
              {u} (--units {u} gives {:.1} mm)",
             largest_m / units.to_metres() * u.to_metres() * 1e3
         ),
         None => format!(
-            "largest extent {largest_m:.4} m in {units} is implausible for a pressed object ({:.0} mm to {:.1} m), \
+            "largest extent {largest_m:.4} m {read} is implausible for a pressed object ({:.0} mm to {:.1} m), \
              and no unit makes it plausible; scale it with --fit-size (e.g. --fit-size 0.05 for 50 mm)",
             PLAUSIBLE_EXTENT_M[0] * 1e3,
             PLAUSIBLE_EXTENT_M[1]
@@ -263,10 +264,7 @@ fn import_file(
         raw.clone()
             .apply_units(&options, &path.display().to_string())
             .map(|m| (m, options))
-            .map_err(|source| ObjectError::Mesh {
-                name: path.display().to_string(),
-                source,
-            })
+            .map_err(ObjectError::MeshFile)
     };
     let given = options.units.unwrap_or(Units::M);
     let (mesh, read_as) = scaled(given)?;
@@ -327,6 +325,25 @@ mod tests {
         assert_eq!(likely_units(0.05, Units::M), None);
         assert_eq!(likely_units(5.0, Units::M), Some(Units::Cm));
         assert_eq!(likely_units(0.00005, Units::Mm), Some(Units::M));
+    }
+
+    #[test]
+    fn size_notes_name_the_unit_or_the_scaling() {
+        assert_eq!(size_note(0.05, Units::M, None), None);
+        assert_eq!(size_note(50.0, Units::M, Some(0.05)), None);
+        let mm = size_note(50.0, Units::M, None).unwrap();
+        assert!(
+            mm.contains("probably in mm") && mm.contains("50.0 mm"),
+            "{mm}"
+        );
+        // 743 m read as metres is still 0.74 m in mm: no unit helps, scaling does.
+        let big = size_note(743.0, Units::M, None).unwrap();
+        assert!(
+            big.contains("no unit") && big.contains("--fit-size"),
+            "{big}"
+        );
+        let scaled = size_note(743.0, Units::Scale(1.0), None).unwrap();
+        assert!(scaled.contains("read at scale 1 "), "{scaled}");
     }
 
     #[test]

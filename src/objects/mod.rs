@@ -76,6 +76,9 @@ pub enum ObjectError {
         set: String,
         available: String,
     },
+    /// A mesh file that could not be read or scaled (the mesh error names the file).
+    #[error(transparent)]
+    MeshFile(MeshError),
     #[error("object '{name}': {source}")]
     Mesh {
         name: String,

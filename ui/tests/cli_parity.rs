@@ -151,6 +151,10 @@ fn workbench_jobs_and_cli_commands_give_bit_identical_samples_and_poses() {
         (best.x.to_bits(), best.y.to_bits(), best.theta.to_bits()),
         "{cli_best:?} vs {best:?}"
     );
+    // Its error against --truth (the cross has no translational symmetry: the plain distance).
+    let err = summary["estimate_error"]["position_mm"].as_f64().unwrap();
+    let expected = (best.x - truth.x).hypot(best.y - truth.y) * 1e3;
+    assert!((err - expected).abs() < 1e-9, "{err} vs {expected}");
     // Every sample's, the baseline's and the multi-sample estimate's pose, cost and errors, in shortest
     // round-trip decimal (so equal text is equal bits), and the KDE curves.
     let csv = std::fs::read_to_string(pose_dir.join("samples.csv")).unwrap();

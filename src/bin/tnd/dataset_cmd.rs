@@ -11,6 +11,7 @@ use tactile_derender::dataset::import::{self, ImportConfig};
 use tactile_derender::dataset::import_recording::{self, PoseSource, RecordingImportConfig};
 use tactile_derender::dataset::{self, Dataset, GenConfig, SplitName};
 use tactile_derender::io::preview;
+use tactile_derender::mesh::Units;
 use tactile_derender::objects::ObjectSet;
 
 use crate::args::SensorArgs;
@@ -217,6 +218,17 @@ fn gen(a: GenArgs) -> Result<()> {
             100.0 * config.min_contact_fraction,
             report.excluded_objects.join(", ")
         );
+        // An object of implausible size is not helped by either: say so.
+        for name in &report.excluded_objects {
+            let Ok(mesh) = set.mesh(name) else { continue };
+            let (lo, hi) = mesh.aabb();
+            let largest = f64::from((hi - lo).max_element());
+            if let Some(note) =
+                tactile_derender::objects::inspect::size_note(largest, Units::M, None)
+            {
+                eprintln!("warning: {name}: {note}");
+            }
+        }
     }
     println!(
         "{}",

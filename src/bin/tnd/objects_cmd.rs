@@ -46,8 +46,9 @@ pub enum ObjectsCommand {
         /// Units of the files (default: metres, or the plausible unit when a file's size says otherwise).
         #[arg(long)]
         units: Option<Units>,
-        /// Scale every mesh so its largest extent is this many metres (e.g. 0.05).
-        #[arg(long)]
+        /// Scale every mesh so its largest extent is this many metres (e.g. 0.05; also spelled --fit-size, as in
+        /// `tnd sim`).
+        #[arg(long, alias = "fit-size")]
         fit: Option<f64>,
         /// Split of the imported objects: seen (may be trained on) or unseen (held out).
         #[arg(long, default_value = "seen")]

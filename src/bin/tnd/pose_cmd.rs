@@ -246,8 +246,13 @@ pub fn run(a: PoseArgs) -> Result<()> {
         }
     }
     let rerun = crate::rerun_out::finish(rrd)?;
+    // The default estimate's error against --truth, as the baseline and the multi-sample estimate report theirs.
+    let estimate_error = truth.zip(estimate.best()).map(|(t, best)| {
+        let e = tactile_derender::uncertainty::SampleError::new(best, 0.0, t, &object.symmetry);
+        json!({"position_mm": e.position_mm, "theta_deg": e.theta_deg})
+    });
     let summary = json!({"object": object.name, "generator": generator, "rerun": rerun, "samples": report.samples.len(),
-        "seed": a.derender.seed, "estimate": estimate.best(),
+        "seed": a.derender.seed, "estimate": estimate.best(), "estimate_error": estimate_error,
         "signature_checked": estimate.checked.is_some(),
         "checked_from_imprint": estimate.checked_from_imprint,
         "best_hypothesis": estimate.hypotheses.first().map(|h| h.pose),
