@@ -10,10 +10,22 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     }
     let current = app.sim.as_ref().filter(|_| !app.sim_failed_for_latest());
     if let Some(s) = current.filter(|s| s.output.contact_pixels == 0) {
-        ui.colored_label(
-            ui.visuals().warn_fg_color,
-            format!("No contact: {}.", s.contact_hint),
-        );
+        ui.horizontal_wrapped(|ui| {
+            ui.colored_label(
+                ui.visuals().warn_fg_color,
+                format!("No contact: {}.", s.contact_hint),
+            );
+            if s.contact_hint.press_m > 0.0
+                && ui
+                    .button("Move the object there")
+                    .on_hover_text("place the object so that its highest point is under the membrane's apex (undo with Ctrl+Z)")
+                    .clicked()
+            {
+                let mut scene = app.state.scene.clone();
+                scene.object_pose = s.contact_hint.centred;
+                cmds.push(Command::SetScene(scene));
+            }
+        });
     }
     ui.horizontal(|ui| {
         if !app.errors.is_empty() && ui.button("Dismiss errors").clicked() {
