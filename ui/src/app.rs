@@ -90,6 +90,8 @@ pub struct Launch {
     pub run_derender: bool,
     /// Then register its samples (Pose tab screenshots).
     pub run_pose: bool,
+    /// Put this mesh file, in these units, in the scene (after the session).
+    pub object: Option<(PathBuf, Units)>,
 }
 
 /// A pending `--screenshot`.
@@ -219,6 +221,10 @@ impl WorkbenchApp {
         }
         if let Some(path) = launch.session {
             app.apply(Command::OpenSession(path));
+        }
+        if let Some((path, units)) = launch.object {
+            app.inputs.object_units = units;
+            app.dialog_answer(crate::worker::DialogPurpose::OpenObjectMesh, Some(path));
         }
         if let Some(rs) = cc.wgpu_render_state.as_ref().filter(|_| !launch.cpu_3d) {
             gpu::GpuResources::install(rs);

@@ -4,6 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::{anyhow, Result};
 use clap::Parser;
+use tactile_derender::mesh::Units;
+use tactile_derender::objects::inspect::likely_units;
 use tnd_workbench::app::{Launch, ScreenshotSlot, WorkbenchApp};
 use tnd_workbench::view3d::gpu::DEPTH_BITS;
 
@@ -33,6 +35,31 @@ struct Args {
     /// Run de-rendering, then register its samples (Pose tab screenshots).
     #[arg(long)]
     run_pose: bool,
+    /// Put this mesh file (OBJ, STL, PLY, glTF/GLB) in the scene, over the session's object.
+    #[arg(long, value_name = "MESH")]
+    object: Option<PathBuf>,
+    /// Units of --object (m, cm, mm or metres per unit); default: metres, or the unit its size says (as `tnd objects
+    /// import` guesses).
+    #[arg(long, requires = "object")]
+    units: Option<Units>,
+}
+
+/// `--units`, or the unit that makes `path`'s size plausible (metres when it already is, or when it cannot be read:
+/// the workbench then shows the load error).
+fn object_units(path: &std::path::Path, units: Option<Units>) -> Units {
+    units.unwrap_or_else(|| {
+        let options = tactile_derender::mesh::LoadOptions {
+            units: Units::M,
+            fit_to_size: None,
+        };
+        tactile_derender::mesh::load(path, &options)
+            .ok()
+            .and_then(|m| {
+                let (lo, hi) = m.aabb();
+                likely_units(f64::from((hi - lo).max_element()), Units::M)
+            })
+            .unwrap_or(Units::M)
+    })
 }
 
 fn main() -> Result<()> {
@@ -61,6 +88,10 @@ fn main() -> Result<()> {
     }
     let slot: ScreenshotSlot = Default::default();
     let screenshot = args.screenshot.clone().map(|out| (out, slot.clone()));
+    let object = args.object.clone().map(|p| {
+        let units = object_units(&p, args.units);
+        (p, units)
+    });
     eframe::run_native(
         "tnd-workbench",
         options,
@@ -72,6 +103,7 @@ fn main() -> Result<()> {
                 print_timings: args.timings,
                 run_derender: args.run_derender,
                 run_pose: args.run_pose,
+                object,
             };
             Ok(Box::new(WorkbenchApp::new(cc, launch)))
         }),

@@ -111,11 +111,19 @@ pub struct SimResult {
     pub t_world_camera: glam::DAffine3,
     /// Where the object's highest point lies from the membrane's apex (why there may be no contact).
     pub contact_hint: tactile_derender::sim::ContactHint,
+    /// What the user should know about the object's file (a size that says its units are wrong).
+    pub object_warnings: Vec<String>,
 }
 
 /// Load the object mesh named by `source` in its resting pose (as `tnd` does: [`ObjectSource::spec`]).
 pub fn load_object(source: &ObjectSource) -> Result<PreparedObject> {
-    Ok(PreparedObject::new(source.spec().load()?.mesh)?)
+    Ok(load_object_noting(source)?.0)
+}
+
+/// [`load_object`], and what the user should know about the file (e.g. a size that says its units are wrong).
+pub fn load_object_noting(source: &ObjectSource) -> Result<(PreparedObject, Vec<String>)> {
+    let loaded = source.spec().load()?;
+    Ok((PreparedObject::new(loaded.mesh)?, loaded.warnings))
 }
 
 /// The scene (object pose, sensor pose pressing the object) of `state` for a prepared simulator and object.
@@ -137,7 +145,7 @@ pub fn scene_of(state: &SceneState, sim: &Simulator, object: &PreparedObject) ->
 #[derive(Default)]
 struct SimCache {
     sim: Option<(SimConfig, Simulator)>,
-    object: Option<(ObjectSource, PreparedObject)>,
+    object: Option<(ObjectSource, PreparedObject, Vec<String>)>,
 }
 
 impl SimCache {
@@ -148,13 +156,13 @@ impl SimCache {
             let sim = Simulator::new(req.sim.clone()).context("sensor")?;
             self.sim = Some((req.sim.clone(), sim));
         }
-        if self.object.as_ref().map(|(s, _)| s) != Some(&req.scene.object) {
+        if self.object.as_ref().map(|(s, _, _)| s) != Some(&req.scene.object) {
             self.object = None;
-            let object = load_object(&req.scene.object)
+            let (object, warnings) = load_object_noting(&req.scene.object)
                 .with_context(|| format!("object {}", req.scene.object.display_name()))?;
-            self.object = Some((req.scene.object.clone(), object));
+            self.object = Some((req.scene.object.clone(), object, warnings));
         }
-        let (Some((_, sim)), Some((_, object))) = (&self.sim, &self.object) else {
+        let (Some((_, sim)), Some((_, object, object_warnings))) = (&self.sim, &self.object) else {
             return Err(anyhow!("internal: simulator cache is empty"));
         };
         let scene = scene_of(&req.scene, sim, object);
@@ -175,6 +183,7 @@ impl SimCache {
             sensor: scene.sensor,
             t_world_camera: sim.t_world_camera(&scene.sensor),
             contact_hint: sim.contact_hint(object, &scene),
+            object_warnings: object_warnings.clone(),
         })
     }
 }

@@ -380,3 +380,29 @@ fn moving_the_object_off_the_membrane_says_why_there_is_no_contact() {
     assert!(shown_contact_pixels(&h) > 50);
     assert!(h.query_by_label_contains("No contact").is_none());
 }
+
+#[test]
+fn a_mesh_in_other_units_than_chosen_is_flagged() {
+    // The library's 20 mm sphere is stored in metres; the workbench's units box starts at mm, so read as mm it is a
+    // 40 µm speck, and the status bar says which unit makes it plausible.
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/objects/sphere_r20.obj");
+    let mut h = harness(WorkbenchApp::default());
+    settle(&mut h);
+    assert!(h.query_by_label_contains("Warning:").is_none());
+    h.get_by_role_and_label(Role::TextInput, "Mesh").click();
+    h.run_ok();
+    h.get_by_role_and_label(Role::TextInput, "Mesh")
+        .type_text(&path.display().to_string());
+    h.run_ok();
+    h.get_by_label("Load mesh file").click();
+    settle(&mut h);
+    assert!(
+        h.query_by_label_contains(
+            "is implausible for a pressed object; the file is probably in m "
+        )
+        .is_some(),
+        "no unit warning: {:?}",
+        h.state().sim.as_ref().map(|s| &s.object_warnings)
+    );
+}

@@ -9,6 +9,9 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         ui.colored_label(app.status_color(), format!("Error: {e}"));
     }
     let current = app.sim.as_ref().filter(|_| !app.sim_failed_for_latest());
+    for w in current.iter().flat_map(|s| &s.object_warnings) {
+        ui.colored_label(ui.visuals().warn_fg_color, format!("Warning: {w}"));
+    }
     if let Some(s) = current.filter(|s| s.output.contact_pixels == 0) {
         ui.horizontal_wrapped(|ui| {
             ui.colored_label(
