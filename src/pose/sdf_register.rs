@@ -11,6 +11,8 @@
 //! `initial_scale_m` down to `scale_m` (wide basin first, outlier rejection last), then polished on the
 //! [`ExactSdf`]. Every hypothesis's final cost is evaluated on the exact SDF at scale `scale_m`.
 
+use std::sync::Arc;
+
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -139,7 +141,7 @@ impl SdfRegistrationConfig {
 
 /// The CHSEL-inspired registration of one object mesh (SDF grid built once; reuse it for many problems).
 pub struct SdfRegistration {
-    exact: ExactSdf,
+    exact: Arc<ExactSdf>,
     grid: SdfGrid,
     config: SdfRegistrationConfig,
     /// Object z range (object frame = world z for SE(2) poses): free points outside it can never be inside.
@@ -157,8 +159,8 @@ impl SdfRegistration {
     /// Prepare an object mesh (object frame, resting pose; any triangle soup): exact SDF and its grid.
     pub fn new(mesh: &Mesh, config: SdfRegistrationConfig) -> Result<Self, PoseError> {
         config.validate()?;
-        let exact = ExactSdf::new(mesh)?;
-        let grid = SdfGrid::build(&exact, &config.grid)?;
+        let exact = Arc::new(ExactSdf::new(mesh)?);
+        let grid = SdfGrid::build(exact.clone(), &config.grid)?;
         let (lo, hi) = exact.aabb();
         Ok(Self {
             exact,
@@ -216,7 +218,7 @@ impl SdfRegistration {
     ) -> Normal {
         let sdf: &dyn ObjectSdf = match field {
             Field::Grid => &self.grid,
-            Field::Exact => &self.exact,
+            Field::Exact => &*self.exact,
         };
         let (s, c) = pose.theta.sin_cos();
         let mut n = Normal {
