@@ -235,6 +235,12 @@ impl WorkbenchApp {
         app.print_timings = launch.print_timings;
         app.auto_run = launch.run_derender || launch.run_pose;
         app.auto_pose = launch.run_pose;
+        // The run's own tab, so that a screenshot shows what was run.
+        if launch.run_pose {
+            app.state.view.tab = crate::state::Tab::Pose;
+        } else if launch.run_derender {
+            app.state.view.tab = crate::state::Tab::Derender;
+        }
         app.screenshot = launch.screenshot.map(|(out, result)| ScreenshotJob {
             out,
             requested: false,
@@ -465,6 +471,10 @@ impl WorkbenchApp {
             b.missing > 0 || (self.state.dataset.selected.is_some() && b.selected.is_none())
         }) || (self.state.dataset.path.is_some()
             && self.analysis.dataset.is_none());
+        let auto_runs = self.auto_run
+            || self.auto_pose
+            || self.analysis.derender.running
+            || self.analysis.pose.running;
         let ready = !self.busy()
             && !self.auto_run
             && !self.auto_pose
@@ -480,13 +490,30 @@ impl WorkbenchApp {
                 return;
             }
         }
-        if !job.requested && (ready || job.started.elapsed().as_secs() > 60) {
+        // A de-rendering or pose run on a slow machine takes minutes; a plain screenshot waits a minute at most.
+        let limit_s = if auto_runs {
+            SCREENSHOT_RUN_LIMIT_S
+        } else {
+            SCREENSHOT_LIMIT_S
+        };
+        let timed_out = !ready && job.started.elapsed().as_secs() > limit_s;
+        if !job.requested && (ready || timed_out) {
             job.requested = true;
             let out = job.out.clone();
             let slot = job.result.clone();
             let wake = ctx.clone();
             ctx.request_screenshot(move |image| {
-                let saved = save_color_image(&out, &image);
+                // Saved either way; a window that never got ready is an error (exit status 1) naming the wait.
+                let saved = save_color_image(&out, &image).and_then(|()| {
+                    if timed_out {
+                        Err(format!(
+                            "saved after waiting {limit_s} s, before the workbench was ready (a run or a load \
+                             still going); the image shows it unfinished"
+                        ))
+                    } else {
+                        Ok(())
+                    }
+                });
                 if let Ok(mut s) = slot.lock() {
                     *s = Some(saved);
                 }
@@ -504,6 +531,11 @@ impl WorkbenchApp {
         }
     }
 }
+
+/// Longest wait of `--screenshot` for the window to be ready, seconds.
+const SCREENSHOT_LIMIT_S: u64 = 60;
+/// The same with `--run-derender` or `--run-pose` (16 samples and their registrations on 2 cores: about a minute).
+const SCREENSHOT_RUN_LIMIT_S: u64 = 600;
 
 /// Write an egui screenshot as PNG (atomically).
 fn save_color_image(path: &std::path::Path, image: &egui::ColorImage) -> Result<(), String> {
