@@ -21,6 +21,12 @@ use super::Mesh;
 /// Triangles per leaf.
 const LEAF_SIZE: usize = 8;
 
+/// Longest triangle edge the tree holds, as a fraction of the mesh's bounding-box diagonal. CAD exports tessellate
+/// flat faces into long slivers (a robot jaw: a fifth of its triangles have edges over 5 % of the diagonal); a
+/// node holding one is as large as the sliver, so it is never far, and every query sums it exactly. Splitting
+/// slivers leaves the winding number unchanged (solid angles add up) and keeps the nodes compact.
+const MAX_EDGE_FRACTION: f64 = 1.0 / 64.0;
+
 /// One tree node: bounds of its triangles, their dipole expansion and where they are in [`FastWinding::tris`].
 #[derive(Clone, Debug)]
 struct Node {
@@ -59,10 +65,20 @@ impl FastWinding {
 
     /// [`Self::new`] with an explicit β (≥ 1).
     pub fn with_beta(mesh: &Mesh, beta: f64) -> Self {
-        let mut tris: Vec<[DVec3; 3]> = (0..mesh.triangles().len())
+        let tris: Vec<[DVec3; 3]> = (0..mesh.triangles().len())
             .map(|i| mesh.triangle(i).map(|v| v.as_dvec3()))
             .filter(|[a, b, c]| (*b - *a).cross(*c - *a).length_squared() > 0.0)
             .collect();
+        let (lo, hi) = mesh.aabb();
+        // At most eight times the triangles (or 250 000, 18 MB): a soup of huge triangles is split less finely.
+        let cap = (8 * tris.len()).max(250_000);
+        let mut max_edge = f64::from((hi - lo).length()) * MAX_EDGE_FRACTION;
+        let mut tris = loop {
+            match split_long(&tris, max_edge, cap) {
+                Some(split) => break split,
+                None => max_edge *= 2.0,
+            }
+        };
         let mut nodes = Vec::with_capacity(2 * tris.len() / LEAF_SIZE + 1);
         if !tris.is_empty() {
             let n = tris.len();
@@ -134,6 +150,34 @@ impl FastWinding {
 /// The exact generalised winding number of the triangles `tris` around `p` (O(triangles)).
 pub fn winding_number_of(tris: impl IntoIterator<Item = [DVec3; 3]>, p: DVec3) -> f64 {
     tris.into_iter().map(|t| solid_angle(&t, p)).sum::<f64>() / (4.0 * std::f64::consts::PI)
+}
+
+/// `tris` with every triangle whose longest edge exceeds `max_edge` halved across that edge's midpoint, recursively
+/// (orientation kept, so every solid angle is the sum of its pieces'); `None` when that makes more than `cap`.
+fn split_long(tris: &[[DVec3; 3]], max_edge: f64, cap: usize) -> Option<Vec<[DVec3; 3]>> {
+    if !max_edge.is_finite() || max_edge <= 0.0 {
+        return Some(tris.to_vec());
+    }
+    let mut out = Vec::with_capacity(tris.len());
+    let mut stack: Vec<[DVec3; 3]> = tris.iter().rev().copied().collect();
+    while let Some(t) = stack.pop() {
+        if out.len() + stack.len() > cap {
+            return None;
+        }
+        // The longest edge (t[i], t[i + 1]).
+        let (i, len) = (0..3)
+            .map(|i| (i, t[i].distance(t[(i + 1) % 3])))
+            .fold((0, 0.0), |best, e| if e.1 > best.1 { e } else { best });
+        if len <= max_edge {
+            out.push(t);
+            continue;
+        }
+        let (a, b, c) = (t[i], t[(i + 1) % 3], t[(i + 2) % 3]);
+        let m = 0.5 * (a + b);
+        stack.push([m, b, c]);
+        stack.push([a, m, c]);
+    }
+    Some(out)
 }
 
 /// Signed solid angle of triangle `t` seen from `p` (Van Oosterom & Strackee 1983).
@@ -320,5 +364,55 @@ mod tests {
         }
         assert!(w.inside(DVec3::new(0.0, 0.0, -0.015)));
         assert!(!w.inside(DVec3::new(0.0, 0.0, 0.05)));
+    }
+
+    #[test]
+    fn slivers_are_split_without_changing_the_winding_number() {
+        // A 60 x 4 x 4 mm bar of 12 triangles: every face a pair of slivers, split down to 1/64 of the diagonal.
+        let bar = crate::objects::shapes::extrude_z(
+            &[
+                (-0.03, -0.002),
+                (0.03, -0.002),
+                (0.03, 0.002),
+                (-0.03, 0.002),
+            ]
+            .map(|(x, y)| glam::Vec2::new(x, y)),
+            0.004,
+        )
+        .unwrap();
+        let w = FastWinding::new(&bar);
+        let (lo, hi) = bar.aabb();
+        let max_edge = f64::from((hi - lo).length()) * MAX_EDGE_FRACTION;
+        assert!(
+            w.triangles() > 100 * bar.triangles().len(),
+            "{}",
+            w.triangles()
+        );
+        assert!(w
+            .tris
+            .iter()
+            .all(|t| (0..3).all(|i| t[i].distance(t[(i + 1) % 3]) <= max_edge + 1e-15)));
+        let original: Vec<[DVec3; 3]> = (0..bar.triangles().len())
+            .map(|i| bar.triangle(i).map(|v| v.as_dvec3()))
+            .collect();
+        for k in 0..200 {
+            let t = f64::from(k) / 200.0;
+            let p = DVec3::new(
+                -0.04 + 0.08 * t,
+                0.003 * (7.0 * t).sin(),
+                0.002 + 0.004 * (5.0 * t).cos(),
+            );
+            let split = w.exact_winding_number(p);
+            let whole = winding_number_of(original.iter().copied(), p);
+            assert!((split - whole).abs() < 1e-9, "{p}: {split} vs {whole}");
+            // Inside the bar (|y| < 2 mm, 0 < z < 4 mm, |x| < 30 mm) the tree says so too.
+            let inside = p.x.abs() < 0.03 && p.y.abs() < 0.002 && p.z > 0.0 && p.z < 0.004;
+            if (p.y.abs() - 0.002).abs() > 2e-4
+                && (p.z - 0.002).abs() < 0.0018
+                && (p.x.abs() - 0.03).abs() > 2e-4
+            {
+                assert_eq!(w.inside(p), inside, "{p}");
+            }
+        }
     }
 }
