@@ -184,7 +184,11 @@ fn run_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
 fn results(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let view = &app.analysis.derender;
     let Some(r) = view.result.as_ref() else {
-        ui.weak("No samples yet: choose the input and press 'Run de-rendering'.");
+        ui.weak(if view.running {
+            "The samples appear here when the run is done."
+        } else {
+            "No samples yet: choose the input and press 'Run de-rendering'."
+        });
         return;
     };
     let sampler = match r.config.sampler.sampler_kind() {

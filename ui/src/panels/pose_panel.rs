@@ -88,6 +88,7 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     });
     let Some(r) = pose.result.as_ref() else {
         match &app.analysis.derender.result {
+            _ if pose.running => ui.weak("The fits appear here when the registration is done."),
             Some(d) => ui.label(format!(
                 "{} samples of {} ready to register.",
                 d.samples.len(),
