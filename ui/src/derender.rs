@@ -28,9 +28,9 @@ pub fn default_model_path() -> PathBuf {
     if here.is_file() {
         return here;
     }
-    let built = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join(DEFAULT_MODEL);
+    // The workspace root without a `..` in the path the workbench shows.
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let built = manifest.parent().unwrap_or(manifest).join(DEFAULT_MODEL);
     if built.is_file() {
         return built;
     }

@@ -213,9 +213,10 @@ fn results(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
         .id_salt("derender_results")
         .auto_shrink([false, false])
         .show(ui, |ui| {
-            // Cards grow with the window; a click shows one enlarged.
-            let big = ((ui.available_width() / n_fixed.max(1) as f32) - 80.0).clamp(64.0, 420.0);
-            ui.horizontal(|ui| {
+            // Cards grow with the window and wrap rather than run off its edge; a click shows one enlarged.
+            let big =
+                ((ui.available_width() / n_fixed.max(1) as f32) - CARD_EXTRA).clamp(64.0, 420.0);
+            ui.horizontal_wrapped(|ui| {
                 for (k, img) in view.images.iter().take(n_fixed).enumerate() {
                     if card(ui, img, fixed_image(r, k), big).clicked() {
                         cmds.push(Command::ZoomImage(Some(ZoomTarget::Derender(k))));
@@ -228,8 +229,8 @@ fn results(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
                 ui.weak("no ground truth for this input: no scores");
             }
             ui.separator();
-            let small = ((ui.available_width() / 6.0) - 80.0).clamp(72.0, 240.0);
-            let cols = ((ui.available_width() / (small + 80.0)).floor() as usize).max(1);
+            let small = ((ui.available_width() / 6.0) - CARD_EXTRA).clamp(72.0, 240.0);
+            let cols = ((ui.available_width() / (small + CARD_EXTRA)).floor() as usize).max(1);
             for (row, chunk) in view.images[n_fixed..].chunks(cols).enumerate() {
                 ui.horizontal(|ui| {
                     for (j, img) in chunk.iter().enumerate() {
@@ -242,6 +243,9 @@ fn results(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
             }
         });
 }
+
+/// Width of a card beside its image: the colour bar with its labels and the spacing, points.
+const CARD_EXTRA: f32 = 100.0;
 
 /// The k-th fixed image of a run: Y, X0 (when known), mean, std.
 pub(crate) fn fixed_image(r: &derender::RunResult, k: usize) -> &tactile_derender::image::Image {
