@@ -164,26 +164,39 @@ pub fn imprint_guidance(
     )?)
 }
 
-/// Per-pixel mean and population standard deviation of equally sized images (`None` for an empty list or images
-/// of different sizes).
+/// Per-pixel mean and population standard deviation of the in-contact depth over the samples that mark the pixel as
+/// contact (a valid depth), 0 where none does: the depth the samples agree on and how much they disagree about it.
+/// Whether a pixel is in contact at all is the contact probability's to say; averaging its zeros in would paint the
+/// rim of every contact at half its depth with a standard deviation of half the depth. `None` for an empty list or
+/// images of different sizes.
 pub fn mean_std(samples: &[Image]) -> Option<(Image, Image)> {
     let first = samples.first()?;
     let (w, h) = (first.width, first.height);
     if samples.iter().any(|s| (s.width, s.height) != (w, h)) {
         return None;
     }
-    let n = samples.len() as f64;
-    let mut mean = vec![0.0f64; w * h];
+    let mut count = vec![0u32; w * h];
+    let mut sum = vec![0.0f64; w * h];
     for s in samples {
-        for (m, &v) in mean.iter_mut().zip(&s.data) {
-            *m += f64::from(v) / n;
+        for ((c, m), &v) in count.iter_mut().zip(sum.iter_mut()).zip(&s.data) {
+            if crate::recon::is_valid_depth(v) {
+                *c += 1;
+                *m += f64::from(v);
+            }
         }
     }
+    let mean: Vec<f64> = sum
+        .iter()
+        .zip(&count)
+        .map(|(&m, &c)| if c > 0 { m / f64::from(c) } else { 0.0 })
+        .collect();
     let mut var = vec![0.0f64; w * h];
     for s in samples {
-        for ((q, &v), &m) in var.iter_mut().zip(&s.data).zip(&mean) {
-            let d = f64::from(v) - m;
-            *q += d * d / n;
+        for (((q, &v), &m), &c) in var.iter_mut().zip(&s.data).zip(&mean).zip(&count) {
+            if crate::recon::is_valid_depth(v) {
+                let d = f64::from(v) - m;
+                *q += d * d / f64::from(c);
+            }
         }
     }
     let mean = Image::from_vec(w, h, mean.iter().map(|&v| v as f32).collect())?;
@@ -197,11 +210,13 @@ mod tests {
 
     #[test]
     fn mean_and_std_of_known_images() {
-        let a = Image::from_vec(2, 1, vec![1.0, 0.0]).unwrap();
-        let b = Image::from_vec(2, 1, vec![3.0, 0.0]).unwrap();
+        // Depths 0.09 / 0.07 m (both in contact), 0.08 m / none (one), none / none.
+        let a = Image::from_vec(3, 1, vec![0.09, 0.08, 0.0]).unwrap();
+        let b = Image::from_vec(3, 1, vec![0.07, 0.0, 0.0]).unwrap();
         let (m, s) = mean_std(&[a.clone(), b]).unwrap();
-        assert_eq!(m.data, vec![2.0, 0.0]);
-        assert_eq!(s.data, vec![1.0, 0.0]);
+        let close = |x: &[f32], y: [f32; 3]| x.iter().zip(y).all(|(p, q)| (p - q).abs() < 1e-7);
+        assert!(close(&m.data, [0.08, 0.08, 0.0]), "{:?}", m.data);
+        assert!(close(&s.data, [0.01, 0.0, 0.0]), "{:?}", s.data);
         assert!(mean_std(&[]).is_none());
         assert!(mean_std(&[a, Image::filled(1, 1, 0.0)]).is_none());
     }
