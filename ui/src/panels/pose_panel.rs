@@ -6,7 +6,6 @@
 
 use egui::Color32;
 use egui_plot::{Legend, Line, Plot, PlotPoints, Points, VLine};
-use tactile_derender::sensor::Se2;
 
 use crate::app::WorkbenchApp;
 use crate::command::Command;
@@ -124,28 +123,63 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
 }
 
 fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, height: f32) {
-    // Room above the drawing for the legend (top right), so that it covers no outline: the drawn poses' extent,
-    // raised by 45 % of its height (the equal-aspect view then widens or heightens around it).
-    let poses = r
-        .report
-        .samples
+    // Every outline drawn, placed once: (legend name, colour, width, polylines in mm).
+    let mut outlines: Vec<(&str, Color32, f32, Vec<Vec<[f64; 2]>>)> = Vec::new();
+    for (k, s) in r.report.samples.iter().enumerate() {
+        let bold = highlight.is_some() && highlight == r.sample_of(k);
+        let (name, colour, width) = if bold {
+            ("highlighted sample", HIGHLIGHT_COLOUR, 2.5)
+        } else {
+            (
+                "sample estimates",
+                ESTIMATE_COLOUR.gamma_multiply(0.35),
+                1.0,
+            )
+        };
+        outlines.push((name, colour, width, placed_mm(&r.outline, &s.pose)));
+    }
+    if let Some(best) = r.single_estimate() {
+        let name = if r.checked_from_imprint {
+            "single-sample estimate (signature-checked; the imprint's proposal)"
+        } else if r.checked.is_some() {
+            "single-sample estimate (signature-checked)"
+        } else {
+            "best hypothesis"
+        };
+        outlines.push((name, ESTIMATE_COLOUR, 2.0, placed_mm(&r.outline, &best)));
+    }
+    if let Some(m) = &r.report.multi_sample {
+        let placed = placed_mm(&r.outline, &m.pose);
+        outlines.push(("multi-sample estimate", MULTI_COLOUR, 2.0, placed));
+    }
+    if let Some(b) = &r.report.baseline {
+        outlines.push((
+            "baseline",
+            BASELINE_COLOUR,
+            1.5,
+            placed_mm(&r.outline, &b.pose),
+        ));
+    }
+    if let Some(t) = &r.truth {
+        outlines.push(("true pose", TRUE_COLOUR, 2.0, placed_mm(&r.outline, t)));
+    }
+    let contacts: Vec<[f64; 2]> = r
+        .contacts
         .iter()
-        .map(|s| s.pose)
-        .chain(r.single_estimate())
-        .chain(r.report.multi_sample.map(|m| m.pose))
-        .chain(r.report.baseline.map(|b| b.pose))
-        .chain(r.truth);
-    let points: Vec<[f64; 2]> = poses
-        .flat_map(|q| placed_mm(&r.outline, &q))
-        .flatten()
-        .chain(r.contacts.iter().map(|c| [c[0] * 1e3, c[1] * 1e3]))
+        .map(|c| [c[0] * 1e3, c[1] * 1e3])
         .collect();
-    let span = |k: usize| {
-        points
+    // Room above the drawing for the legend (top right), so that it covers no outline: the drawing's extent,
+    // raised by 45 % of its height (the equal-aspect view then widens or heightens around it).
+    let points = || {
+        outlines
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
-                (a.min(p[k]), b.max(p[k]))
-            })
+            .flat_map(|o| o.3.iter().flatten())
+            .chain(&contacts)
+    };
+    let span = |k: usize| {
+        points().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p[k]), b.max(p[k]))
+        })
     };
     let ((x0, x1), (y0, y1)) = (span(0), span(1));
     let mut plot = Plot::new("pose_top_view")
@@ -162,18 +196,8 @@ fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, heigh
             .include_y(y1 + 0.45 * (y1 - y0).max(0.3 * (x1 - x0)));
     }
     plot.show(ui, |p| {
-        for (k, s) in r.report.samples.iter().enumerate() {
-            let bold = highlight.is_some() && highlight == r.sample_of(k);
-            for l in placed_mm(&r.outline, &s.pose) {
-                let (name, colour, width) = if bold {
-                    ("highlighted sample", HIGHLIGHT_COLOUR, 2.5)
-                } else {
-                    (
-                        "sample estimates",
-                        ESTIMATE_COLOUR.gamma_multiply(0.35),
-                        1.0,
-                    )
-                };
+        for (name, colour, width, lines) in outlines {
+            for l in lines {
                 p.line(
                     Line::new(name, PlotPoints::from(l))
                         .color(colour)
@@ -181,39 +205,6 @@ fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, heigh
                 );
             }
         }
-        let mut outline = |name: &str, pose: &Se2, colour: Color32, width: f32| {
-            for l in placed_mm(&r.outline, pose) {
-                p.line(
-                    Line::new(name, PlotPoints::from(l))
-                        .color(colour)
-                        .width(width),
-                );
-            }
-        };
-        if let Some(best) = r.single_estimate() {
-            let name = if r.checked_from_imprint {
-                "single-sample estimate (signature-checked; the imprint's proposal)"
-            } else if r.checked.is_some() {
-                "single-sample estimate (signature-checked)"
-            } else {
-                "best hypothesis"
-            };
-            outline(name, &best, ESTIMATE_COLOUR, 2.0);
-        }
-        if let Some(m) = &r.report.multi_sample {
-            outline("multi-sample estimate", &m.pose, MULTI_COLOUR, 2.0);
-        }
-        if let Some(b) = &r.report.baseline {
-            outline("baseline", &b.pose, BASELINE_COLOUR, 1.5);
-        }
-        if let Some(t) = &r.truth {
-            outline("true pose", t, TRUE_COLOUR, 2.0);
-        }
-        let contacts: Vec<[f64; 2]> = r
-            .contacts
-            .iter()
-            .map(|c| [c[0] * 1e3, c[1] * 1e3])
-            .collect();
         p.points(
             Points::new(
                 format!("contact points (sample {})", r.registered_sample),
