@@ -122,9 +122,12 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     }
 }
 
+/// One outline of the top view: legend name, colour, line width and its polylines placed in the world, mm.
+type Placed<'a> = (&'a str, Color32, f32, Vec<Vec<[f64; 2]>>);
+
 fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, height: f32) {
-    // Every outline drawn, placed once: (legend name, colour, width, polylines in mm).
-    let mut outlines: Vec<(&str, Color32, f32, Vec<Vec<[f64; 2]>>)> = Vec::new();
+    // Every outline drawn, placed once.
+    let mut outlines: Vec<Placed<'_>> = Vec::new();
     for (k, s) in r.report.samples.iter().enumerate() {
         let bold = highlight.is_some() && highlight == r.sample_of(k);
         let (name, colour, width) = if bold {
