@@ -277,6 +277,12 @@ impl Mesh {
         )
     }
 
+    /// The largest side of the bounding box, metres (the size that units and scale-to-fit are judged by).
+    pub fn largest_extent(&self) -> f64 {
+        let (lo, hi) = self.aabb();
+        f64::from((hi - lo).max_element())
+    }
+
     /// The mesh with every vertex mapped by `t` (e.g. `t_world_object`). Orientation is kept for proper rigid motions
     /// and positive scales; a reflection flips the winding back so normals stay outward.
     pub fn transformed(&self, t: &Affine3A) -> Self {
@@ -301,8 +307,7 @@ impl Mesh {
     pub fn apply_units(self, options: &LoadOptions, context: &str) -> Result<Self, MeshError> {
         let mut scale = options.units.to_metres();
         if let Some(size) = options.fit_to_size {
-            let (lo, hi) = self.aabb();
-            let extent = f64::from((hi - lo).max_element()) * scale;
+            let extent = self.largest_extent() * scale;
             if !(size.is_finite() && size > 0.0) || extent <= 0.0 {
                 return Err(MeshError::Invalid {
                     context: context.to_string(),

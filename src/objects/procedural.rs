@@ -232,8 +232,7 @@ fn round_um(m: f64) -> f64 {
 
 /// Scale uniformly so the largest bounding-box extent is `extent` metres.
 fn scale_to_extent(mesh: &Mesh, extent: f64) -> Mesh {
-    let (lo, hi) = mesh.aabb();
-    let largest = f64::from((hi - lo).max_element()).max(1e-9);
+    let largest = mesh.largest_extent().max(1e-9);
     mesh.transformed(&Affine3A::from_scale(Vec3::splat(
         (extent / largest) as f32,
     )))
@@ -580,8 +579,7 @@ mod tests {
             kinds.insert(o.kind);
             let again = generate(&config, i).unwrap();
             assert_eq!(o.mesh, again.mesh, "object {i} not reproducible");
-            let (lo, hi) = o.mesh.aabb();
-            let largest = f64::from((hi - lo).max_element());
+            let largest = o.mesh.largest_extent();
             assert!(
                 largest >= config.extent_m[0] - 1e-6 && largest <= config.extent_m[1] + 1e-6,
                 "{}: extent {largest}",

@@ -95,9 +95,7 @@ impl ObjectSpec {
             };
             let mesh = mesh::load(&path, &options)?.rest_on_table();
             let mut warnings = Vec::new();
-            let (lo, hi) = mesh.aabb();
-            let largest = f64::from((hi - lo).max_element());
-            if let Some(note) = size_note(largest, self.units, self.fit_size) {
+            if let Some(note) = size_note(mesh.largest_extent(), self.units, self.fit_size) {
                 warnings.push(format!("{}: {note}", path.display()));
             }
             let name = path

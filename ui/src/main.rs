@@ -54,10 +54,7 @@ fn object_units(path: &std::path::Path, units: Option<Units>) -> Units {
         };
         tactile_derender::mesh::load(path, &options)
             .ok()
-            .and_then(|m| {
-                let (lo, hi) = m.aabb();
-                likely_units(f64::from((hi - lo).max_element()), Units::M)
-            })
+            .and_then(|m| likely_units(m.largest_extent(), Units::M))
             .unwrap_or(Units::M)
     })
 }

@@ -221,8 +221,7 @@ fn gen(a: GenArgs) -> Result<()> {
         // An object of implausible size is not helped by either: say so.
         for name in &report.excluded_objects {
             let Ok(mesh) = set.mesh(name) else { continue };
-            let (lo, hi) = mesh.aabb();
-            let largest = f64::from((hi - lo).max_element());
+            let largest = mesh.largest_extent();
             if let Some(note) =
                 tactile_derender::objects::inspect::size_note(largest, Units::M, None)
             {
