@@ -28,6 +28,17 @@ fn settle(h: &mut Harness<'_, WorkbenchApp>) {
     h.run_ok();
 }
 
+/// Type `p` into the scene's mesh field, press "Load mesh file" and wait for the simulation.
+fn type_mesh_path(h: &mut Harness<'_, WorkbenchApp>, p: &std::path::Path) {
+    h.get_by_role_and_label(Role::TextInput, "Mesh").click();
+    h.run_ok();
+    h.get_by_role_and_label(Role::TextInput, "Mesh")
+        .type_text(&p.display().to_string());
+    h.run_ok();
+    h.get_by_label("Load mesh file").click();
+    settle(h);
+}
+
 fn shown_contact_pixels(h: &Harness<'_, WorkbenchApp>) -> usize {
     let Some(n) = h.state().contact_pixels() else {
         panic!("no simulation result: {:?}", h.state().errors);
@@ -247,15 +258,6 @@ fn a_typed_mesh_path_in_millimetres_replaces_the_object_and_a_missing_one_shows_
 
     let mut h = harness(WorkbenchApp::default());
     settle(&mut h);
-    let type_mesh_path = |h: &mut Harness<'_, WorkbenchApp>, p: &std::path::Path| {
-        h.get_by_role_and_label(Role::TextInput, "Mesh").click();
-        h.run_ok();
-        h.get_by_role_and_label(Role::TextInput, "Mesh")
-            .type_text(&p.display().to_string());
-        h.run_ok();
-        h.get_by_label("Load mesh file").click();
-        settle(h);
-    };
     type_mesh_path(&mut h, &path);
     assert_eq!(
         h.state().state.scene.object,
@@ -390,13 +392,7 @@ fn a_mesh_in_other_units_than_chosen_is_flagged() {
     let mut h = harness(WorkbenchApp::default());
     settle(&mut h);
     assert!(h.query_by_label_contains("Warning:").is_none());
-    h.get_by_role_and_label(Role::TextInput, "Mesh").click();
-    h.run_ok();
-    h.get_by_role_and_label(Role::TextInput, "Mesh")
-        .type_text(&path.display().to_string());
-    h.run_ok();
-    h.get_by_label("Load mesh file").click();
-    settle(&mut h);
+    type_mesh_path(&mut h, &path);
     assert!(
         h.query_by_label_contains(
             "is implausible for a pressed object; the file is probably in m "
