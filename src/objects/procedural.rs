@@ -579,6 +579,7 @@ mod tests {
             kinds.insert(o.kind);
             let again = generate(&config, i).unwrap();
             assert_eq!(o.mesh, again.mesh, "object {i} not reproducible");
+            let (lo, hi) = o.mesh.aabb();
             let largest = o.mesh.largest_extent();
             assert!(
                 largest >= config.extent_m[0] - 1e-6 && largest <= config.extent_m[1] + 1e-6,
