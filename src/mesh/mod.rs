@@ -283,6 +283,24 @@ impl Mesh {
         f64::from((hi - lo).max_element())
     }
 
+    /// The area-weighted centroid of the surface, metres (on any symmetry axis of the mesh; unlike the bounding
+    /// box's centre, which a five-fold star has off its axis). The bounding box's centre for a mesh without area.
+    pub fn surface_centroid(&self) -> glam::DVec3 {
+        let (mut sum, mut area) = (glam::DVec3::ZERO, 0.0);
+        for i in 0..self.triangles.len() {
+            let [a, b, c] = self.triangle(i).map(|v| v.as_dvec3());
+            let w = 0.5 * (b - a).cross(c - a).length();
+            sum += w * (a + b + c) / 3.0;
+            area += w;
+        }
+        if area > 0.0 {
+            sum / area
+        } else {
+            let (lo, hi) = self.aabb();
+            (0.5 * (lo + hi)).as_dvec3()
+        }
+    }
+
     /// The mesh with every vertex mapped by `t` (e.g. `t_world_object`). Orientation is kept for proper rigid motions
     /// and positive scales; a reflection flips the winding back so normals stay outward.
     pub fn transformed(&self, t: &Affine3A) -> Self {

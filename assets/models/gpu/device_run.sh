@@ -6,7 +6,7 @@
 #   b: the wider architecture of wide_config.json here (wide1 with every other setting spelled out), from scratch.
 # Everything ends by BUDGET_S seconds after the start; the EMA checkpoints and logs go to OUT.
 #
-#     [PAIRS=300000] [INFLATION=0.027,0.033] [MODELS="a b"|a|b] [B_INIT=b.safetensors] [SAVE_EVERY_S=120] \
+#     [PAIRS=300000] [INFLATION=0.027,0.033] [MODELS="a b"|a|b] [B_INIT=b.safetensors] [LR_B=3e-4] [SAVE_EVERY_S=120] \
 #         assets/models/gpu/device_run.sh TND OUT BUDGET_S
 set -u
 tnd=$1 out=$2 budget=$3
@@ -47,7 +47,7 @@ if [ "$models" != a ]; then
     # B_INIT continues an earlier run b (its checkpoint holds the wide config); otherwise b starts from scratch.
     if [ -n "${B_INIT:-}" ]; then start=(--init "$B_INIT"); else start=(--config "$here/wide_config.json"); fi
     python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" "${start[@]}" \
-        --out "$out/b" --deadline-s "$left" --lr 3e-4 --seed 2 --batch "${BATCH:-256}" --capacity 300000 \
+        --out "$out/b" --deadline-s "$left" --lr "${LR_B:-3e-4}" --seed 2 --batch "${BATCH:-256}" --capacity 300000 \
         --save-every-s "$save" > "$out/b.out" 2>&1 &
     pb=$!
 fi

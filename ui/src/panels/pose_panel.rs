@@ -344,6 +344,26 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
     }
 }
 
+/// Grid steps from the 1-2-5 series, each dividing the next (1, 2, 10 · 10^k; 2, 10, 20; 5, 10, 50): egui_plot's
+/// default powers of ten leave an axis spanning a few millimetres with one label ("0"), its 1 mm steps too close to
+/// label and its 10 mm steps outside the range.
+fn steps_1_2_10(input: egui_plot::GridInput) -> [f64; 3] {
+    let base = input.base_step_size.abs().max(f64::MIN_POSITIVE);
+    let decade = 10f64.powf(base.log10().floor());
+    // Per leading digit of the finest step: the three steps, in decades.
+    let series = [
+        [1.0, 2.0, 10.0],
+        [2.0, 10.0, 20.0],
+        [5.0, 10.0, 50.0],
+        [10.0, 20.0, 100.0],
+    ];
+    let k = [1.0, 2.0, 5.0]
+        .iter()
+        .position(|m| m * decade >= base)
+        .unwrap_or(3);
+    series[k].map(|m| m * decade)
+}
+
 /// KDE of the position (mm) or yaw (degrees) errors, the samples as a rug, the baseline as a point; hovering picks
 /// the nearest sample.
 fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Option<usize>) {
@@ -377,6 +397,7 @@ fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Op
     let response = Plot::new(id)
         .height(ui.available_height().max(180.0))
         .x_axis_label(label)
+        .x_grid_spacer(egui_plot::uniform_grid_spacer(steps_1_2_10))
         .y_axis_label("density")
         .legend(Legend::default())
         .show(ui, |p| {
@@ -421,5 +442,38 @@ fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Op
             .filter_map(|(k, s)| value(s).map(|v| (k, (v - pos.x).abs())))
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .and_then(|(k, _)| r.sample_of(k));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::steps_1_2_10;
+
+    #[test]
+    fn grid_steps_follow_1_2_5_and_divide_each_other() {
+        let steps = |base: f64| {
+            steps_1_2_10(egui_plot::GridInput {
+                bounds: (-1.0, 4.0),
+                base_step_size: base,
+            })
+        };
+        let close =
+            |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9 * y);
+        assert!(close(steps(0.15), [0.2, 1.0, 2.0]), "{:?}", steps(0.15));
+        assert!(close(steps(0.7), [1.0, 2.0, 10.0]), "{:?}", steps(0.7));
+        assert!(close(steps(3.0), [5.0, 10.0, 50.0]), "{:?}", steps(3.0));
+        assert!(close(steps(1.0), [1.0, 2.0, 10.0]), "{:?}", steps(1.0));
+        for k in -40..40 {
+            let base = 1.37f64.powi(k);
+            let s = steps(base);
+            assert!(s[0] >= base * (1.0 - 1e-12), "{base}: {s:?}");
+            for w in s.windows(2) {
+                let ratio = w[1] / w[0];
+                assert!(
+                    (ratio - ratio.round()).abs() < 1e-9 && ratio >= 2.0 - 1e-9,
+                    "{base}: {s:?}"
+                );
+            }
+        }
     }
 }
