@@ -451,3 +451,58 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
         "{e_pooled} mm pooled, {e_alone} mm alone"
     );
 }
+
+/// `estimate_pose` (tnd pose, the workbench's Pose tab) counts its steps as `pose_steps` says, the same numbers with
+/// or without a measured signature (no baseline then), and `pose_stage` names the step in progress.
+#[test]
+fn pose_estimate_steps_are_counted_and_named() {
+    use tactile_derender::pipeline::{
+        estimate_pose, pose_stage, pose_steps, ObjectSpec, PoseInput,
+    };
+    let src = source();
+    let sim = tactile_derender::sim::Simulator::new(SimConfig::default()).unwrap();
+    let pair = src.pair(0).unwrap();
+    let object = ObjectSpec::library("builtin", &pair.object).load().unwrap();
+    let samples = [pair.target.clone(), pair.target.clone()];
+    for signature in [Some(&pair.signature), None] {
+        let input = PoseInput {
+            t_world_camera: pair.t_world_camera,
+            samples: &samples,
+            imprint: &pair.imprint,
+            signature,
+            truth: Some(pair.object_pose),
+        };
+        let mut seen = Vec::new();
+        estimate_pose(
+            &object,
+            &sim,
+            &input,
+            &EvalConfig::default(),
+            7,
+            &mut |d, t| {
+                seen.push((d, t));
+                true
+            },
+        )
+        .unwrap();
+        // First registration, 2 samples, the baseline (counted when absent too), the multi-sample estimate.
+        let total = pose_steps(2);
+        assert_eq!(total, 5);
+        let expected: Vec<_> = if signature.is_some() {
+            (1..=total).map(|d| (d, total)).collect()
+        } else {
+            [1, 2, 3, 5].map(|d| (d, total)).to_vec()
+        };
+        assert_eq!(seen, expected, "signature: {}", signature.is_some());
+    }
+    assert_eq!(
+        pose_stage(0, 2),
+        "registering the first sample from random starts"
+    );
+    assert_eq!(pose_stage(2, 2), "registering sample 2 of 2");
+    assert_eq!(pose_stage(3, 2), "registering the threshold baseline");
+    assert!(pose_stage(4, 2).starts_with("multi-sample estimate"));
+    // One sample: no multi-sample step.
+    assert_eq!(pose_steps(1), 3);
+    assert_eq!(pose_stage(3, 1), "finishing");
+}

@@ -30,7 +30,10 @@ pub mod pose;
 
 pub use derender::{derender, imprint_guidance, mean_std, DerenderConfig, Derendered};
 pub use object::{LoadedObject, ObjectSpec};
-pub use pose::{estimate_pose, write_fit_figure, write_pose_geometry, PoseEstimate, PoseInput};
+pub use pose::{
+    estimate_pose, pose_stage, pose_steps, write_fit_figure, write_pose_geometry, PoseEstimate,
+    PoseInput,
+};
 
 use std::path::PathBuf;
 

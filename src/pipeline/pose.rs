@@ -138,11 +138,11 @@ pub fn estimate_pose(
         }
         None => (None, false),
     };
-    let multi = usize::from(input.samples.len() > 1);
-    let total = 2 + input.samples.len() + multi;
+    let total = pose_steps(input.samples.len());
     if !progress(1, total) {
         return Err(PipelineError::Cancelled);
     }
+    let n = input.samples.len();
     let sig = Signature {
         t_world_camera: input.t_world_camera,
         samples: &samples,
@@ -151,8 +151,11 @@ pub fn estimate_pose(
         init: hypotheses.first().map(|h| h.pose),
         measured: input.signature.map(|s| (s, input.imprint)),
     };
+    // The baseline's step is counted whether or not there is one (no signature), so that the steps keep the
+    // numbers [`pose_stage`] names.
+    let no_baseline = usize::from(sig.baseline.is_none());
     let report = analyse_with_progress(&evaluator, &model, &ctx, &sig, seed, &mut |done, _| {
-        progress(1 + done, total)
+        progress(1 + done + no_baseline * usize::from(done > n), total)
     })
     .map_err(|e| match e {
         EvalError::Cancelled => PipelineError::Cancelled,
@@ -168,6 +171,25 @@ pub fn estimate_pose(
         report,
         anchor_shift_m,
     })
+}
+
+/// The number of progress steps of [`estimate_pose`] for `samples` samples: the first registration (K starts and the
+/// signature check), each sample, the baseline and, from two samples, the multi-sample estimate.
+pub fn pose_steps(samples: usize) -> usize {
+    2 + samples + usize::from(samples > 1)
+}
+
+/// What [`estimate_pose`] is doing once `done` of its [`pose_steps`] are done, for progress displays.
+pub fn pose_stage(done: usize, samples: usize) -> String {
+    match done {
+        0 => "registering the first sample from random starts".into(),
+        d if d <= samples => format!("registering sample {d} of {samples}"),
+        d if d == samples + 1 => "registering the threshold baseline".into(),
+        d if d == samples + 2 && samples > 1 => {
+            "multi-sample estimate: registering the samples' consensus".into()
+        }
+        _ => "finishing".into(),
+    }
 }
 
 /// One file written by [`write_pose_geometry`].

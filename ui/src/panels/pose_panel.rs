@@ -31,8 +31,16 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
                     ui.add(
                         egui::ProgressBar::new(done as f32 / total.max(1) as f32)
                             .desired_width(220.0)
-                            .text(format!("registered {done} / {total}")),
+                            .text(format!("{done} / {total}")),
                     );
+                    // The step in progress, by name (the last one, the multi-sample estimate, is the longest).
+                    let samples = app
+                        .analysis
+                        .derender
+                        .result
+                        .as_ref()
+                        .map_or(0, |r| r.samples.len());
+                    ui.label(tactile_derender::pipeline::pose_stage(done, samples));
                 }
                 None => {
                     ui.label("registering the samples…");
