@@ -240,4 +240,43 @@ fn sample_uses_the_bundled_model_by_default_and_decodes_no_contact_to_zero() {
     // Every pixel is either "no contact" (exactly 0) or an in-contact depth at or beyond the cut.
     assert!(samples.data.iter().all(|&d| d == 0.0 || d >= cut));
     assert!(samples.data.contains(&0.0));
+
+    // `--model wide`, from a directory without such a file: the bundled wide model, which is the committed file's
+    // weights (f16 on disk, f32 in memory) and its wider config.
+    let wide = DiffusionModel::load(Path::new("wide")).unwrap();
+    let file = DiffusionModel::load(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/assets/models/wide.safetensors"
+    )))
+    .unwrap();
+    assert_eq!(wide.config(), file.config());
+    assert_eq!(wide.config().block_out_channels, vec![32, 64, 96, 96]);
+    assert_ne!(wide.config(), model.config());
+    let out = dir.path().join("out_wide");
+    let o = Command::new(env!("CARGO_BIN_EXE_tnd"))
+        .current_dir(dir.path())
+        .args([
+            "sample",
+            "--model",
+            "wide",
+            "--imprint",
+            ip.to_str().unwrap(),
+        ])
+        .args([
+            "--n",
+            "1",
+            "--sampler",
+            "ddim",
+            "--steps",
+            "3",
+            "--seed",
+            "1",
+        ])
+        .args(["--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let samples = npy::read(&out.join("samples.npy")).unwrap();
+    assert_eq!(samples.shape, vec![1, 64, 64]);
+    assert!(samples.data.iter().all(|&d| d == 0.0 || d >= cut));
 }
