@@ -42,7 +42,7 @@ pub const BUNDLED_MODEL: &[u8] = include_bytes!("../../assets/models/default.saf
 pub const BUNDLED_MODEL_NAME: &str = "default";
 
 /// The bundled wide model (`assets/models/wide.safetensors`, 5.4 MB in f16): 2.5x the default's parameters, better
-/// depth on real meshes, 1.6x the sampling time (`assets/models/README.md`, session 12).
+/// depth on real meshes, about twice the sampling time (`assets/models/README.md`, session 12).
 pub const BUNDLED_WIDE_MODEL: &[u8] = include_bytes!("../../assets/models/wide.safetensors");
 
 /// The name that selects [`BUNDLED_WIDE_MODEL`] (`--model wide`).

@@ -123,7 +123,7 @@ fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>)
             .radio(wide, "bundled wide")
             .on_hover_text(
                 "2.5× the default's parameters: better depth and multi-sample pose on real meshes (SSIM 0.81 \
-                 against 0.80), the single-sample pose within its noise, 1.6× the sampling time",
+                 against 0.80), the single-sample pose within its noise, about twice the sampling time",
             )
             .clicked()
             && !wide
