@@ -241,24 +241,24 @@ fn sample_uses_the_bundled_model_by_default_and_decodes_no_contact_to_zero() {
     assert!(samples.data.iter().all(|&d| d == 0.0 || d >= cut));
     assert!(samples.data.contains(&0.0));
 
-    // `--model wide`, from a directory without such a file: the bundled wide model, which is the committed file's
-    // weights (f16 on disk, f32 in memory) and its wider config.
-    let wide = DiffusionModel::load(Path::new("wide")).unwrap();
+    // `--model small`, from a directory without such a file: the bundled small model, which is the committed
+    // file's weights and its narrower config (the default is stored in f16 and read as f32).
+    let small = DiffusionModel::load(Path::new("small")).unwrap();
     let file = DiffusionModel::load(Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/assets/models/wide.safetensors"
+        "/assets/models/small.safetensors"
     )))
     .unwrap();
-    assert_eq!(wide.config(), file.config());
-    assert_eq!(wide.config().block_out_channels, vec![32, 64, 96, 96]);
-    assert_ne!(wide.config(), model.config());
-    let out = dir.path().join("out_wide");
+    assert_eq!(small.config(), file.config());
+    assert_eq!(small.config().block_out_channels, vec![16, 32, 64, 64]);
+    assert_eq!(model.config().block_out_channels, vec![32, 64, 96, 96]);
+    let out = dir.path().join("out_small");
     let o = Command::new(env!("CARGO_BIN_EXE_tnd"))
         .current_dir(dir.path())
         .args([
             "sample",
             "--model",
-            "wide",
+            "small",
             "--imprint",
             ip.to_str().unwrap(),
         ])

@@ -35,23 +35,23 @@ pub fn read_tensors(path: &Path) -> Result<TensorFile, ModelError> {
 }
 
 /// The bundled default model, compiled into the binary so that `tnd` and the workbench find it from any working
-/// directory (`assets/models/default.safetensors` at build time; 4.3 MB).
+/// directory (`assets/models/default.safetensors` at build time; 5.4 MB in f16, 2.71 M parameters).
 pub const BUNDLED_MODEL: &[u8] = include_bytes!("../../assets/models/default.safetensors");
 
 /// The name that selects [`BUNDLED_MODEL`] wherever a checkpoint path is asked for (`--model default`).
 pub const BUNDLED_MODEL_NAME: &str = "default";
 
-/// The bundled wide model (`assets/models/wide.safetensors`, 5.4 MB in f16): 2.5x the default's parameters, better
-/// depth on real meshes, about twice the sampling time (`assets/models/README.md`, session 12).
-pub const BUNDLED_WIDE_MODEL: &[u8] = include_bytes!("../../assets/models/wide.safetensors");
+/// The bundled small model (`assets/models/small.safetensors`, 4.3 MB, 1.09 M parameters; the default until session
+/// 12): about twice as fast to sample, a little worse depth on real meshes (`assets/models/README.md`).
+pub const BUNDLED_SMALL_MODEL: &[u8] = include_bytes!("../../assets/models/small.safetensors");
 
-/// The name that selects [`BUNDLED_WIDE_MODEL`] (`--model wide`).
-pub const BUNDLED_WIDE_MODEL_NAME: &str = "wide";
+/// The name that selects [`BUNDLED_SMALL_MODEL`] (`--model small`).
+pub const BUNDLED_SMALL_MODEL_NAME: &str = "small";
 
 /// The bundled models by name: `(name, bytes)`.
 pub const BUNDLED_MODELS: [(&str, &[u8]); 2] = [
     (BUNDLED_MODEL_NAME, BUNDLED_MODEL),
-    (BUNDLED_WIDE_MODEL_NAME, BUNDLED_WIDE_MODEL),
+    (BUNDLED_SMALL_MODEL_NAME, BUNDLED_SMALL_MODEL),
 ];
 
 /// The bundled model called `name` ([`BUNDLED_MODELS`]) as tensors and its config (from its metadata), if there is
@@ -136,7 +136,7 @@ pub fn write_tensors(
 }
 
 /// Locate weights and config for `path` (file or diffusers directory) and parse the config. The names `default` and
-/// `wide` (when no such file exists) are the bundled models ([`BUNDLED_MODELS`]).
+/// `small` (when no such file exists) are the bundled models ([`BUNDLED_MODELS`]).
 pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
     if !path.exists() {
         if let Some(found) = path.to_str().and_then(bundled_named) {

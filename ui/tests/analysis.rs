@@ -335,15 +335,15 @@ fn without_a_checkpoint_the_bundled_model_is_used() {
     assert!(h
         .query_by_label_contains(&format!("using {shown}"))
         .is_some());
-    // The bundled wide model is one click away, and named as such.
-    h.get_by_label("bundled wide").click();
+    // The bundled small model is one click away, and named as such.
+    h.get_by_label("bundled small").click();
     h.run_ok();
     assert_eq!(
         h.state().state.model.path.as_deref(),
-        Some(std::path::Path::new("wide"))
+        Some(std::path::Path::new("small"))
     );
     assert!(h
-        .query_by_label_contains("using the bundled wide model")
+        .query_by_label_contains("using the bundled small model")
         .is_some());
     h.get_by_label("bundled default").click();
     h.run_ok();

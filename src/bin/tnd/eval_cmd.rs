@@ -25,8 +25,8 @@ use tactile_derender::uncertainty::analysis::{analyse, Signature};
 
 #[derive(Args, Debug)]
 pub struct EvalArgs {
-    /// The generator: a model checkpoint (default: the bundled model; `wide`: the bundled wide one), or
-    /// `ground-truth` (the true X0: tests everything but the model).
+    /// The generator: a model checkpoint (default: the bundled model; `small`: the bundled small one, twice as fast),
+    /// or `ground-truth` (the true X0: tests everything but the model).
     #[arg(long, default_value = "default")]
     pub model: String,
     /// Dataset directory (`tnd dataset gen`).

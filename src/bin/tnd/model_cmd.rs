@@ -39,7 +39,7 @@ pub enum ModelCommand {
 
 #[derive(Args, Debug)]
 pub struct ExportArgs {
-    /// Checkpoint to export (default: the bundled model; `wide`: the bundled wide one).
+    /// Checkpoint to export (default: the bundled model; `small`: the bundled small one, twice as fast).
     #[arg(long, default_value = "default")]
     pub model: PathBuf,
     /// The diffusers folder to write (created if missing).
@@ -59,7 +59,7 @@ pub struct ImportArgs {
 
 #[derive(Args, Debug)]
 pub struct DiagnoseArgs {
-    /// Checkpoint (default: the bundled model; `wide`: the bundled wide one).
+    /// Checkpoint (default: the bundled model; `small`: the bundled small one, twice as fast).
     #[arg(long, default_value = "default")]
     pub model: PathBuf,
     /// Dataset directory.

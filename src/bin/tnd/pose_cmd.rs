@@ -26,8 +26,8 @@ use super::progress;
 
 #[derive(Args, Debug)]
 pub struct PoseArgs {
-    /// The generator: a model checkpoint (default: the bundled model; `wide`: the bundled wide one), or
-    /// `ground-truth` (then --target is the "generated" X0).
+    /// The generator: a model checkpoint (default: the bundled model; `small`: the bundled small one, twice as fast),
+    /// or `ground-truth` (then --target is the "generated" X0).
     #[arg(long, default_value = "default")]
     pub model: String,
     /// The imprint Y = R − S (metres, .npy at the model resolution).

@@ -18,8 +18,8 @@ use tactile_derender::pipeline::{self, DerenderConfig};
 
 #[derive(Args, Debug)]
 pub struct SampleArgs {
-    /// Model checkpoint (.safetensors with config, or a diffusers directory); default: the bundled model; `wide`:
-    /// the bundled wide one.
+    /// Model checkpoint (.safetensors with config, or a diffusers directory); default: the bundled model; `small`:
+    /// the bundled small one, twice as fast.
     #[arg(long, default_value = "default")]
     pub model: PathBuf,
     /// Imprint Y as a 2-D .npy array in metres, at the model's resolution.

@@ -117,19 +117,19 @@ fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>)
         if ui.radio(bundled, "bundled default").clicked() && !bundled {
             cmds.push(Command::SetModel(ModelSettings { path: None }));
         }
-        let wide_name = tactile_derender::model::checkpoint::BUNDLED_WIDE_MODEL_NAME;
-        let wide = app.state.model.path.as_deref() == Some(std::path::Path::new(wide_name));
+        let small_name = tactile_derender::model::checkpoint::BUNDLED_SMALL_MODEL_NAME;
+        let small = app.state.model.path.as_deref() == Some(std::path::Path::new(small_name));
         if ui
-            .radio(wide, "bundled wide")
+            .radio(small, "bundled small")
             .on_hover_text(
-                "2.5× the default's parameters: better depth and multi-sample pose on real meshes (SSIM 0.81 \
-                 against 0.80), the single-sample pose within its noise, about twice the sampling time",
+                "the default until 2026-11-26: about twice as fast to sample, a little worse depth on real meshes \
+                 (SSIM 0.80 against 0.81), the same single-sample pose within its noise",
             )
             .clicked()
-            && !wide
+            && !small
         {
             cmds.push(Command::SetModel(ModelSettings {
-                path: Some(wide_name.into()),
+                path: Some(small_name.into()),
             }));
         }
         if let Some(path) = path_submit(
