@@ -54,13 +54,15 @@ pub const BUNDLED_MODELS: [(&str, &[u8]); 2] = [
     (BUNDLED_SMALL_MODEL_NAME, BUNDLED_SMALL_MODEL),
 ];
 
-/// The bundled model called `name` ([`BUNDLED_MODELS`]) as tensors and its config (from its metadata), if there is
-/// one.
-pub fn bundled_named(name: &str) -> Option<Result<(TensorFile, UNet2DConfig), ModelError>> {
+/// The bundled model that `path` names ([`BUNDLED_MODELS`]): a bare name such as `small` that is not also an
+/// existing file (a file of that name wins).
+pub fn bundled_name(path: &Path) -> Option<(&'static str, &'static [u8])> {
+    let name = path.to_str()?;
     BUNDLED_MODELS
         .iter()
         .find(|(n, _)| *n == name)
-        .map(|(n, bytes)| parse_bundled(n, bytes))
+        .filter(|_| !path.exists())
+        .copied()
 }
 
 fn parse_bundled(name: &str, bytes: &[u8]) -> Result<(TensorFile, UNet2DConfig), ModelError> {
@@ -138,10 +140,8 @@ pub fn write_tensors(
 /// Locate weights and config for `path` (file or diffusers directory) and parse the config. The names `default` and
 /// `small` (when no such file exists) are the bundled models ([`BUNDLED_MODELS`]).
 pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
-    if !path.exists() {
-        if let Some(found) = path.to_str().and_then(bundled_named) {
-            return found;
-        }
+    if let Some((name, bytes)) = bundled_name(path) {
+        return parse_bundled(name, bytes);
     }
     let weights = if path.is_dir() {
         path.join("diffusion_pytorch_model.safetensors")

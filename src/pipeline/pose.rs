@@ -138,11 +138,11 @@ pub fn estimate_pose(
         }
         None => (None, false),
     };
-    let total = pose_steps(input.samples.len());
+    let n = input.samples.len();
+    let total = pose_steps(n);
     if !progress(1, total) {
         return Err(PipelineError::Cancelled);
     }
-    let n = input.samples.len();
     let sig = Signature {
         t_world_camera: input.t_world_camera,
         samples: &samples,

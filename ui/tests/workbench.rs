@@ -28,14 +28,24 @@ fn settle(h: &mut Harness<'_, WorkbenchApp>) {
     h.run_ok();
 }
 
-/// Type `p` into the scene's mesh field, press "Load mesh file" and wait for the simulation.
-fn type_mesh_path(h: &mut Harness<'_, WorkbenchApp>, p: &std::path::Path) {
-    h.get_by_role_and_label(Role::TextInput, "Mesh").click();
+/// Type `p` into the text field `field` and press `button`.
+fn type_path_and_press(
+    h: &mut Harness<'_, WorkbenchApp>,
+    field: &str,
+    p: &std::path::Path,
+    button: &str,
+) {
+    h.get_by_role_and_label(Role::TextInput, field).click();
     h.run_ok();
-    h.get_by_role_and_label(Role::TextInput, "Mesh")
+    h.get_by_role_and_label(Role::TextInput, field)
         .type_text(&p.display().to_string());
     h.run_ok();
-    h.get_by_label("Load mesh file").click();
+    h.get_by_label(button).click();
+}
+
+/// Type `p` into the scene's mesh field, press "Load mesh file" and wait for the simulation.
+fn type_mesh_path(h: &mut Harness<'_, WorkbenchApp>, p: &std::path::Path) {
+    type_path_and_press(h, "Mesh", p, "Load mesh file");
     settle(h);
 }
 
@@ -106,13 +116,7 @@ fn saving_then_opening_a_session_restores_the_state() {
     let saved = h.state().state.clone();
     assert!((saved.scene.press - 0.0045).abs() < 1e-9);
 
-    let field = h.get_by_role_and_label(Role::TextInput, "Session file");
-    field.click();
-    h.run_ok();
-    h.get_by_role_and_label(Role::TextInput, "Session file")
-        .type_text(&path.display().to_string());
-    h.run_ok();
-    h.get_by_label("Save").click();
+    type_path_and_press(&mut h, "Session file", &path, "Save");
     h.run_ok();
     assert!(path.exists(), "no session written: {:?}", h.state().errors);
 
@@ -120,13 +124,7 @@ fn saving_then_opening_a_session_restores_the_state() {
     settle(&mut h);
     assert_eq!(h.state().state, State::default());
 
-    h.get_by_role_and_label(Role::TextInput, "Session file")
-        .click();
-    h.run_ok();
-    h.get_by_role_and_label(Role::TextInput, "Session file")
-        .type_text(&path.display().to_string());
-    h.run_ok();
-    h.get_by_label("Open").click();
+    type_path_and_press(&mut h, "Session file", &path, "Open");
     settle(&mut h);
     assert_eq!(h.state().state, saved);
     assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
@@ -141,13 +139,7 @@ fn opening_a_corrupt_session_shows_an_error_and_changes_nothing() {
     settle(&mut h);
     let before = h.state().state.clone();
     let pixels = shown_contact_pixels(&h);
-    h.get_by_role_and_label(Role::TextInput, "Session file")
-        .click();
-    h.run_ok();
-    h.get_by_role_and_label(Role::TextInput, "Session file")
-        .type_text(&path.display().to_string());
-    h.run_ok();
-    h.get_by_label("Open").click();
+    type_path_and_press(&mut h, "Session file", &path, "Open");
     settle(&mut h);
     assert!(
         h.query_by_label_contains("broken.json: not a valid session file")
@@ -320,12 +312,7 @@ fn a_dataset_pair_as_measurement_places_the_scene_and_calibrates_the_inflation()
     state.calibration.threshold = 0.0002;
     let mut h = harness(WorkbenchApp::with_state(state));
     settle(&mut h);
-    h.get_by_role_and_label(Role::TextInput, "Imprint").click();
-    h.run_ok();
-    h.get_by_role_and_label(Role::TextInput, "Imprint")
-        .type_text(&data.display().to_string());
-    h.run_ok();
-    h.get_by_label("Load imprint").click();
+    type_path_and_press(&mut h, "Imprint", &data, "Load imprint");
     h.run_ok();
     assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
     assert!(h

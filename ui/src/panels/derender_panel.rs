@@ -163,16 +163,9 @@ fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>)
             format!(" · loaded, {w}x{h} px, predicts {predicts}")
         })
         .unwrap_or_default();
-    let shown = match p.to_str() {
-        Some(name)
-            if !p.exists()
-                && tactile_derender::model::checkpoint::BUNDLED_MODELS
-                    .iter()
-                    .any(|(n, _)| *n == name) =>
-        {
-            format!("the bundled {name} model")
-        }
-        _ => p.display().to_string(),
+    let shown = match tactile_derender::model::checkpoint::bundled_name(&p) {
+        Some((name, _)) => format!("the bundled {name} model"),
+        None => p.display().to_string(),
     };
     ui.weak(format!("using {shown}{loaded}"));
 }
