@@ -9,6 +9,7 @@ use std::path::Path;
 use tactile_derender::dataset::import_recording::{
     import_recording, PoseSource, RecordingImportConfig,
 };
+use tactile_derender::dataset::npz::NpzIndex;
 use tactile_derender::dataset::{Dataset, SplitName};
 use tactile_derender::image::Image;
 use tactile_derender::metrics::evaluate::{EvalConfig, Evaluator, GroundTruthGenerator};
@@ -384,11 +385,38 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
         "--model",
         "ground-truth",
         "--no-signature-check",
+        "--save-samples",
+        "saved",
     ]);
     assert_eq!(eval["split"], "unseen_objects");
     assert_eq!(eval["pairs"].as_u64(), Some(pairs));
     assert!(eval["failed"].as_array().unwrap().is_empty());
     assert!(eval["model"]["position_mm"]["median"].as_f64().unwrap() < 0.05);
+    // Every pair's samples are saved beside its truth; the ground-truth generator's one sample is the true X0.
+    for i in 0..pairs {
+        let path = dir.path().join(format!("saved/unseen_objects/{i}.npz"));
+        let bytes = std::fs::read(&path).unwrap();
+        let index = NpzIndex::read(std::io::Cursor::new(bytes.as_slice()), &path).unwrap();
+        let data = |name: &str| {
+            let m = index
+                .get(name)
+                .unwrap_or_else(|| panic!("{name} in {path:?}"));
+            (
+                m.shape.clone(),
+                &bytes[m.data_offset as usize..(m.data_offset + m.data_len) as usize],
+            )
+        };
+        let (target_shape, target) = data("target");
+        let (samples_shape, samples) = data("samples");
+        assert_eq!(samples_shape, [&[1][..], &target_shape[..]].concat());
+        assert_eq!(samples, target);
+        assert!(
+            target.chunks(4).any(|v| v != [0; 4]),
+            "pair {i}: no contact saved"
+        );
+        assert_eq!(data("imprint").0, target_shape);
+        assert_eq!(data("object_pose").0, [3]);
+    }
     // The saved run in the paper's layout: one row for the run (named here), the baseline, θ in radians.
     std::fs::write(dir.path().join("gt.json"), format!("{eval}\n")).unwrap();
     let out = output(&["eval", "--tables-from", "truth=gt.json"]);

@@ -58,6 +58,11 @@ pub enum EvalError {
         #[source]
         source: crate::sim::SimError,
     },
+    #[error("{}: {message}", path.display())]
+    Write {
+        path: std::path::PathBuf,
+        message: String,
+    },
     #[error("cancelled")]
     Cancelled,
 }
@@ -538,7 +543,7 @@ impl Evaluator {
         generator: &dyn Generator,
         i: usize,
         pair_seed: u64,
-        observe: &mut dyn FnMut(usize, &EvalPair, &Image),
+        observe: &mut dyn FnMut(usize, &EvalPair, &[Image]),
     ) -> Result<PairRecord, FailedPair> {
         let pair = source.pair(i).map_err(|e| FailedPair {
             name: format!("#{i}"),
@@ -557,7 +562,7 @@ impl Evaluator {
         let first = samples
             .first()
             .ok_or_else(|| fail(EvalError::Generator("returned no sample".into())))?;
-        observe(i, &pair, first);
+        observe(i, &pair, &samples);
         let model_reg = self
             .register_pair(&pair, first, std::slice::from_ref(first), ctx, pair_seed)
             .map_err(fail)?;
@@ -643,15 +648,15 @@ impl Evaluator {
         self.evaluate_observed(source, generator, seed, progress, &mut |_, _, _| {})
     }
 
-    /// [`Self::evaluate`], showing `observe(i, pair, first_sample)` every pair the generator produced a sample for
-    /// (e.g. to log it).
+    /// [`Self::evaluate`], showing `observe(i, pair, samples)` every pair the generator produced samples for (e.g. to
+    /// log or save them; the first is the one the single-sample rows score).
     pub fn evaluate_observed(
         &self,
         source: &dyn PairSource,
         generator: &dyn Generator,
         seed: u64,
         progress: &mut dyn FnMut(usize, usize) -> bool,
-        observe: &mut dyn FnMut(usize, &EvalPair, &Image),
+        observe: &mut dyn FnMut(usize, &EvalPair, &[Image]),
     ) -> Result<EvalReport, EvalError> {
         let mut records = Vec::with_capacity(source.len());
         let mut failed = Vec::new();

@@ -2,7 +2,8 @@
 //! depth against the true one ([`depth`], [`ssim`]) and pose metrics with the objects' symmetry exclusions
 //! ([`pose`]); [`summary`] aggregates them into mean/std rows; [`evaluate`] runs the whole loop over a
 //! [`evaluate::PairSource`] ([`sources`]: dataset splits, simulated pairs) with a [`evaluate::Generator`];
-//! [`paper_table`] sets runs side by side in the paper's layout and units.
+//! [`paper_table`] sets runs side by side in the paper's layout and units; [`saved_samples`] keeps each pair's
+//! samples for analysis.
 
 pub mod breakdown;
 pub mod depth;
@@ -11,6 +12,7 @@ pub mod hypotheses;
 pub mod model_generator;
 pub mod paper_table;
 pub mod pose;
+pub mod saved_samples;
 pub mod sources;
 pub mod ssim;
 pub mod summary;

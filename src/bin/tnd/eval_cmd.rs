@@ -16,6 +16,7 @@ use tactile_derender::metrics::evaluate::{
 };
 use tactile_derender::metrics::model_generator::ModelGenerator;
 use tactile_derender::metrics::paper_table::{paper_tables, PaperEntry};
+use tactile_derender::metrics::saved_samples::save_samples;
 use tactile_derender::metrics::sources::DatasetSource;
 use tactile_derender::metrics::MeanStd;
 use tactile_derender::model::{DiffusionModel, GuidanceConfig, SamplerConfig};
@@ -99,6 +100,10 @@ pub struct EvalArgs {
     /// Also write every pair's scores (both methods, estimated and true pose) as JSON lines to this file.
     #[arg(long)]
     pub records: Option<PathBuf>,
+    /// Also save every scored pair's imprint, signature, true X0 and model samples (all --pose-samples of them) as
+    /// DIR/<split>/<index>.npz, metres, for analysis in numpy (README, "Evaluation").
+    #[arg(long, value_name = "DIR")]
+    pub save_samples: Option<PathBuf>,
     /// The rerun recording has one step per pair on the "pair" timeline: the imprint, the true and generated X0 under
     /// the camera, the generated contact points, and the object at its true and estimated poses.
     #[command(flatten)]
@@ -171,7 +176,9 @@ pub fn run(a: EvalArgs) -> Result<()> {
             " pairs",
             source.len(),
         ));
+        // A recording or saving error stops the run at once (rather than after every pair is scored).
         let mut log_error = None;
+        let stop = std::cell::Cell::new(false);
         let report = evaluator.evaluate_observed(
             &source,
             gen.as_ref(),
@@ -180,17 +187,29 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 if let Ok(mut b) = bar.lock() {
                     let _ = b.update_to(done);
                 }
-                true
+                !stop.get()
             },
-            &mut |i, pair, sample| {
-                if let (Some(log), None) = (&mut pair_log, &log_error) {
+            &mut |i, pair, samples| {
+                if log_error.is_some() {
+                    return;
+                }
+                if let Some(dir) = &a.save_samples {
+                    log_error = save_samples(dir, pair, samples)
+                        .err()
+                        .map(|e| anyhow!(tactile_derender::error::render(&e)));
+                }
+                if let (Some(log), Some(sample), None) =
+                    (&mut pair_log, samples.first(), &log_error)
+                {
                     log_error = log.pair(source.context(), i, pair, sample).err();
                 }
+                stop.set(log_error.is_some());
             },
-        )?;
+        );
         if let Some(e) = log_error {
             return Err(e);
         }
+        let report = report?;
         if let Some(log) = &mut pair_log {
             log.estimates(source.context(), &report)?;
             log.next_split(source.len());
