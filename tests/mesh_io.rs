@@ -211,6 +211,11 @@ fn stl_ascii_cube_welds_to_a_closed_unit_cube() {
     let welded = m.welded(1e-9);
     assert_eq!(welded.vertices().len(), 8);
     assert_unit_cube(&welded);
+    // What `tnd objects list` and `check` report: open as stored, closed once welded at the extent's scale.
+    assert!(!m.report().closed);
+    let topology = m.welded_for_topology();
+    assert_eq!(topology.vertices().len(), 8);
+    assert!(topology.report().closed);
 }
 
 #[test]

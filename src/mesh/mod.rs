@@ -389,6 +389,12 @@ impl Mesh {
         }
     }
 
+    /// [`Self::welded`] at a millionth of the largest extent: the mesh whose topology (shells, closedness) users are
+    /// told about, whatever the file format stores (STL keeps every triangle's corners apart).
+    pub fn welded_for_topology(&self) -> Self {
+        self.welded((self.largest_extent() * 1e-6).max(1e-9) as f32)
+    }
+
     /// Merge vertices closer than `tolerance` metres (e.g. STL files, which store each triangle's corners separately)
     /// so that topology (closedness) can be checked. Triangles that become degenerate are dropped.
     pub fn welded(&self, tolerance: f32) -> Self {

@@ -58,7 +58,7 @@ fn check_mesh(path: &Path, mesh: &Mesh, options: &LoadOptions) -> MeshCheck {
     let (lo, hi) = mesh.aabb();
     let size = (hi - lo).as_dvec3();
     let largest = size.max_element();
-    let welded = mesh.welded((largest * 1e-6).max(1e-9) as f32);
+    let welded = mesh.welded_for_topology();
     let report = welded.report();
     let shells = welded.shell_count();
     let likely_units = if options.fit_to_size.is_none() {
@@ -118,13 +118,15 @@ pub fn size_note(largest_m: f64, units: Units, fit_size: Option<f64>) -> Option<
     };
     Some(match likely_units(largest_m, units) {
         Some(u) => format!(
-            "largest extent {largest_m:.4} m {read} is implausible for a pressed object; the file is probably in \
+            "largest extent {} {read} is implausible for a pressed object; the file is probably in \
              {u} (--units {u} gives {:.1} mm)",
+            length(largest_m),
             largest_m / units.to_metres() * u.to_metres() * 1e3
         ),
         None => format!(
-            "largest extent {largest_m:.4} m {read} is implausible for a pressed object ({:.0} mm to {:.1} m), \
+            "largest extent {} {read} is implausible for a pressed object ({:.0} mm to {:.1} m), \
              and no unit makes it plausible; scale it with --fit-size (e.g. --fit-size 0.05 for 50 mm)",
+            length(largest_m),
             PLAUSIBLE_EXTENT_M[0] * 1e3,
             PLAUSIBLE_EXTENT_M[1]
         ),
@@ -132,21 +134,36 @@ pub fn size_note(largest_m: f64, units: Units, fit_size: Option<f64>) -> Option<
 }
 
 /// The unit under which a largest extent of `largest_m` metres (read with `units`) becomes plausible, if the given
-/// one is not.
+/// one is not. Millimetres win whenever they make it 5 mm or more: CAD and slicer files (STL above all) are in
+/// millimetres and centimetre files are rare, so a file 13 units across is a 13 mm screw, not a 130 mm object wider
+/// than the sensor (a 3-unit file stays a 30 mm object: at 3 mm it would barely touch the membrane). Otherwise the
+/// plausible unit that brings the object closest (in ratio) to a typical 50 mm.
 pub fn likely_units(largest_m: f64, units: Units) -> Option<Units> {
     let plausible = |m: f64| (PLAUSIBLE_EXTENT_M[0]..=PLAUSIBLE_EXTENT_M[1]).contains(&m);
     if plausible(largest_m) {
         return None;
     }
-    // Of the plausible units, the one that brings the object closest (in ratio) to a typical 50 mm.
     let in_file_units = largest_m / units.to_metres();
-    [Units::Mm, Units::Cm, Units::M]
+    let candidates: Vec<Units> = [Units::Mm, Units::Cm, Units::M]
         .into_iter()
         .filter(|u| *u != units && plausible(in_file_units * u.to_metres()))
-        .min_by(|a, b| {
-            let off = |u: &Units| (in_file_units * u.to_metres() / 0.05).ln().abs();
-            off(a).total_cmp(&off(b))
-        })
+        .collect();
+    if candidates.contains(&Units::Mm) && in_file_units * Units::Mm.to_metres() >= 0.005 {
+        return Some(Units::Mm);
+    }
+    candidates.into_iter().min_by(|a, b| {
+        let off = |u: &Units| (in_file_units * u.to_metres() / 0.05).ln().abs();
+        off(a).total_cmp(&off(b))
+    })
+}
+
+/// A length for a message: millimetres below a metre (three significant decimals), else metres.
+fn length(m: f64) -> String {
+    if m.abs() < 1.0 {
+        format!("{:.3} mm", m * 1e3)
+    } else {
+        format!("{m:.2} m")
+    }
 }
 
 /// Guess the rotational symmetry of a resting mesh about the vertical axis through its surface centroid:
@@ -199,6 +216,51 @@ pub fn guess_symmetry(mesh: &Mesh) -> Symmetry {
 
 /// The largest n-fold symmetry [`guess_symmetry`] looks for (a 64-tooth gear; finer ones read as continuous).
 pub const MAX_GUESSED_FOLD: u32 = 64;
+
+/// What lies below a folder that [`import_dir`] does not read (it reads only the files directly in it): mesh files
+/// in subfolders (a URDF package keeps them in `meshes/visual`, `meshes/collision`) and formats it cannot read.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NotImported {
+    /// Mesh files in subfolders (up to three levels down).
+    pub in_subfolders: usize,
+    /// The subfolder holding the most of them.
+    pub busiest_subfolder: Option<PathBuf>,
+    /// COLLADA (`.dae`) files, anywhere in those levels.
+    pub collada: usize,
+}
+
+/// Look below `dir` for what [`import_dir`] leaves out, to tell the user (errors reading subfolders are ignored:
+/// this is a hint, not the import).
+pub fn not_imported(dir: &Path) -> NotImported {
+    fn walk(dir: &Path, depth: usize, top: bool, out: &mut NotImported, best: &mut usize) {
+        let Ok(read) = std::fs::read_dir(dir) else {
+            return;
+        };
+        let mut here = 0;
+        for path in read.flatten().map(|e| e.path()) {
+            if path.is_dir() {
+                if depth < 3 {
+                    walk(&path, depth + 1, false, out, best);
+                }
+            } else if path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("dae"))
+            {
+                out.collada += 1;
+            } else if !top && mesh::is_mesh_file(&path) {
+                here += 1;
+            }
+        }
+        out.in_subfolders += here;
+        if here > *best {
+            *best = here;
+            out.busiest_subfolder = Some(dir.to_path_buf());
+        }
+    }
+    let mut out = NotImported::default();
+    walk(dir, 0, true, &mut out, &mut 0);
+    out
+}
 
 /// Options of [`import_dir`].
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -285,7 +347,34 @@ fn import_file(
         (None, _, _) => given.to_metres(),
     };
     let (mesh, read_as) = scaled(Units::Scale(scale_to_m))?;
-    let check = check_mesh(path, &mesh, &read_as);
+    let mut check = check_mesh(path, &mesh, &read_as);
+    let final_largest = check.extent_m.iter().copied().fold(0.0, f64::max);
+    if options.fit_m.is_none()
+        && !(PLAUSIBLE_EXTENT_M[0]..=PLAUSIBLE_EXTENT_M[1]).contains(&final_largest)
+    {
+        // Not written into the set: a 0.06 mm finger or a 700 m engine only fails later, in the simulator.
+        let read = options.units.unwrap_or(Units::M);
+        let note = size_note(final_largest, read, None).unwrap_or_default();
+        let advice = if options.units.is_some() {
+            "not imported (without --units each file's size picks its unit; or add it to objects.json with its scale_to_m)"
+        } else {
+            "not imported"
+        };
+        return Err(ObjectError::ImplausibleSize {
+            path: path.to_path_buf(),
+            message: format!("{note}; {advice}"),
+        });
+    }
+    if let (None, None, Some(likely)) = (options.fit_m, options.units, first.likely_units) {
+        check.notes.insert(
+            0,
+            format!(
+                "units guessed from its size: {likely} (largest extent {:.1} mm; --units, or scale_to_m in \
+                 objects.json, to change)",
+                final_largest * 1e3
+            ),
+        );
+    }
     let mesh = mesh.rest_on_table();
     let stem: String = path
         .file_stem()
@@ -332,8 +421,16 @@ mod tests {
     fn units_guess_names_the_plausible_unit() {
         assert_eq!(likely_units(50.0, Units::M), Some(Units::Mm));
         assert_eq!(likely_units(0.05, Units::M), None);
-        assert_eq!(likely_units(5.0, Units::M), Some(Units::Cm));
         assert_eq!(likely_units(0.00005, Units::Mm), Some(Units::M));
+        // 3–50 units across is plausible in millimetres and in centimetres: millimetres, the CAD convention (a
+        // 13 mm screw, a 6.35 mm nut; not a 130 mm part wider than the sensor).
+        assert_eq!(likely_units(13.0, Units::M), Some(Units::Mm));
+        assert_eq!(likely_units(6.35, Units::M), Some(Units::Mm));
+        // Under 5 units centimetres (a 3 mm part would barely touch the membrane; 1.2 mm is implausible).
+        assert_eq!(likely_units(3.0, Units::M), Some(Units::Cm));
+        assert_eq!(likely_units(1.2, Units::M), Some(Units::Cm));
+        // A metres file read as millimetres.
+        assert_eq!(likely_units(0.000057, Units::Mm), Some(Units::M));
     }
 
     #[test]
@@ -351,6 +448,9 @@ mod tests {
             big.contains("no unit") && big.contains("--fit-size"),
             "{big}"
         );
+        // Tiny sizes are written in millimetres, not as 0.0000 m.
+        let tiny = size_note(0.000057, Units::Mm, None).unwrap();
+        assert!(tiny.starts_with("largest extent 0.057 mm in mm"), "{tiny}");
         let scaled = size_note(743.0, Units::Scale(1.0), None).unwrap();
         assert!(scaled.contains("read at scale 1 "), "{scaled}");
     }
@@ -460,6 +560,47 @@ mod tests {
             .find(|e| e.name == "two_spheres")
             .unwrap();
         assert!((two.scale_to_m - 0.001).abs() < 1e-12);
+        // The guess is said, not only applied.
+        let two_check = &imported
+            .iter()
+            .find(|m| m.entry.name == "two_spheres")
+            .unwrap()
+            .check;
+        assert!(
+            two_check.notes[0]
+                .starts_with("units guessed from its size: mm (largest extent 70.0 mm"),
+            "{:?}",
+            two_check.notes
+        );
+        // Given units that make a file implausible (the 20 mm holed sphere, in metres, read as millimetres) leave
+        // that file out with the unit that fits, and keep the others.
+        let (_, imported, failed) = import_dir(
+            dir.path(),
+            &ImportOptions {
+                units: Some(Units::Mm),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(
+            imported
+                .iter()
+                .map(|m| m.entry.name.as_str())
+                .collect::<Vec<_>>(),
+            ["two_spheres"]
+        );
+        let (path, e) = failed
+            .iter()
+            .find(|(p, _)| p.ends_with("holed.obj"))
+            .unwrap();
+        let e = e.to_string();
+        assert!(
+            e.starts_with(&path.display().to_string())
+                && e.contains("0.020 mm in mm is implausible")
+                && e.contains("probably in m ")
+                && e.contains("not imported"),
+            "{e}"
+        );
         let fit = import_dir(
             dir.path(),
             &ImportOptions {
@@ -475,5 +616,25 @@ mod tests {
             .unwrap()
             .check;
         assert!((c.extent_m[0] - 0.05).abs() < 1e-6, "{:?}", c.extent_m);
+    }
+
+    #[test]
+    fn not_imported_finds_meshes_in_subfolders_and_collada_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let visual = dir.path().join("meshes/visual");
+        let collision = dir.path().join("meshes/collision");
+        std::fs::create_dir_all(&visual).unwrap();
+        std::fs::create_dir_all(&collision).unwrap();
+        for f in ["a.STL", "b.stl", "c.obj"] {
+            std::fs::write(collision.join(f), "").unwrap();
+        }
+        std::fs::write(visual.join("a.dae"), "").unwrap();
+        std::fs::write(visual.join("a.png"), "").unwrap();
+        std::fs::write(dir.path().join("top.obj"), "").unwrap();
+        let n = not_imported(dir.path());
+        assert_eq!(n.in_subfolders, 3);
+        assert_eq!(n.busiest_subfolder.as_deref(), Some(collision.as_path()));
+        assert_eq!(n.collada, 1);
+        assert_eq!(not_imported(&collision).in_subfolders, 0);
     }
 }

@@ -97,6 +97,9 @@ pub enum ObjectError {
         #[source]
         source: std::io::Error,
     },
+    /// A mesh whose size, in the units it was read with, no sensor could press.
+    #[error("{}: {message}", path.display())]
+    ImplausibleSize { path: PathBuf, message: String },
     #[error("cannot serialise the object manifest: {0}")]
     Serialize(#[source] serde_json::Error),
 }

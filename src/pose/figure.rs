@@ -80,20 +80,18 @@ impl Draw for FitFigure<'_> {
             .map_err(err)?
             .label(format!("contact points ({})", contacts.len()))
             .legend(move |(x, y)| Circle::new((x + 10, y), dot + 1, RGBColor(30, 30, 30).filled()));
+        // Each outline edge on its own: a thick polyline's mitred joins shoot far out of the plot at the sharp
+        // turns of a real mesh's outline (the bitmap backend has no miter limit).
         for (loops, colour, label) in placed {
-            let mut first = true;
-            for l in loops {
-                let series = chart
-                    .draw_series(LineSeries::new(
-                        l.into_iter().map(|p| (p[0], p[1])),
-                        colour.stroke_width(stroke),
-                    ))
-                    .map_err(err)?;
-                if first {
-                    series.label(label).legend(swatch(colour, stroke));
-                    first = false;
-                }
-            }
+            let style = colour.stroke_width(stroke);
+            let series = chart
+                .draw_series(loops.iter().flat_map(|l| {
+                    l.windows(2).map(move |w| {
+                        PathElement::new(vec![(w[0][0], w[0][1]), (w[1][0], w[1][1])], style)
+                    })
+                }))
+                .map_err(err)?;
+            series.label(label).legend(swatch(colour, stroke));
         }
         draw_legend(&mut chart, s)?;
         Ok(())

@@ -21,7 +21,8 @@ pub struct SdfGridConfig {
     pub spacing_m: f64,
     /// Margin added around the object's bounding box on every side, metres (default 10 mm).
     pub padding_m: f64,
-    /// Refuse grids with more nodes than this (default 8 million, 32 MB).
+    /// Most nodes of a grid (default 8 million, 32 MB if every block were sampled): an object whose grid would need
+    /// more at `spacing_m` (a bulky object over ~20 cm: a 30 cm cube, 1.6 mm) gets the finest spacing that fits.
     pub max_nodes: usize,
 }
 
@@ -78,14 +79,19 @@ impl SdfGrid {
         let (lo, hi) = exact.aabb();
         let origin = lo - DVec3::splat(config.padding_m);
         let extent = hi + DVec3::splat(config.padding_m) - origin;
-        let n = |e: f64| (e / h).ceil() as usize + 1;
-        let dims = [n(extent.x), n(extent.y), n(extent.z)];
-        let total = dims[0].saturating_mul(dims[1]).saturating_mul(dims[2]);
-        if total > config.max_nodes {
-            return Err(PoseError::Config(format!(
-                "SDF grid of {}x{}x{} nodes exceeds {} nodes; raise spacing_m ({h} m) or max_nodes",
-                dims[0], dims[1], dims[2], config.max_nodes
-            )));
+        let dims_at = |h: f64| {
+            let n = |e: f64| (e / h).ceil() as usize + 1;
+            [n(extent.x), n(extent.y), n(extent.z)]
+        };
+        let total = |d: [usize; 3]| d[0].saturating_mul(d[1]).saturating_mul(d[2]);
+        // Too many nodes at the asked spacing (a bulky object over ~20 cm, a file in the wrong units): coarser.
+        let mut h = h;
+        let mut dims = dims_at(h);
+        while total(dims) > config.max_nodes.max(8) {
+            h *= (total(dims) as f64 / config.max_nodes.max(8) as f64)
+                .cbrt()
+                .max(1.01);
+            dims = dims_at(h);
         }
         let block_dims = dims.map(|d| d.div_ceil(BLOCK));
         let blocks = (0..block_dims.iter().product())
@@ -293,14 +299,29 @@ mod tests {
         let (v, g) = grid.value_grad(p);
         assert!((v - 0.08).abs() < 1e-5, "{v}");
         assert!((g - DVec3::X).length() < 1e-3, "{g}");
+        // A grid that would exceed max_nodes is made coarser to fit, and stays right.
         let too_fine = SdfGridConfig {
             spacing_m: 1e-5,
             ..Default::default()
         };
-        assert!(SdfGrid::build(exact, &too_fine)
-            .unwrap_err()
-            .to_string()
-            .contains("spacing_m"));
+        let coarse = SdfGrid::build(exact.clone(), &too_fine).unwrap();
+        let nodes: usize = coarse.dims.iter().product();
+        assert!(
+            nodes <= too_fine.max_nodes && nodes > too_fine.max_nodes / 2,
+            "{:?}",
+            coarse.dims
+        );
+        assert!(
+            coarse.spacing > 1e-5 && coarse.spacing < 1e-3,
+            "{}",
+            coarse.spacing
+        );
+        let q = DVec3::new(0.021, 0.003, -0.002);
+        assert!(
+            (coarse.value(q) - 0.001).abs() < 1e-5,
+            "{}",
+            coarse.value(q)
+        );
     }
 
     /// Sampling on demand gives every node the exact value at its position, and a query near one spot samples only

@@ -89,7 +89,8 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
         ObjectsCommand::List { objects } => {
             let set = ObjectSet::open(&objects)?;
             for e in set.entries() {
-                let report = set.mesh(&e.name)?.report();
+                // Welded, as `tnd objects check` reports it (an STL stores each triangle's corners apart).
+                let report = set.mesh(&e.name)?.welded_for_topology().report();
                 let mut v = serde_json::to_value(e)?;
                 if let Some(obj) = v.as_object_mut() {
                     obj.insert("triangles".into(), report.triangles.into());
@@ -151,11 +152,33 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
                     tactile_derender::error::render(e)
                 );
             }
+            let below = inspect::not_imported(&dir);
+            let mut hints = Vec::new();
+            if let Some(sub) = &below.busiest_subfolder {
+                hints.push(format!(
+                    "{} mesh file(s) lie in subfolders, which are not searched (import one as its own set, e.g. \
+                     tnd objects import {})",
+                    below.in_subfolders,
+                    sub.display()
+                ));
+            }
+            if below.collada > 0 {
+                hints.push(format!(
+                    "{} COLLADA (.dae) file(s) cannot be read: convert them to .glb, .obj or .stl (e.g. assimp \
+                     export, or Blender)",
+                    below.collada
+                ));
+            }
+            let hint = hints.join("; ");
             if imported.is_empty() {
+                let sep = if hint.is_empty() { "" } else { "; " };
                 bail!(
-                    "{}: no readable mesh files (.obj, .stl, .ply, .gltf, .glb)",
+                    "{}: no readable mesh files (.obj, .stl, .ply, .gltf, .glb){sep}{hint}",
                     dir.display()
                 );
+            }
+            if !hint.is_empty() {
+                eprintln!("{}: note: {hint}", dir.display());
             }
             for m in &imported {
                 for note in &m.check.notes {

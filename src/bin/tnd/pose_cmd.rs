@@ -56,8 +56,9 @@ pub struct PoseArgs {
     /// estimate).
     #[arg(long)]
     pub truth: Option<String>,
-    /// Press depth of the sensor apex below the object's top, metres (places the sensor as `tnd sim` does).
-    #[arg(long, default_value_t = 0.006)]
+    /// Press depth of the sensor apex below the object's top, metres (places the sensor as `tnd sim` does; give the
+    /// simulation's --press).
+    #[arg(long, default_value_t = crate::args::DEFAULT_PRESS_M)]
     pub press: f64,
     #[command(flatten)]
     pub derender: DerenderConfig,

@@ -21,7 +21,7 @@ pub struct SimArgs {
     #[arg(long, default_value = "0,0,0", allow_hyphen_values = true)]
     pub pose: String,
     /// Press depth of the membrane apex below the object's top, metres.
-    #[arg(long, default_value_t = 0.005)]
+    #[arg(long, default_value_t = crate::args::DEFAULT_PRESS_M)]
     pub press: f64,
     /// Sensor yaw about the vertical, radians.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
@@ -85,7 +85,10 @@ pub fn run(a: SimArgs) -> Result<()> {
         sensor: sim.pressing_pose(&object, 0.0, 0.0, a.sensor_yaw, a.press),
     };
     let (out, elapsed_s) = sim.simulate_timed(&object, &scene, a.seed);
-    if out.contact_pixels == 0 {
+    if out.contact_pixels == 0 && !loaded.warnings.is_empty() {
+        // A centring hint in metres for an object of the wrong size would mislead: the size comes first.
+        eprintln!("warning: no contact; fix the object's size first (warning above)");
+    } else if out.contact_pixels == 0 {
         let hint = sim.contact_hint(&object, &scene);
         let c = hint.centred;
         eprintln!(

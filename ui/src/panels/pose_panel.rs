@@ -372,6 +372,14 @@ fn steps_1_2_10(input: egui_plot::GridInput) -> [f64; 3] {
     series[k].map(|m| m * decade)
 }
 
+/// A tick label with as many decimals as its step needs: egui_plot's default rounds the decimals of a 0.5 or 0.2 step
+/// to none (labels "0 0 1 1 2 2" for 0, 0.5, 1, ...), since it expects powers of ten.
+fn step_label(mark: egui_plot::GridMark, _range: &std::ops::RangeInclusive<f64>) -> String {
+    let step = mark.step_size.abs().max(1e-12);
+    let decimals = (-step.log10() - 1e-9).ceil().max(0.0) as usize;
+    format!("{:.*}", decimals, mark.value)
+}
+
 /// KDE of the position (mm) or yaw (degrees) errors, the samples as a rug, the baseline as a point; hovering picks
 /// the nearest sample.
 fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Option<usize>) {
@@ -406,6 +414,7 @@ fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Op
         .height(ui.available_height().max(180.0))
         .x_axis_label(label)
         .x_grid_spacer(egui_plot::uniform_grid_spacer(steps_1_2_10))
+        .x_axis_formatter(step_label)
         .y_axis_label("density")
         .legend(Legend::default())
         .show(ui, |p| {
@@ -455,7 +464,21 @@ fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Op
 
 #[cfg(test)]
 mod tests {
-    use super::steps_1_2_10;
+    use super::{step_label, steps_1_2_10};
+
+    #[test]
+    fn tick_labels_carry_the_decimals_of_their_step() {
+        let label = |value: f64, step_size: f64| {
+            step_label(egui_plot::GridMark { value, step_size }, &(0.0..=1.0))
+        };
+        assert_eq!(label(1.5, 0.5), "1.5");
+        assert_eq!(label(0.5, 0.5), "0.5");
+        assert_eq!(label(0.4, 0.2), "0.4");
+        assert_eq!(label(2.0, 1.0), "2");
+        assert_eq!(label(20.0, 10.0), "20");
+        assert_eq!(label(0.05, 0.05), "0.05");
+        assert_eq!(label(-0.1, 0.1), "-0.1");
+    }
 
     #[test]
     fn grid_steps_follow_1_2_5_and_divide_each_other() {
