@@ -4,7 +4,9 @@
 //!
 //! Every triangle primitive of every mesh reachable from the default scene (or from all scenes when none is marked
 //! default, or every mesh when there are no scenes) is placed by its node's world transform and merged into one
-//! triangle soup. glTF positions are metres by specification.
+//! triangle soup. glTF positions are metres by specification, and its up axis is +Y: the soup is turned into this
+//! project's +Z-up frame the way Blender imports glTF, (x, y, z) → (x, −z, y), so that a model exported from
+//! Blender or a scanner app stands on the table as it was modelled.
 
 use std::path::Path;
 
@@ -51,11 +53,18 @@ fn decode_unguarded(
         if !required.is_empty() {
             return Err(format!(
                 "the file requires the glTF extension{} {}, which this reader does not support; export it without \
-                 (e.g. from Blender with mesh compression off)",
+                 ({})",
                 if required.len() > 1 { "s" } else { "" },
-                required.join(", ")
+                required.join(", "),
+                export_advice(&required)
             ));
         }
+    }
+    if let Some(version) = gltf_1_version(bytes) {
+        return Err(format!(
+            "glTF {version} file; only glTF 2.0 is read (convert it, e.g. with the Khronos glTF 1.0 → 2.0 converter \
+             or by importing and exporting it in Blender)"
+        ));
     }
     let doc = gltf::Gltf::from_slice(bytes).map_err(|e| e.to_string())?;
     let mut buffers = Vec::new();
@@ -82,14 +91,16 @@ fn decode_unguarded(
         Some(s) => vec![s],
         None => doc.scenes().collect(),
     };
+    // glTF's +Y up becomes +Z up: a quarter turn about +X, (x, y, z) → (x, −z, y).
+    let z_up = Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2);
     if scenes.is_empty() {
         for mesh in doc.meshes() {
-            out.add_mesh(&mesh, Mat4::IDENTITY, &buffers)?;
+            out.add_mesh(&mesh, z_up, &buffers)?;
         }
     } else {
         for scene in scenes {
             for node in scene.nodes() {
-                out.add_node(&node, Mat4::IDENTITY, &buffers, 0)?;
+                out.add_node(&node, z_up, &buffers, 0)?;
             }
         }
     }
@@ -100,6 +111,28 @@ fn decode_unguarded(
 }
 
 /// The bytes of a buffer URI: a base64 `data:` URI or a file next to the glTF.
+/// How to export a file without the `required` extensions.
+fn export_advice(required: &[&str]) -> &'static str {
+    if required.contains(&"KHR_mesh_quantization") {
+        "e.g. gltfpack -noq, or Blender without quantised positions"
+    } else if required.contains(&"EXT_meshopt_compression") {
+        "e.g. gltfpack without -c"
+    } else {
+        "e.g. from Blender with mesh compression off"
+    }
+}
+
+/// The `asset.version` of a glTF 1.x JSON file (whose layout the 2.0 parser rejects with an unhelpful message).
+fn gltf_1_version(bytes: &[u8]) -> Option<String> {
+    let json: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+    let version = json.get("asset")?.get("version")?;
+    let text = version
+        .as_str()
+        .map(str::to_string)
+        .or_else(|| version.as_f64().map(|v| format!("{v:.1}")))?;
+    text.starts_with('1').then_some(text)
+}
+
 fn load_uri(uri: &str, dir: Option<&Path>) -> Result<Vec<u8>, String> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, payload) = rest
@@ -239,7 +272,27 @@ mod tests {
     fn embedded_buffer_and_node_transform() {
         let (v, t) = decode(triangle_gltf(&triangle_buffer(), 42).as_bytes(), None).unwrap();
         assert_eq!(t, vec![[0, 1, 2]]);
-        assert_eq!(v[1], Vec3::new(1.0, 0.0, 0.5));
+        // glTF (x, y, z) is (x, −z, y) here: the node's +Z translation points to −Y, glTF's up (+Y) is +Z.
+        let close = |a: Vec3, b: Vec3| (a - b).length() < 1e-6;
+        assert!(close(v[1], Vec3::new(1.0, -0.5, 0.0)), "{:?}", v[1]);
+        assert!(close(v[2], Vec3::new(0.0, -0.5, 1.0)), "{:?}", v[2]);
+    }
+
+    #[test]
+    fn gltf_1_and_quantised_files_get_their_own_advice() {
+        let v1 = br#"{"asset":{"version":"1.0"},"scene":"defaultScene","scenes":{"defaultScene":{"nodes":[]}}}"#;
+        let err = decode(v1, None).unwrap_err();
+        assert!(
+            err.starts_with("glTF 1.0 file; only glTF 2.0 is read"),
+            "{err}"
+        );
+        let quantised = triangle_gltf(&triangle_buffer(), 42).replacen(
+            r#"{"asset""#,
+            r#"{"extensionsUsed":["KHR_mesh_quantization"],"extensionsRequired":["KHR_mesh_quantization"],"asset""#,
+            1,
+        );
+        let err = decode(quantised.as_bytes(), None).unwrap_err();
+        assert!(err.contains("gltfpack -noq"), "{err}");
     }
 
     #[test]
