@@ -450,6 +450,17 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
         e_pooled < 1.0 && e_alone > 5.0,
         "{e_pooled} mm pooled, {e_alone} mm alone"
     );
+    // The report (its CSV and figure) carries the pose reported, scored like the samples.
+    for p in [&pooled, &alone] {
+        let e = p.report.estimate.unwrap();
+        assert_eq!(e.pose, p.best().unwrap());
+        assert!((e.position_mm - error(e.pose)).abs() < 1e-9);
+        assert!(p
+            .report
+            .samples_csv()
+            .lines()
+            .any(|l| l.starts_with("estimate,0,")));
+    }
 }
 
 /// `estimate_pose` (tnd pose, the workbench's Pose tab) counts its steps as `pose_steps` says, the same numbers with

@@ -14,6 +14,7 @@ use crate::recon::is_valid_depth;
 use crate::sensor::Se2;
 use crate::sim::Simulator;
 use crate::uncertainty::analysis::{analyse_with_progress, first_registration, Signature};
+use crate::uncertainty::SampleError;
 use crate::uncertainty::UncertaintyReport;
 
 /// What the sensor saw: the camera's pose, the generated samples and the imprint (metres).
@@ -154,13 +155,23 @@ pub fn estimate_pose(
     // The baseline's step is counted whether or not there is one (no signature), so that the steps keep the
     // numbers [`pose_stage`] names.
     let no_baseline = usize::from(sig.baseline.is_none());
-    let report = analyse_with_progress(&evaluator, &model, &ctx, &sig, seed, &mut |done, _| {
+    let mut report = analyse_with_progress(&evaluator, &model, &ctx, &sig, seed, &mut |done, _| {
         progress(1 + done + no_baseline * usize::from(done > n), total)
     })
     .map_err(|e| match e {
         EvalError::Cancelled => PipelineError::Cancelled,
         e => e.into(),
     })?;
+    // The pose reported, beside the samples' in the report (and its figure).
+    report.estimate = checked
+        .or_else(|| hypotheses.first().map(|h| h.pose))
+        .map(|pose| {
+            let cost = hypotheses
+                .iter()
+                .find(|h| h.pose == pose)
+                .map_or(f64::NAN, |h| h.cost);
+            SampleError::new(pose, cost, report.reference, &model.symmetry)
+        });
     Ok(PoseEstimate {
         object: object.name.clone(),
         hypotheses,

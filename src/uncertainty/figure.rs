@@ -1,6 +1,6 @@
 //! The uncertainty figure (paper V.D, Fig. "uncertainty"): one panel per pose-error variable (position in mm, θ in
-//! degrees) with the KDE of the samples' errors, the samples as a rug, and the threshold baseline's and the
-//! multi-sample estimate's errors as vertical lines; axes, units and a legend. SVG and PNG through
+//! degrees) with the KDE of the samples' errors, the samples as a rug, and the threshold baseline's, the single-sample
+//! estimate's (the pose reported) and the multi-sample estimate's errors as vertical lines; axes, units and a legend. SVG and PNG through
 //! [`crate::io::figure`].
 
 use plotters::coord::Shift;
@@ -20,6 +20,7 @@ struct Panel<'a> {
     curve: &'a [(f64, f64)],
     samples: Vec<f64>,
     baseline: Option<f64>,
+    estimate: Option<f64>,
     multi: Option<f64>,
 }
 
@@ -41,6 +42,7 @@ impl Draw for KdeFigure<'_> {
             curve: &r.position_kde,
             samples: r.samples.iter().map(|s| s.position_mm).collect(),
             baseline: r.baseline.map(|b| b.position_mm),
+            estimate: r.estimate.map(|e| e.position_mm),
             multi: r.multi_sample.map(|m| m.position_mm),
         }];
         let theta: Vec<f64> = r.samples.iter().filter_map(|s| s.theta_deg).collect();
@@ -51,6 +53,7 @@ impl Draw for KdeFigure<'_> {
                 curve: &r.theta_kde,
                 samples: theta,
                 baseline: r.baseline.and_then(|b| b.theta_deg),
+                estimate: r.estimate.and_then(|e| e.theta_deg),
                 multi: r.multi_sample.and_then(|m| m.theta_deg),
             });
         }
@@ -74,6 +77,7 @@ fn panel<DB: DrawingBackend>(
         .map(|c| c.0)
         .chain(p.samples.iter().copied())
         .chain(p.baseline)
+        .chain(p.estimate)
         .chain(p.multi)
         .filter(|v| v.is_finite());
     let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
@@ -129,6 +133,7 @@ fn panel<DB: DrawingBackend>(
         });
     for (value, colour, label) in [
         (p.baseline, RED, "threshold baseline"),
+        (p.estimate, RGBColor(230, 140, 0), "single-sample estimate"),
         (p.multi, RGBColor(0, 150, 60), "multi-sample estimate"),
     ] {
         if let Some(v) = value {

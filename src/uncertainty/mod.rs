@@ -92,6 +92,11 @@ pub struct UncertaintyReport {
     /// more samples whose consensus has contact.
     #[serde(default)]
     pub multi_sample: Option<SampleError>,
+    /// The pose reported for the signature (`tnd pose`'s estimate, the Pose tab's single-sample fit): the first
+    /// sample's K-start registration after the signature check. Set by [`crate::pipeline::estimate_pose`]; cost NaN
+    /// where the check refined the pose.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimate: Option<SampleError>,
     /// Registrations that failed; the rest of the report stands without them.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub failed: Vec<FailedRegistration>,
@@ -139,11 +144,13 @@ impl UncertaintyReport {
             samples,
             baseline,
             multi_sample: None,
+            estimate: None,
             failed: Vec::new(),
         }
     }
 
-    /// `samples.csv` text: one row per sample, one for the baseline and one for the multi-sample estimate.
+    /// `samples.csv` text: one row per sample, one each for the baseline, the multi-sample estimate and the
+    /// estimate reported (kinds `sample`, `baseline`, `multi_sample`, `estimate`).
     pub fn samples_csv(&self) -> String {
         let mut s =
             String::from("kind,index,x_m,y_m,theta_rad,cost,position_err_mm,theta_err_deg\n");
@@ -163,6 +170,9 @@ impl UncertaintyReport {
         }
         if let Some(m) = &self.multi_sample {
             row(&mut s, "multi_sample", 0, m);
+        }
+        if let Some(e) = &self.estimate {
+            row(&mut s, "estimate", 0, e);
         }
         s
     }

@@ -436,6 +436,13 @@ fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Op
                         .color(BASELINE_COLOUR),
                 );
             }
+            // The poses reported, against the samples they came from.
+            if let Some(v) = rep.estimate.as_ref().and_then(value) {
+                p.vline(VLine::new("single-sample estimate", v).color(ESTIMATE_COLOUR));
+            }
+            if let Some(v) = rep.multi_sample.as_ref().and_then(value) {
+                p.vline(VLine::new("multi-sample estimate", v).color(MULTI_COLOUR));
+            }
             if let Some(v) = shown {
                 p.vline(VLine::new("highlighted sample", v).color(HIGHLIGHT_COLOUR));
             }
