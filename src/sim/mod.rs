@@ -25,6 +25,11 @@ use crate::sensor::{
 };
 pub use signature::SignatureConfig;
 
+/// Press depth of the membrane apex below the object's highest point that every front end starts from (`tnd sim`,
+/// `tnd pose`, the workbench's scene), metres: the same everywhere, so that a pose run on a simulated contact places
+/// the sensor where the simulation did unless told otherwise.
+pub const DEFAULT_PRESS_M: f64 = 0.006;
+
 /// Errors setting up or running the simulator.
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {

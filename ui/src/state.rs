@@ -121,7 +121,7 @@ impl Default for SceneState {
             sensor_x: 0.0,
             sensor_y: 0.0,
             sensor_yaw: 0.0,
-            press: 0.006,
+            press: tactile_derender::sim::DEFAULT_PRESS_M,
         }
     }
 }

@@ -8,10 +8,6 @@ use tactile_derender::mesh::Units;
 use tactile_derender::sensor::camera::parse_resolution;
 use tactile_derender::sim::SimConfig;
 
-/// Default `--press` of `tnd sim` and `tnd pose`, metres: the same, so that a pose run on a simulated contact places
-/// the sensor where the simulation did unless told otherwise.
-pub const DEFAULT_PRESS_M: f64 = 0.005;
-
 /// Sensor, elastomer and signature options: overrides of the library's [`SimConfig`], whose defaults (the Soft
 /// Bubble of the paper) apply to every option left out.
 #[derive(Args, Clone, Debug)]

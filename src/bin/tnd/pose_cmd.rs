@@ -58,7 +58,7 @@ pub struct PoseArgs {
     pub truth: Option<String>,
     /// Press depth of the sensor apex below the object's top, metres (places the sensor as `tnd sim` does; give the
     /// simulation's --press).
-    #[arg(long, default_value_t = crate::args::DEFAULT_PRESS_M)]
+    #[arg(long, default_value_t = tactile_derender::sim::DEFAULT_PRESS_M)]
     pub press: f64,
     #[command(flatten)]
     pub derender: DerenderConfig,

@@ -21,7 +21,7 @@ pub struct SimArgs {
     #[arg(long, default_value = "0,0,0", allow_hyphen_values = true)]
     pub pose: String,
     /// Press depth of the membrane apex below the object's top, metres.
-    #[arg(long, default_value_t = crate::args::DEFAULT_PRESS_M)]
+    #[arg(long, default_value_t = tactile_derender::sim::DEFAULT_PRESS_M)]
     pub press: f64,
     /// Sensor yaw about the vertical, radians.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
