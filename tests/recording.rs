@@ -361,6 +361,21 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
     assert_eq!(rec["frames"], 3 + 6 + 5 + 3);
     let info = run(&["recording", "info", "press.mcap"]);
     assert_eq!(info["frames"], 17);
+    // A folder of frames named by a relative path (the README's `--from frames/`): each frame is read once from
+    // that folder, not from frames/frames/.
+    let folder = dir.path().join("frames");
+    std::fs::create_dir_all(&folder).unwrap();
+    let rec_file =
+        Recording::open(&dir.path().join("press.mcap"), &FolderOptions::default()).unwrap();
+    let stream = rec_file.depth_stream(None).unwrap().clone();
+    let k = SimConfig::default().camera.native;
+    for i in 0..4 {
+        let d = rec_file.depth_frame(&stream, i, &k).unwrap().depth;
+        tactile_derender::io::npy::write_image(&folder.join(format!("frame_{i:02}.npy")), &d)
+            .unwrap();
+    }
+    let folder_info = run(&["recording", "info", "frames/"]);
+    assert_eq!(folder_info["frames"], 4, "{folder_info}");
     assert_eq!(info["peak_contact_frame"], 8);
     let imported = run(&[
         "dataset",

@@ -314,12 +314,17 @@ impl Recording {
                     png_scale: options.png_scale,
                     ..ImportConfig::default()
                 };
+                // `file` already holds the folder (a relative folder joined twice was looked for inside itself).
+                let (dir, name) = (
+                    file.parent().unwrap_or(Path::new("")),
+                    file.file_name()
+                        .map(|n| n.to_string_lossy())
+                        .unwrap_or_default(),
+                );
                 let depth =
-                    load_image(&self.path, &file.to_string_lossy(), &config).map_err(|e| {
-                        RecordingError::Format {
-                            path: file.clone(),
-                            message: e.to_string(),
-                        }
+                    load_image(dir, &name, &config).map_err(|e| RecordingError::Format {
+                        path: file.clone(),
+                        message: e.to_string(),
                     })?;
                 Ok(DepthFrame {
                     stamp_ns: (index as f64 * 1e9 / options.fps).round() as u64,
