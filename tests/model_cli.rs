@@ -280,3 +280,58 @@ fn sample_uses_the_bundled_model_by_default_and_decodes_no_contact_to_zero() {
     assert_eq!(samples.shape, vec![1, 64, 64]);
     assert!(samples.data.iter().all(|&d| d == 0.0 || d >= cut));
 }
+
+/// `tnd train` as a user runs it: a new run says so and trains the bundled default architecture; the same command
+/// resumes (and says so); a resume with other data or another batch is refused, naming what differs.
+#[test]
+fn train_starts_resumes_and_refuses_other_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_tnd"))
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap()
+    };
+    for (out, seed) in [("ds", "3"), ("ds2", "4")] {
+        let o = run(&[
+            "dataset", "gen", "-q", "--out", out, "--pairs", "24", "--seed", seed,
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let train = |data: &str, steps: &str, batch: &str| {
+        run(&[
+            "train", "-q", "--data", data, "--out", "run", "--steps", steps, "--batch", batch,
+        ])
+    };
+    let first = train("ds", "1", "2");
+    let err = String::from_utf8_lossy(&first.stderr);
+    assert!(first.status.success(), "{err}");
+    assert!(
+        err.contains("run: no checkpoint there, starting a new run"),
+        "{err}"
+    );
+    let (_, cfg) =
+        tactile_derender::model::checkpoint::locate(&dir.path().join("run/model.safetensors"))
+            .unwrap();
+    let (_, bundled) = tactile_derender::model::checkpoint::locate(Path::new("default")).unwrap();
+    assert_eq!(cfg.block_out_channels, bundled.block_out_channels);
+    let again = train("ds", "2", "2");
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{err}");
+    assert!(
+        err.contains("resuming the run from its last checkpoint"),
+        "{err}"
+    );
+    let other_data = train("ds2", "3", "2");
+    let err = String::from_utf8_lossy(&other_data.stderr);
+    assert!(!other_data.status.success());
+    assert!(
+        err.contains("started with --data") && err.contains("ds2"),
+        "{err}"
+    );
+    let other_batch = train("ds", "3", "1");
+    let err = String::from_utf8_lossy(&other_batch.stderr);
+    assert!(!other_batch.status.success());
+    assert!(err.contains("--batch 2 (now 1)"), "{err}");
+}

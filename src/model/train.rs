@@ -94,7 +94,8 @@ pub struct TrainConfig {
     /// EMA decay of the weights (e.g. 0.999; the saved model then holds the EMA weights); none by default.
     #[arg(long)]
     pub ema: Option<f64>,
-    /// Wall-clock seconds between checkpoints.
+    /// Wall-clock seconds between checkpoints (a kill loses at most this much work; a checkpoint of the default
+    /// model takes well under a second).
     #[arg(long = "checkpoint-every", default_value_t = TrainConfig::default().checkpoint_every_s)]
     pub checkpoint_every_s: f64,
     /// Also checkpoint every this many steps (0: only by time).
@@ -124,7 +125,7 @@ impl Default for TrainConfig {
             loss: Loss::L2,
             seed: 0,
             ema: None,
-            checkpoint_every_s: 300.0,
+            checkpoint_every_s: 60.0,
             checkpoint_every_steps: 0,
             log_every: 50,
             prediction: None,
@@ -134,13 +135,37 @@ impl Default for TrainConfig {
 }
 
 impl TrainConfig {
-    fn same_run(&self, other: &Self) -> bool {
-        self.batch == other.batch
-            && self.lr == other.lr
-            && self.loss == other.loss
-            && self.seed == other.seed
-            && self.ema == other.ema
-            && self.prediction == other.prediction
+    /// The settings of a run's identity in which `other` (a resume) differs from `self` (the run as started), as
+    /// `--flag started (now given)`.
+    fn differences(&self, other: &Self) -> Vec<String> {
+        let mut out = Vec::new();
+        let mut check = |flag: &str, a: String, b: String| {
+            if a != b {
+                out.push(format!("{flag} {a} (now {b})"));
+            }
+        };
+        check("--batch", self.batch.to_string(), other.batch.to_string());
+        check("--lr", self.lr.to_string(), other.lr.to_string());
+        // The flags' own spelling (eps, v, l2).
+        fn name(v: impl clap::ValueEnum) -> String {
+            v.to_possible_value()
+                .map(|p| p.get_name().to_string())
+                .unwrap_or_default()
+        }
+        check("--loss", name(self.loss), name(other.loss));
+        check("--seed", self.seed.to_string(), other.seed.to_string());
+        let opt = |v: Option<String>| v.unwrap_or_else(|| "none".into());
+        check(
+            "--ema",
+            opt(self.ema.map(|e| e.to_string())),
+            opt(other.ema.map(|e| e.to_string())),
+        );
+        check(
+            "--prediction",
+            opt(self.prediction.map(name)),
+            opt(other.prediction.map(name)),
+        );
+        out
     }
 }
 
@@ -389,13 +414,13 @@ fn open_run(
                 path: state.clone(),
                 message: format!("metadata 'train': {e}"),
             })?;
-        if !saved.same_run(tc) {
+        let differences = saved.differences(tc);
+        if !differences.is_empty() {
             return Err(ModelError::Config {
                 source_name: state.display().to_string(),
                 message: format!(
-                    "this run was started with batch {}, lr {}, loss {:?}, seed {}, ema {:?}, prediction {:?}; resume \
-                     with the same settings or use a new --out",
-                    saved.batch, saved.lr, saved.loss, saved.seed, saved.ema, saved.prediction
+                    "this run was started with {}; resume with the same settings or use a new --out",
+                    differences.join(", ")
                 ),
             });
         }
@@ -599,6 +624,37 @@ fn truncate_log(run_dir: &Path, step: u64) -> Result<(), ModelError> {
 mod tests {
     use super::*;
     use candle_core::{Device, Var};
+
+    #[test]
+    fn a_resume_names_each_setting_that_differs_in_the_flags_spelling() {
+        let started = TrainConfig {
+            ema: Some(0.999),
+            prediction: Some(PredictionType::VPrediction),
+            ..TrainConfig::default()
+        };
+        // Steps, checkpoints and the device are not part of a run's identity.
+        let same = TrainConfig {
+            steps: Some(10),
+            checkpoint_every_s: 1.0,
+            device: "cuda".into(),
+            ..started.clone()
+        };
+        assert!(started.differences(&same).is_empty());
+        let resumed = TrainConfig {
+            batch: 8,
+            ema: None,
+            prediction: Some(PredictionType::Epsilon),
+            ..started.clone()
+        };
+        assert_eq!(
+            started.differences(&resumed),
+            [
+                "--batch 16 (now 8)",
+                "--ema 0.999 (now none)",
+                "--prediction v (now eps)"
+            ]
+        );
+    }
 
     #[test]
     fn ema_update_is_the_weighted_mean_and_holds_no_graph() {

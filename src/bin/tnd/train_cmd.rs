@@ -23,7 +23,8 @@ pub struct TrainArgs {
     /// Fine-tune from this checkpoint (architecture and normalisation come from it).
     #[arg(long)]
     pub init: Option<PathBuf>,
-    /// Architecture for training from scratch: a UNet2DModel config JSON object or file (default: the shipped one).
+    /// Architecture for training from scratch: a UNet2DModel config JSON object or file (default: the bundled default
+    /// model's, a v-prediction U-Net of 2.7 M parameters; `small`: the bundled small model's).
     #[arg(long)]
     pub config: Option<String>,
     #[command(flatten)]
@@ -35,14 +36,65 @@ pub struct TrainArgs {
     pub val_data: Option<PathBuf>,
 }
 
+/// The run's inputs besides its settings (the data and the starting point) in `OUT/run_inputs.json`: a resume with
+/// other ones is refused (it would continue the old run on new data), and the user is told whether the run starts
+/// or resumes.
+fn check_run_inputs(a: &TrainArgs) -> Result<()> {
+    let path = a.out.join("run_inputs.json");
+    let canonical = |p: &std::path::Path| {
+        std::fs::canonicalize(p)
+            .unwrap_or_else(|_| p.to_path_buf())
+            .display()
+            .to_string()
+    };
+    let now = json!({
+        "data": canonical(&a.data),
+        "init": a.init.as_deref().map(|p| if p.exists() { canonical(p) } else { p.display().to_string() }),
+    });
+    let resuming = a.out.join("train_state.safetensors").is_file();
+    if resuming {
+        if let Ok(text) = std::fs::read_to_string(&path) {
+            let saved: serde_json::Value = serde_json::from_str(&text)
+                .map_err(|e| anyhow!("{}: not JSON: {e}", path.display()))?;
+            for key in ["data", "init"] {
+                if saved[key] != now[key] {
+                    bail!(
+                        "{}: this run was started with --{key} {}, not {}; resume with it or use a new --out",
+                        a.out.display(),
+                        saved[key],
+                        now[key]
+                    );
+                }
+            }
+        }
+        eprintln!(
+            "{}: resuming the run from its last checkpoint",
+            a.out.display()
+        );
+    } else {
+        eprintln!(
+            "{}: no checkpoint there, starting a new run",
+            a.out.display()
+        );
+    }
+    std::fs::create_dir_all(&a.out)
+        .map_err(|e| anyhow!("{}: cannot create: {e}", a.out.display()))?;
+    tactile_derender::io::write_atomic(&path, format!("{now}\n").as_bytes())
+        .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
+    Ok(())
+}
+
 fn model_config(a: &TrainArgs, resolution: (usize, usize)) -> Result<UNet2DConfig> {
-    let mut cfg = match &a.config {
-        None => UNet2DConfig::default(),
+    let mut cfg = match a.config.as_deref() {
+        None => tactile_derender::model::checkpoint::locate(std::path::Path::new("default"))?.1,
+        Some("small") => {
+            tactile_derender::model::checkpoint::locate(std::path::Path::new("small"))?.1
+        }
         Some(c) => {
             let text = if std::path::Path::new(c).is_file() {
-                std::fs::read_to_string(c).with_context(|| c.clone())?
+                std::fs::read_to_string(c).with_context(|| c.to_string())?
             } else {
-                c.clone()
+                c.to_string()
             };
             UNet2DConfig::from_json(&text, "--config")?
         }
@@ -86,6 +138,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
     if let Some(v) = &val_dataset {
         data = data.with_validation(v);
     }
+    check_run_inputs(&a)?;
     let mut bar = super::progress::bar("training", " steps", 0);
     let summary = train(&a.out, &tc, &cfg, a.init.as_deref(), &mut data, &mut |p| {
         bar.total = p.total as usize;
