@@ -432,6 +432,24 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
         assert_eq!(data("imprint").0, target_shape);
         assert_eq!(data("object_pose").0, [3]);
     }
+    // With the signature check (the default) the table also sets the model against the baseline with the same check.
+    let checked = output(&[
+        "eval",
+        "--data",
+        "ds",
+        "--split",
+        "unseen_objects",
+        "--model",
+        "ground-truth",
+        "--limit",
+        "2",
+    ]);
+    let table = String::from_utf8_lossy(&checked.stderr);
+    assert!(checked.status.success(), "{table}");
+    assert!(
+        table.contains("Against the threshold baseline with the same signature check: model / (baseline + check)"),
+        "{table}"
+    );
     // The saved run in the paper's layout: one row for the run (named here), the baseline, θ in radians.
     std::fs::write(dir.path().join("gt.json"), format!("{eval}\n")).unwrap();
     let out = output(&["eval", "--tables-from", "truth=gt.json"]);

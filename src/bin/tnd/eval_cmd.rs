@@ -462,6 +462,20 @@ pub fn markdown_table(split: &str, r: &EvalReport) -> String {
             );
         }
     }
+    // The ratios above credit the model with the signature check it runs; the baseline with the same check shows
+    // what the model's samples add (a model of noise scores near 1 here however good the line above looks).
+    if let Some(b) = r
+        .baseline_checked
+        .as_ref()
+        .filter(|b| b.position_mm.mean > 0.0)
+    {
+        let _ = writeln!(
+            s,
+            "Against the threshold baseline with the same signature check: model / (baseline + check) {:.2} (below 1: \
+             the model's samples help beyond the check).\n",
+            r.model.position_mm.mean / b.position_mm.mean
+        );
+    }
     s
 }
 
