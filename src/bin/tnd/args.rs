@@ -8,6 +8,50 @@ use tactile_derender::mesh::Units;
 use tactile_derender::sensor::camera::parse_resolution;
 use tactile_derender::sim::SimConfig;
 
+/// Deepest press any command takes, metres: the whole sensor is about 90 mm deep, so anything deeper is a depth given
+/// in millimetres.
+const MAX_PRESS_M: f64 = 0.1;
+
+/// Check a press depth given as `flag` (metres): finite, not negative (positive when `positive`), and not deeper
+/// than the sensor (then it was given in millimetres: say what it means in metres).
+pub fn check_press(flag: &str, press_m: f64, positive: bool) -> Result<()> {
+    let sign_ok = if positive {
+        press_m > 0.0
+    } else {
+        press_m >= 0.0
+    };
+    if !(press_m.is_finite() && sign_ok) {
+        return Err(anyhow!(
+            "{flag} must be a {} depth in metres, got {press_m}",
+            if positive { "positive" } else { "non-negative" }
+        ));
+    }
+    if press_m > MAX_PRESS_M {
+        return Err(anyhow!(
+            "{flag} {press_m} m is deeper than the whole sensor; depths are in metres (did you mean {}?)",
+            press_m / 1000.0
+        ));
+    }
+    Ok(())
+}
+
+/// Parse an object pose `X,Y,THETA` given as `flag` (metres, metres, radians), refusing positions no sensor could
+/// reach (then they were given in millimetres).
+pub fn parse_pose(flag: &str, text: &str) -> Result<tactile_derender::sensor::Se2> {
+    let pose = tactile_derender::sensor::Se2::parse(text).map_err(|e| anyhow!("{flag}: {e}"))?;
+    let far = pose.x.abs().max(pose.y.abs());
+    if far > 0.5 {
+        return Err(anyhow!(
+            "{flag} {text}: {far} m from the sensor axis is beyond any sensor's reach; positions are in metres (did \
+             you mean {},{},{}?)",
+            pose.x / 1000.0,
+            pose.y / 1000.0,
+            pose.theta
+        ));
+    }
+    Ok(pose)
+}
+
 /// Sensor, elastomer and signature options: overrides of the library's [`SimConfig`], whose defaults (the Soft
 /// Bubble of the paper) apply to every option left out.
 #[derive(Args, Clone, Debug)]
@@ -81,4 +125,30 @@ pub fn parse_figure_size(s: &str) -> Result<tactile_derender::io::figure::Figure
         width_px: u32::try_from(w).map_err(|_| bad())?,
         height_px: u32::try_from(h).map_err(|_| bad())?,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{check_press, parse_pose};
+
+    #[test]
+    fn depths_and_positions_in_millimetres_are_caught_with_their_metres() {
+        assert!(check_press("--press", 0.006, false).is_ok());
+        assert!(check_press("--press", 0.0, false).is_ok());
+        assert!(check_press("--max-press", 0.0, true).is_err());
+        let e = check_press("--press", 6.0, false).unwrap_err().to_string();
+        assert!(
+            e.starts_with("--press 6 m is deeper") && e.contains("did you mean 0.006?"),
+            "{e}"
+        );
+        assert!(check_press("--press", f64::NAN, false).is_err());
+        let p = parse_pose("--pose", "0.002,-0.001,0.35").unwrap();
+        assert_eq!((p.x, p.y, p.theta), (0.002, -0.001, 0.35));
+        let e = parse_pose("--pose", "2,-1,20").unwrap_err().to_string();
+        assert!(e.contains("did you mean 0.002,-0.001,20?"), "{e}");
+        assert!(parse_pose("--truth", "nope")
+            .unwrap_err()
+            .to_string()
+            .starts_with("--truth: "));
+    }
 }

@@ -179,6 +179,9 @@ fn gen(a: GenArgs) -> Result<()> {
         None => GenConfig::default().press_range,
         Some(p) => pair("press", p, "0.003,0.015")?,
     };
+    for p in press_range {
+        crate::args::check_press("--press", p, false)?;
+    }
     let inflation = a
         .inflation_range
         .as_deref()

@@ -18,7 +18,6 @@ use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::{self, DerenderConfig, ObjectSpec, PoseInput};
 use tactile_derender::pose::from_depth::contact_probability;
-use tactile_derender::sensor::Se2;
 use tactile_derender::sim::{PreparedObject, Simulator};
 
 use super::args::SensorArgs;
@@ -98,6 +97,7 @@ pub(crate) fn check_size(path: &Path, img: &Image, want: (usize, usize)) -> Resu
 }
 
 pub fn run(a: PoseArgs) -> Result<()> {
+    crate::args::check_press("--press", a.press, false)?;
     let sim = Simulator::new(a.sensor.sim_config()?)?;
     let rrd = a.rerun.open("tnd pose")?;
     let res = (sim.intrinsics().width, sim.intrinsics().height);
@@ -116,9 +116,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let truth = a
         .truth
         .as_deref()
-        .map(Se2::parse)
-        .transpose()
-        .map_err(|e| anyhow!("--truth: {e}"))?;
+        .map(|t| crate::args::parse_pose("--truth", t))
+        .transpose()?;
     let signature = a.signature.as_ref().map(|p| read(p, res)).transpose()?;
     let eval = EvalConfig {
         check_signature: !a.no_signature_check,

@@ -3,13 +3,12 @@
 
 use std::path::PathBuf;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::Result;
 use clap::{Args, Subcommand};
 use serde_json::json;
 use tactile_derender::pipeline::ObjectSpec;
 use tactile_derender::recording::synth::{self, DepthEncoding, PressSequence};
 use tactile_derender::recording::{self, FolderOptions, ProcessConfig, Recording, ReferenceChoice};
-use tactile_derender::sensor::Se2;
 use tactile_derender::sim::PreparedObject;
 
 use crate::args::SensorArgs;
@@ -151,15 +150,8 @@ fn info(a: InfoArgs) -> Result<()> {
 }
 
 fn simulate(a: SimulateArgs) -> Result<()> {
-    let pose = Se2::parse(&a.pose)
-        .map_err(|e| anyhow!(e))
-        .context("--pose")?;
-    if !(a.max_press.is_finite() && a.max_press > 0.0) {
-        return Err(anyhow!(
-            "--max-press must be a positive depth in metres, got {}",
-            a.max_press
-        ));
-    }
+    let pose = crate::args::parse_pose("--pose", &a.pose)?;
+    crate::args::check_press("--max-press", a.max_press, true)?;
     let config = a.sensor.sim_config()?;
     let loaded = a.object.load()?;
     for w in &loaded.warnings {

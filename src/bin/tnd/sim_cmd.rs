@@ -2,12 +2,12 @@
 
 use std::path::PathBuf;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use tactile_derender::image::Image;
 use tactile_derender::io::{npy, preview};
-use tactile_derender::sensor::{Scene, Se2};
+use tactile_derender::sensor::Scene;
 use tactile_derender::sim::{PreparedObject, SimOutput, Simulator};
 
 use crate::args::SensorArgs;
@@ -62,15 +62,8 @@ fn image_of<'a>(out: &'a SimOutput, name: &str) -> &'a Image {
 }
 
 pub fn run(a: SimArgs) -> Result<()> {
-    let pose = Se2::parse(&a.pose)
-        .map_err(|e| anyhow!(e))
-        .context("--pose")?;
-    if !(a.press.is_finite() && a.press >= 0.0) {
-        return Err(anyhow!(
-            "--press must be a non-negative depth in metres, got {}",
-            a.press
-        ));
-    }
+    let pose = crate::args::parse_pose("--pose", &a.pose)?;
+    crate::args::check_press("--press", a.press, false)?;
     let config = a.sensor.sim_config()?;
     let rrd = a.rerun.open("tnd sim")?;
     let loaded = a.object.load()?;
