@@ -316,6 +316,16 @@ fn train_starts_resumes_and_refuses_other_inputs() {
             .unwrap();
     let (_, bundled) = tactile_derender::model::checkpoint::locate(Path::new("default")).unwrap();
     assert_eq!(cfg.block_out_channels, bundled.block_out_channels);
+    // The run directory given as a model points to the model in it.
+    let e = tactile_derender::model::checkpoint::locate(&dir.path().join("run"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("a training run, not a model; its model is ")
+            && e.ends_with("run/model.safetensors"),
+        "{e}"
+    );
     let again = train("ds", "2", "2");
     let err = String::from_utf8_lossy(&again.stderr);
     assert!(again.status.success(), "{err}");

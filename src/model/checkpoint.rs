@@ -144,6 +144,13 @@ pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
         return parse_bundled(name, bytes);
     }
     let weights = if path.is_dir() {
+        let run_model = path.join("model.safetensors");
+        if run_model.is_file() && !path.join("diffusion_pytorch_model.safetensors").exists() {
+            // A `tnd train` run directory, not a diffusers folder.
+            return Err(ModelError::TrainingRun {
+                run: path.to_path_buf(),
+            });
+        }
         path.join("diffusion_pytorch_model.safetensors")
     } else {
         path.to_path_buf()

@@ -85,6 +85,9 @@ pub enum ModelError {
     NonFinite { what: String, at_step: Option<u64> },
     #[error("input has the wrong shape: {0}")]
     Input(String),
+    /// A `tnd train` run directory given where a model is expected.
+    #[error("{}: a training run, not a model; its model is {}", run.display(), run.join("model.safetensors").display())]
+    TrainingRun { run: PathBuf },
     #[error("cancelled")]
     Cancelled,
     #[error("{message}")]

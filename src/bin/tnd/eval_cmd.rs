@@ -133,7 +133,9 @@ fn splits(s: &str) -> Result<Vec<SplitName>> {
     if s == "all" {
         return Ok(vec![SplitName::UnseenPoses, SplitName::UnseenObjects]);
     }
-    Ok(vec![s.parse::<SplitName>().map_err(|e| anyhow!(e))?])
+    Ok(vec![s.parse::<SplitName>().map_err(|e| {
+        anyhow!("--split: {e}, or all (unseen_poses and unseen_objects)")
+    })?])
 }
 
 pub fn run(a: EvalArgs) -> Result<()> {

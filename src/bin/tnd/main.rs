@@ -31,7 +31,8 @@ struct Cli {
 enum Command {
     /// Simulate one contact: depth, elastomer, contact mask, target, signature, reference and imprint.
     Sim(Box<sim_cmd::SimArgs>),
-    /// The object library: list the built-in set or a directory set, export the built-in set.
+    /// The object library and users' meshes: list, export, check a mesh file, import a folder of meshes, generate a
+    /// procedural training set.
     Objects(objects_cmd::ObjectsArgs),
     /// Synthetic and real datasets: generate, import, statistics, preview.
     Dataset(dataset_cmd::DatasetArgs),
@@ -41,7 +42,8 @@ enum Command {
     Eval(Box<eval_cmd::EvalArgs>),
     /// One signature end to end: samples, pose, uncertainty (CSV + KDE plot).
     Pose(Box<pose_cmd::PoseArgs>),
-    /// Diffusion model checkpoints: verify against a diffusers reference.
+    /// Diffusion model checkpoints: verify against a diffusers reference, diagnose per timestep, export to and import
+    /// from diffusers folders.
     Model(model_cmd::ModelArgs),
     /// De-render: draw N samples of the in-contact depth for one imprint (DDPM or DDIM).
     Sample(Box<sample_cmd::SampleArgs>),
