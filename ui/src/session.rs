@@ -1,7 +1,7 @@
 //! Session files (`sessions/*.json`): the [`State`] as pretty JSON, written atomically; reading validates the file and
 //! names it in every error, so a bad file changes nothing.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, Context, Result};
 use tactile_derender::io::write_atomic;
@@ -22,7 +22,46 @@ pub fn read(path: &Path) -> Result<State> {
         ));
     }
     validate(&state).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let mut state = state;
+    if let Some(dir) = path.parent() {
+        resolve_beside(&mut state, dir);
+    }
     Ok(state)
+}
+
+/// The files a session names are kept as they were typed, relative to where the workbench ran. Opened from another
+/// directory, a relative path that does not exist from here but does beside the session file is taken from there
+/// (a session saved next to its data opens from anywhere).
+fn resolve_beside(state: &mut State, session_dir: &Path) {
+    let fix = |p: &mut PathBuf| {
+        if p.is_relative() && !p.exists() {
+            let beside = session_dir.join(&*p);
+            if beside.exists() {
+                *p = beside;
+            }
+        }
+    };
+    match &mut state.scene.object {
+        crate::state::ObjectSource::File { path, .. } => fix(path),
+        crate::state::ObjectSource::Library { set, .. } if set != "builtin" => {
+            let mut p = PathBuf::from(&*set);
+            fix(&mut p);
+            *set = p.display().to_string();
+        }
+        crate::state::ObjectSource::Library { .. } => {}
+    }
+    for p in [
+        state.sim.elastomer.mesh_file.as_mut(),
+        state.calibration.measured.as_mut(),
+        state.model.path.as_mut(),
+        state.dataset.path.as_mut(),
+        state.recording.path.as_mut(),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        fix(p);
+    }
 }
 
 /// Write `state` to `path` atomically (temp file + rename).
@@ -67,6 +106,40 @@ pub fn validate(state: &State) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn relative_paths_missing_here_are_taken_from_beside_the_session() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("part.obj"),
+            "v 0 0 0\nv 0.01 0 0\nv 0 0.01 0\nf 1 2 3\n",
+        )
+        .unwrap();
+        std::fs::create_dir(dir.path().join("ds")).unwrap();
+        let mut state = State::default();
+        state.scene.object = crate::state::ObjectSource::File {
+            path: "part.obj".into(),
+            units: tactile_derender::mesh::Units::M,
+        };
+        state.dataset.path = Some("ds".into());
+        // Not beside the session either: left as typed (the load then names it).
+        state.model.path = Some("runs/none.safetensors".into());
+        let p = dir.path().join("s.json");
+        write(&p, &state).unwrap();
+        let back = read(&p).unwrap();
+        assert_eq!(
+            back.scene.object,
+            crate::state::ObjectSource::File {
+                path: dir.path().join("part.obj"),
+                units: tactile_derender::mesh::Units::M,
+            }
+        );
+        assert_eq!(back.dataset.path, Some(dir.path().join("ds")));
+        assert_eq!(
+            back.model.path,
+            Some(PathBuf::from("runs/none.safetensors"))
+        );
+    }
 
     #[test]
     fn round_trip_and_errors_name_the_file() {
