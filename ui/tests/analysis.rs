@@ -513,9 +513,10 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
         );
     }
     let csv = std::fs::read_to_string(dir.path().join("out/pose/samples.csv")).unwrap();
-    // Header, four samples, the baseline and the multi-sample estimate.
-    assert_eq!(csv.lines().count(), 1 + 4 + 1 + 1, "{csv}");
+    // Header, four samples, the baseline, the multi-sample estimate and the estimate reported.
+    assert_eq!(csv.lines().count(), 1 + 4 + 1 + 1 + 1, "{csv}");
     assert!(csv.contains("\nmulti_sample,0,"), "{csv}");
+    assert!(csv.contains("\nestimate,0,"), "{csv}");
 
     // A cancelled registration leaves no result (even if its thread was about to finish) and no error.
     h.get_by_label("Register samples").click();
