@@ -299,14 +299,18 @@ fn train_starts_resumes_and_refuses_other_inputs() {
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     }
+    // (succeeded, stderr) of one `tnd train` in the same run directory.
     let train = |data: &str, steps: &str, batch: &str| {
-        run(&[
+        let o = run(&[
             "train", "-q", "--data", data, "--out", "run", "--steps", steps, "--batch", batch,
-        ])
+        ]);
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
     };
-    let first = train("ds", "1", "2");
-    let err = String::from_utf8_lossy(&first.stderr);
-    assert!(first.status.success(), "{err}");
+    let (ok, err) = train("ds", "1", "2");
+    assert!(ok, "{err}");
     assert!(
         err.contains("run: no checkpoint there, starting a new run"),
         "{err}"
@@ -326,22 +330,19 @@ fn train_starts_resumes_and_refuses_other_inputs() {
             && e.ends_with("run/model.safetensors"),
         "{e}"
     );
-    let again = train("ds", "2", "2");
-    let err = String::from_utf8_lossy(&again.stderr);
-    assert!(again.status.success(), "{err}");
+    let (ok, err) = train("ds", "2", "2");
+    assert!(ok, "{err}");
     assert!(
         err.contains("resuming the run from its last checkpoint"),
         "{err}"
     );
-    let other_data = train("ds2", "3", "2");
-    let err = String::from_utf8_lossy(&other_data.stderr);
-    assert!(!other_data.status.success());
+    let (ok, err) = train("ds2", "3", "2");
+    assert!(!ok);
     assert!(
         err.contains("started with --data") && err.contains("ds2"),
         "{err}"
     );
-    let other_batch = train("ds", "3", "1");
-    let err = String::from_utf8_lossy(&other_batch.stderr);
-    assert!(!other_batch.status.success());
+    let (ok, err) = train("ds", "3", "1");
+    assert!(!ok);
     assert!(err.contains("--batch 2 (now 1)"), "{err}");
 }

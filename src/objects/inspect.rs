@@ -19,6 +19,11 @@ use crate::mesh::{self, LoadOptions, Mesh, Units};
 /// Largest extents, metres, that a pressed object plausibly has; outside, the units are probably wrong.
 pub const PLAUSIBLE_EXTENT_M: [f64; 2] = [0.003, 0.5];
 
+/// Whether a largest extent of `m` metres is plausible for a pressed object ([`PLAUSIBLE_EXTENT_M`]).
+fn plausible_extent(m: f64) -> bool {
+    (PLAUSIBLE_EXTENT_M[0]..=PLAUSIBLE_EXTENT_M[1]).contains(&m)
+}
+
 /// What [`check`] found in a mesh file (after its units).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MeshCheck {
@@ -109,7 +114,7 @@ fn check_mesh(path: &Path, mesh: &Mesh, options: &LoadOptions) -> MeshCheck {
 /// metres if given) when that is implausible for a pressed object: the unit that makes it plausible, or, when none
 /// does, that it needs scaling.
 pub fn size_note(largest_m: f64, units: Units, fit_size: Option<f64>) -> Option<String> {
-    if fit_size.is_some() || (PLAUSIBLE_EXTENT_M[0]..=PLAUSIBLE_EXTENT_M[1]).contains(&largest_m) {
+    if fit_size.is_some() || plausible_extent(largest_m) {
         return None;
     }
     let read = match units {
@@ -139,14 +144,13 @@ pub fn size_note(largest_m: f64, units: Units, fit_size: Option<f64>) -> Option<
 /// than the sensor (a 3-unit file stays a 30 mm object: at 3 mm it would barely touch the membrane). Otherwise the
 /// plausible unit that brings the object closest (in ratio) to a typical 50 mm.
 pub fn likely_units(largest_m: f64, units: Units) -> Option<Units> {
-    let plausible = |m: f64| (PLAUSIBLE_EXTENT_M[0]..=PLAUSIBLE_EXTENT_M[1]).contains(&m);
-    if plausible(largest_m) {
+    if plausible_extent(largest_m) {
         return None;
     }
     let in_file_units = largest_m / units.to_metres();
     let candidates: Vec<Units> = [Units::Mm, Units::Cm, Units::M]
         .into_iter()
-        .filter(|u| *u != units && plausible(in_file_units * u.to_metres()))
+        .filter(|u| *u != units && plausible_extent(in_file_units * u.to_metres()))
         .collect();
     if candidates.contains(&Units::Mm) && in_file_units * Units::Mm.to_metres() >= 0.005 {
         return Some(Units::Mm);
@@ -349,9 +353,7 @@ fn import_file(
     let (mesh, read_as) = scaled(Units::Scale(scale_to_m))?;
     let mut check = check_mesh(path, &mesh, &read_as);
     let final_largest = check.extent_m.iter().copied().fold(0.0, f64::max);
-    if options.fit_m.is_none()
-        && !(PLAUSIBLE_EXTENT_M[0]..=PLAUSIBLE_EXTENT_M[1]).contains(&final_largest)
-    {
+    if options.fit_m.is_none() && !plausible_extent(final_largest) {
         // Not written into the set: a 0.06 mm finger or a 700 m engine only fails later, in the simulator.
         let read = options.units.unwrap_or(Units::M);
         let note = size_note(final_largest, read, None).unwrap_or_default();
