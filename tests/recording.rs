@@ -482,3 +482,155 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.json: no split summaries"));
 }
+
+#[test]
+fn press_from_the_true_contact_puts_its_highest_point_on_the_object_s_top() {
+    // Independent truth: the press the simulator placed the sensor at. The object's top is under the sensor at these
+    // poses, so the highest point of the true in-contact depth lies on it and the press comes back; a press is
+    // never over-estimated (no contact point lies above the top).
+    use tactile_derender::pipeline::track::press_from_samples;
+    let sim = Simulator::new(quiet_sim()).unwrap();
+    let cross = PreparedObject::new(ObjectSet::builtin().mesh("cross_w12_s50").unwrap()).unwrap();
+    let eval = EvalConfig::default();
+    for (pose, press) in [
+        (Se2::new(0.003, -0.002, 0.4), 0.002),
+        (Se2::new(0.003, -0.002, 0.4), 0.006),
+        (Se2::new(-0.005, 0.004, 1.2), 0.004),
+    ] {
+        let scene = Scene {
+            object: pose,
+            sensor: sim.pressing_pose(&cross, 0.0, 0.0, 0.0, press),
+        };
+        let out = sim.simulate(&cross, &scene, 0);
+        let got = press_from_samples(
+            &sim,
+            &cross,
+            std::slice::from_ref(&out.target),
+            &out.signature,
+            &out.imprint,
+            &eval,
+            0.03,
+        )
+        .unwrap()
+        .unwrap();
+        assert!(
+            (got - press).abs() < 3e-4,
+            "press {press} at {pose:?}: estimated {got}"
+        );
+    }
+    // No contact, no press.
+    let empty = Image::filled(64, 64, 0.0);
+    let none = press_from_samples(
+        &sim,
+        &cross,
+        std::slice::from_ref(&empty),
+        &empty,
+        &empty,
+        &eval,
+        0.03,
+    );
+    assert_eq!(none.unwrap(), None);
+}
+
+#[test]
+fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
+    // As a user would: tnd recording simulate -> tnd recording track (bundled model, two samples a frame); the
+    // recorded pose topic is the truth the rows are scored against, never an input.
+    let dir = tempfile::tempdir().unwrap();
+    let tnd = env!("CARGO_BIN_EXE_tnd");
+    let output = |args: &[&str]| {
+        std::process::Command::new(tnd)
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap()
+    };
+    let run = |args: &[&str]| -> serde_json::Value {
+        let out = output(args);
+        assert!(
+            out.status.success(),
+            "tnd {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let stdout = String::from_utf8(out.stdout).unwrap();
+        serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+    };
+    let simulated = run(&[
+        "recording",
+        "simulate",
+        "press.mcap",
+        "--object",
+        "cross_w12_s50",
+        "--pose",
+        "0.003,-0.002,0.4",
+        "--max-press",
+        "0.007",
+        "--rest",
+        "2",
+        "--ramp",
+        "5",
+    ]);
+    let presses: Vec<f64> = simulated["presses_m"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_f64().unwrap())
+        .collect();
+    let info = run(&["recording", "info", "press.mcap"]);
+    let with_contact = info["contact_px"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| c.as_u64().unwrap() >= 10)
+        .count();
+    let track = [
+        "recording",
+        "track",
+        "press.mcap",
+        "--object",
+        "cross_w12_s50",
+        "--samples",
+        "2",
+        "--out",
+        "track",
+    ];
+    let summary = run(&track);
+    assert_eq!(
+        summary["tracked"].as_u64(),
+        Some(with_contact as u64),
+        "{summary}"
+    );
+    assert_eq!(summary["scored_against"], "/object/pose");
+    assert_eq!(summary["no_estimate"], 0, "{summary}");
+    let median = summary["position_err_mm"]["median"].as_f64().unwrap();
+    assert!(median < 1.0, "{summary}");
+    let csv = std::fs::read_to_string(dir.path().join("track/track.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), with_contact + 1);
+    // The press found for each frame (never given: the sensor does not measure it) is the one simulated.
+    for line in &lines[1..] {
+        let cells: Vec<&str> = line.split(',').collect();
+        let frame: usize = cells[0].parse().unwrap();
+        let press: f64 = cells[3].parse().unwrap();
+        assert!(
+            (press - presses[frame]).abs() < 5e-4,
+            "frame {frame}: press {press} against {}",
+            presses[frame]
+        );
+    }
+    // A run killed after two frames resumes: the other frames are tracked again, bit for bit as before.
+    std::fs::write(dir.path().join("track/track.csv"), lines[..3].join("\n")).unwrap();
+    let resumed = run(&track);
+    assert_eq!(resumed["this_run"].as_u64(), Some(with_contact as u64 - 2));
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("track/track.csv")).unwrap(),
+        csv
+    );
+    // Other settings into the same folder are refused, naming them.
+    let mut other = track.to_vec();
+    other.extend(["--press", "0.005"]);
+    let refused = output(&other);
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(stderr.contains("other settings (press)"), "{stderr}");
+}

@@ -101,10 +101,12 @@ pub struct RecordingImportReport {
 }
 
 /// One frame's known pose.
-#[derive(Clone, Copy, Debug)]
-struct FramePose {
-    pose: Se2,
-    press: Option<f64>,
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FramePose {
+    /// The object's pose `t_world_object`.
+    pub pose: Se2,
+    /// The press depth, metres, where the pose table gives one.
+    pub press: Option<f64>,
 }
 
 /// Import a recording (MCAP file or frame folder) at `from` into a new real dataset at `out`.
@@ -135,7 +137,12 @@ pub fn import_recording(
     let stream = rec.depth_stream(config.topic.as_deref())?.clone();
     let processed =
         recording::process(&rec, &stream, &sim_config.camera, &config.process, progress)?;
-    let poses = frame_poses(&rec, &processed.stamps_ns, config)?;
+    let poses = frame_poses(
+        &rec,
+        &processed.stamps_ns,
+        &config.poses,
+        config.max_pose_gap_s,
+    )?;
 
     let sim = noise_free_simulator(sim_config)?;
     let object = PreparedObject::new(set.mesh(&config.object)?)?;
@@ -220,22 +227,24 @@ pub fn import_recording(
     })
 }
 
-/// The known pose of every frame (`None` where none is known).
-fn frame_poses(
+/// The known pose of every frame of `rec` stamped `stamps_ns` (`None` where none is known): the pose message or
+/// CSV row nearest in time within `max_gap_s`, or the CSV row naming the frame.
+pub fn frame_poses(
     rec: &Recording,
     stamps_ns: &[u64],
-    config: &RecordingImportConfig,
+    poses: &PoseSource,
+    max_gap_s: f64,
 ) -> Result<Vec<Option<FramePose>>, DatasetError> {
-    match &config.poses {
+    match poses {
         PoseSource::Topic(name) => {
             let stream = rec.pose_stream(name.as_deref())?.clone();
             Ok(rec
-                .poses_at(&stream, stamps_ns, config.max_pose_gap_s)?
+                .poses_at(&stream, stamps_ns, max_gap_s)?
                 .into_iter()
                 .map(|p| p.map(|pose| FramePose { pose, press: None }))
                 .collect())
         }
-        PoseSource::Csv(path) => csv_poses(path, stamps_ns, config.max_pose_gap_s),
+        PoseSource::Csv(path) => csv_poses(path, stamps_ns, max_gap_s),
     }
 }
 

@@ -66,7 +66,22 @@ impl Evaluator {
         t_world_camera: &DAffine3,
         measured: Option<(&Image, &Image)>,
     ) -> Result<Option<(Se2, usize)>, PoseError> {
-        let best = hypotheses.first().map(|h| (h.pose, 0));
+        Ok(self
+            .choose_scored(object, hypotheses, ctx, t_world_camera, measured)?
+            .map(|(pose, from, _)| (pose, from)))
+    }
+
+    /// [`Self::choose`], with the signature cost of the pick (robust mean, metres²) when the check ran: a score of
+    /// how well the pose, seen from `t_world_camera`, explains the signature.
+    pub fn choose_scored(
+        &self,
+        object: &ObjectModel,
+        hypotheses: &[Hypothesis],
+        ctx: &EvalContext,
+        t_world_camera: &DAffine3,
+        measured: Option<(&Image, &Image)>,
+    ) -> Result<Option<(Se2, usize, Option<f64>)>, PoseError> {
+        let best = hypotheses.first().map(|h| (h.pose, 0, None));
         let measured = measured.filter(|_| self.config.check_signature);
         let (Some(model), Some((signature, imprint))) = (ctx.signature_model, measured) else {
             return Ok(best);
@@ -87,6 +102,9 @@ impl Evaluator {
             config: &self.config.signature_check,
         };
         let poses: Vec<Se2> = hypotheses.iter().map(|h| h.pose).collect();
-        Ok(check.select(&poses)?.map(|c| (c.pose, c.from)).or(best))
+        Ok(check
+            .select(&poses)?
+            .map(|c| (c.pose, c.from, Some(c.cost)))
+            .or(best))
     }
 }

@@ -12,6 +12,7 @@ mod recording_cmd;
 mod rerun_out;
 mod sample_cmd;
 mod sim_cmd;
+mod track_cmd;
 mod train_cmd;
 
 use clap::{Parser, Subcommand};

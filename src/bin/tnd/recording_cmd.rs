@@ -24,6 +24,9 @@ pub struct RecordingArgs {
 pub enum RecordingCommand {
     /// List a recording's topics, detect the no-contact reference and print the contact area of every frame (JSON).
     Info(Box<InfoArgs>),
+    /// Estimate the object's pose on every contact frame (de-render, register; track.csv, scored against the
+    /// recorded poses when there are any).
+    Track(Box<crate::track_cmd::TrackArgs>),
     /// Write a simulated press sequence (sensor lowered onto an object and lifted) as an MCAP recording.
     Simulate(Box<SimulateArgs>),
 }
@@ -114,6 +117,7 @@ pub fn run(a: RecordingArgs) -> Result<()> {
     match a.command {
         RecordingCommand::Info(i) => info(*i),
         RecordingCommand::Simulate(s) => simulate(*s),
+        RecordingCommand::Track(t) => crate::track_cmd::run(*t),
     }
 }
 
