@@ -488,7 +488,7 @@ fn press_from_the_true_contact_puts_its_highest_point_on_the_object_s_top() {
     // Independent truth: the press the simulator placed the sensor at. The object's top is under the sensor at these
     // poses, so the highest point of the true in-contact depth lies on it and the press comes back; a press is
     // never over-estimated (no contact point lies above the top).
-    use tactile_derender::pipeline::track::press_from_samples;
+    use tactile_derender::pipeline::press::press_from_samples;
     let sim = Simulator::new(quiet_sim()).unwrap();
     let cross = PreparedObject::new(ObjectSet::builtin().mesh("cross_w12_s50").unwrap()).unwrap();
     let eval = EvalConfig::default();
@@ -506,7 +506,7 @@ fn press_from_the_true_contact_puts_its_highest_point_on_the_object_s_top() {
             &sim,
             &cross,
             std::slice::from_ref(&out.target),
-            &out.signature,
+            Some(&out.signature),
             &out.imprint,
             &eval,
             0.03,
@@ -524,7 +524,7 @@ fn press_from_the_true_contact_puts_its_highest_point_on_the_object_s_top() {
         &sim,
         &cross,
         std::slice::from_ref(&empty),
-        &empty,
+        Some(&empty),
         &empty,
         &eval,
         0.03,

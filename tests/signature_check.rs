@@ -166,3 +166,46 @@ fn poses_the_signature_cannot_tell_apart_keep_the_registrations_pick_with_a_marg
     let off = Se2::new(truth.x + 0.004, truth.y, truth.theta);
     assert_eq!(c.select(&[off, truth]).unwrap().unwrap().from, 1);
 }
+
+#[test]
+fn the_press_is_found_from_the_contact_and_the_noisy_signature() {
+    // Independent truth: the press the simulator placed the sensor at (the sensor never measures it). With the true
+    // contact as the sample, the signature's search lands within half a millimetre of it, as does the samples'
+    // highest point alone (no signature); a fixed press is taken as given.
+    use tactile_derender::metrics::evaluate::EvalConfig;
+    use tactile_derender::pipeline::press::{PressChoice, SensorPlacement};
+    use tactile_derender::pipeline::ObjectSpec;
+    let object = ObjectSpec::library("builtin", "cross_w12_s50")
+        .load()
+        .unwrap();
+    let prepared = PreparedObject::new(object.mesh.clone()).unwrap();
+    let eval = EvalConfig::default();
+    for press in [0.003, 0.0045, 0.007] {
+        let s = setup(
+            "cross_w12_s50",
+            Se2::new(0.003, -0.002, 0.4),
+            press,
+            0.00138,
+        );
+        let at = SensorPlacement {
+            sim: &s.sim,
+            object: &object,
+            prepared: &prepared,
+            eval: &eval,
+        };
+        let samples = std::slice::from_ref(&s.out.target);
+        let (sig, imprint) = (&s.out.signature, &s.out.imprint);
+        let searched = at
+            .press(PressChoice::Auto, samples, Some(sig), imprint, 0)
+            .unwrap();
+        let highest = at
+            .press(PressChoice::Auto, samples, None, imprint, 0)
+            .unwrap();
+        for (how, got) in [("searched", searched), ("highest point", highest)] {
+            let got = got.unwrap();
+            assert!((got - press).abs() < 5e-4, "{how}: {got} for {press}");
+        }
+        let fixed = at.press(PressChoice::Fixed(0.006), samples, Some(sig), imprint, 0);
+        assert_eq!(fixed.unwrap(), Some(0.006));
+    }
+}

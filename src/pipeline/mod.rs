@@ -15,6 +15,7 @@
 //! | generate a dataset | [`crate::dataset::GenConfig`] | [`crate::dataset::gen::generate`] |
 //! | train | [`crate::model::train::TrainConfig`] | [`crate::model::train::train`] |
 //! | evaluate | [`crate::metrics::evaluate::EvalConfig`] | [`crate::metrics::evaluate::Evaluator::evaluate`] |
+//! | place the sensor: find how far it is pressed | [`press::PressChoice`] | [`press::SensorPlacement::press`] |
 //! | estimate the pose on every contact frame of a recording | [`track::TrackContext`] | [`track::track_frame`] |
 //! | calibrate the inflation | a [`crate::sim::SimConfig`] and the inflations | [`crate::sim::calibration::sweep_inflation`] |
 //!
@@ -28,6 +29,7 @@
 pub mod derender;
 pub mod object;
 pub mod pose;
+pub mod press;
 pub mod track;
 
 pub use derender::{derender, imprint_guidance, mean_std, DerenderConfig, Derendered};

@@ -16,6 +16,7 @@ use tactile_derender::io::npy;
 use tactile_derender::io::ply::PlyEncoding;
 use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::DiffusionModel;
+use tactile_derender::pipeline::press::{PressChoice, SensorPlacement};
 use tactile_derender::pipeline::{self, DerenderConfig, ObjectSpec, PoseInput};
 use tactile_derender::pose::from_depth::contact_probability;
 use tactile_derender::sim::{PreparedObject, Simulator};
@@ -56,9 +57,10 @@ pub struct PoseArgs {
     #[arg(long)]
     pub truth: Option<String>,
     /// Press depth of the sensor apex below the object's top, metres (places the sensor as `tnd sim` does; give the
-    /// simulation's --press).
-    #[arg(long, default_value_t = tactile_derender::sim::DEFAULT_PRESS_M)]
-    pub press: f64,
+    /// simulation's --press), or "auto" for a measured imprint: found from the samples (and the signature, with
+    /// --signature) as `tnd recording track` does.
+    #[arg(long, default_value_t = PressChoice::Fixed(tactile_derender::sim::DEFAULT_PRESS_M))]
+    pub press: PressChoice,
     #[command(flatten)]
     pub derender: DerenderConfig,
     /// Encoding of the PLY files (contact, free-space and consensus points, the object at each estimate).
@@ -97,7 +99,6 @@ pub(crate) fn check_size(path: &Path, img: &Image, want: (usize, usize)) -> Resu
 }
 
 pub fn run(a: PoseArgs) -> Result<()> {
-    crate::args::check_press("--press", a.press, false)?;
     let sim = Simulator::new(a.sensor.sim_config()?)?;
     let rrd = a.rerun.open("tnd pose")?;
     let res = (sim.intrinsics().width, sim.intrinsics().height);
@@ -106,13 +107,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     for w in &object.warnings {
         eprintln!("warning: {w}");
     }
-    let sensor = sim.pressing_pose(
-        &PreparedObject::new(object.mesh.clone())?,
-        0.0,
-        0.0,
-        0.0,
-        a.press,
-    );
+    let prepared = PreparedObject::new(object.mesh.clone())?;
     let truth = a
         .truth
         .as_deref()
@@ -159,6 +154,27 @@ pub fn run(a: PoseArgs) -> Result<()> {
             Some(out.contact_probability),
         )
     };
+    let placement = SensorPlacement {
+        sim: &sim,
+        object: &object,
+        prepared: &prepared,
+        eval: &eval,
+    };
+    let press = placement
+        .press(
+            a.press,
+            &samples,
+            signature.as_ref(),
+            &imprint,
+            a.derender.seed,
+        )?
+        .ok_or_else(|| {
+            anyhow!(
+                "{}: no sample has any contact; nothing to register",
+                a.imprint.display()
+            )
+        })?;
+    let sensor = sim.pressing_pose(&prepared, 0.0, 0.0, 0.0, press);
     let input = PoseInput {
         t_world_camera: sim.t_world_camera(&sensor),
         samples: &samples,
@@ -252,7 +268,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         json!({"position_mm": e.position_mm, "theta_deg": e.theta_deg})
     });
     let summary = json!({"object": object.name, "generator": generator, "rerun": rerun, "samples": report.samples.len(),
-        "seed": a.derender.seed, "estimate": estimate.best(), "estimate_error": estimate_error,
+        "seed": a.derender.seed, "press_m": press, "estimate": estimate.best(), "estimate_error": estimate_error,
         "signature_checked": estimate.checked.is_some(),
         "checked_from_imprint": estimate.checked_from_imprint,
         "best_hypothesis": estimate.hypotheses.first().map(|h| h.pose),
