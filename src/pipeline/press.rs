@@ -12,6 +12,7 @@
 use std::fmt;
 use std::str::FromStr;
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::{LoadedObject, PipelineError};
@@ -19,6 +20,7 @@ use crate::dataset::import_recording::DEFAULT_MAX_PRESS_M;
 use crate::image::Image;
 use crate::metrics::evaluate::{EvalConfig, EvalContext, Evaluator};
 use crate::objects::ObjectSet;
+use crate::pose::InitStrategy;
 use crate::sim::{PreparedObject, Simulator};
 
 /// Deepest press a [`PressChoice::Fixed`] takes, metres: the whole sensor is about 90 mm deep.
@@ -145,6 +147,9 @@ pub const PRESS_SEARCH_M: [f64; 11] = [
     -0.001, -0.0005, 0.0, 0.0005, 0.001, 0.0015, 0.002, 0.003, 0.004, 0.005, 0.006,
 ];
 
+/// Starts of the registrations at the searched presses: the pick at the least press and its next-best poses.
+const SEARCH_STARTS: usize = 3;
+
 /// The press of [`PRESS_SEARCH_M`] around `least` whose pose (the first sample with contact registered from
 /// the evaluation's random starts, then the signature check) best explains the signature.
 fn search_press(
@@ -164,33 +169,61 @@ fn search_press(
     };
     let ectx = EvalContext::of_simulator(at.sim, ObjectSet::builtin());
     let model = evaluator.object_from_mesh(&at.object.name, &at.object.mesh, at.object.symmetry)?;
-    let strategy = evaluator.random_starts(seed);
     let measured = Some((signature, imprint));
-    let mut scores: Vec<(f64, f64)> = Vec::new();
+    let place = |press: f64| {
+        at.sim
+            .t_world_camera(&at.sim.pressing_pose(at.prepared, 0.0, 0.0, 0.0, press))
+    };
+    let register = |t: &glam::DAffine3, strategy: &InitStrategy| {
+        evaluator.pooled_hypotheses(
+            &model,
+            std::slice::from_ref(first),
+            &ectx,
+            t,
+            measured,
+            strategy,
+        )
+    };
+    // At the least press from the evaluation's random starts; at the others from its pick and best poses (another
+    // press moves the pose little), a third of the work.
+    let t = place(least);
+    let hypotheses = register(&t, &evaluator.random_starts(seed))?;
+    let Some((pick, _, cost)) =
+        evaluator.choose_scored(&model, &hypotheses, &ectx, &t, measured)?
+    else {
+        return Ok(least);
+    };
+    let mut scores: Vec<(f64, f64)> = cost.map(|c| (least, c)).into_iter().collect();
+    let mut starts = vec![pick];
+    starts.extend(
+        hypotheses
+            .iter()
+            .map(|h| h.pose)
+            .filter(|p| *p != pick)
+            .take(SEARCH_STARTS - 1),
+    );
     for dp in PRESS_SEARCH_M {
         let press = least + dp;
-        if press < 0.0 {
+        if dp == 0.0 || press < 0.0 {
             continue;
         }
         if press > DEFAULT_MAX_PRESS_M {
             break;
         }
-        let t = at
-            .sim
-            .t_world_camera(&at.sim.pressing_pose(at.prepared, 0.0, 0.0, 0.0, press));
-        let hypotheses = evaluator.pooled_hypotheses(
-            &model,
-            std::slice::from_ref(first),
-            &ectx,
-            &t,
-            measured,
-            &strategy,
-        )?;
-        let scored = evaluator.choose_scored(&model, &hypotheses, &ectx, &t, measured)?;
-        if let Some((_, _, Some(cost))) = scored {
+        let t = place(press);
+        let found: Result<Vec<_>, _> = starts
+            .par_iter()
+            .map(|&s| register(&t, &InitStrategy::Fixed(s)))
+            .collect();
+        let mut hypotheses: Vec<_> = found?.into_iter().flatten().collect();
+        hypotheses.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+        if let Some((_, _, Some(cost))) =
+            evaluator.choose_scored(&model, &hypotheses, &ectx, &t, measured)?
+        {
             scores.push((press, cost));
         }
     }
+    scores.sort_by(|a, b| a.0.total_cmp(&b.0));
     Ok(parabola_minimum(&scores).unwrap_or(least))
 }
 

@@ -56,6 +56,16 @@ x,y,theta,multi_x,multi_y,multi_theta,baseline_x,baseline_y,baseline_theta,\
 recorded_x,recorded_y,recorded_theta,position_err_mm,theta_err_deg,\
 multi_position_err_mm,multi_theta_err_deg,baseline_position_err_mm,baseline_theta_err_deg";
 
+    /// `rows` as a CSV table with [`Self::CSV_HEADER`] (what `tnd recording track` writes as track.csv).
+    pub fn csv(rows: &[FrameTrack]) -> String {
+        let mut text = format!("{}\n", Self::CSV_HEADER);
+        for r in rows {
+            text.push_str(&r.csv_row());
+            text.push('\n');
+        }
+        text
+    }
+
     /// The frame as one CSV row (metres, radians; errors in mm and degrees; empty where unknown).
     pub fn csv_row(&self) -> String {
         let pose = |p: Option<Se2>| match p {

@@ -261,6 +261,7 @@ impl WorkbenchApp {
             || self.analysis.derender.running
             || self.analysis.pose.running
             || self.recording.loading
+            || self.recording.track.running
             || self.worker.is_some()
                 && self.sim.as_ref().map(|s| s.generation) != Some(self.generation)
                 && !self.sim_failed_for_latest()
@@ -351,10 +352,14 @@ impl WorkbenchApp {
                     JobKind::Pose if self.analysis.pose.running => {
                         self.analysis.pose.progress = Some((done, total))
                     }
+                    JobKind::Track if self.recording.track.running => {
+                        self.recording.track.progress = Some((done, total))
+                    }
                     _ => {}
                 },
                 WorkerMsg::Dataset(msg) => self.dataset_message(ctx, msg),
                 WorkerMsg::Recording(msg) => self.recording_message(msg),
+                WorkerMsg::Track(msg) => self.track_message(msg),
                 WorkerMsg::Derendered(result) => self.derendered(ctx, result),
                 WorkerMsg::Posed {
                     generation,
@@ -385,6 +390,11 @@ impl WorkbenchApp {
                         JobKind::Recording => {
                             self.recording.loading = false;
                             self.recording.cancel = None;
+                        }
+                        JobKind::Track if generation != self.recording.track.generation => continue,
+                        JobKind::Track => {
+                            self.recording.track.running = false;
+                            self.recording.track.cancel = None;
                         }
                         JobKind::Pose if generation != self.analysis.pose.generation => continue,
                         JobKind::Pose => {

@@ -96,6 +96,12 @@ pub enum Command {
     CancelRecording,
     /// De-render the frame under the timeline cursor (and, with `pose`, register the samples when they are in).
     DerenderFrame { pose: bool },
+    /// Estimate the object's pose on every contact frame of the recording.
+    TrackRecording,
+    /// Stop the track.
+    CancelTrack,
+    /// Write the track as a CSV file beside the recording.
+    SaveTrack,
     /// Show an analysis image enlarged in its own window (`None`: close it).
     ZoomImage(Option<crate::analysis_runs::ZoomTarget>),
 }
@@ -272,6 +278,15 @@ impl WorkbenchApp {
                 let r = self.derender_frame(pose);
                 self.report("de-render", r);
             }
+            Command::TrackRecording => {
+                let r = self.start_track();
+                self.report("track", r);
+            }
+            Command::CancelTrack => self.cancel_track(),
+            Command::SaveTrack => match self.save_track() {
+                Ok(path) => self.notice = Some(format!("track saved as {}", path.display())),
+                Err(e) => self.error(format!("track: {e}")),
+            },
             Command::Undo => {
                 let now = crate::history::Snapshot::of(&self.state);
                 match self.history.undo(now) {

@@ -23,5 +23,6 @@ pub mod session;
 pub mod shortcuts;
 pub mod state;
 pub mod timings;
+pub mod track_view;
 pub mod view3d;
 pub mod worker;

@@ -75,6 +75,8 @@ pub struct RecordingView {
     pub progress: Option<(usize, usize)>,
     pub cancel: Option<Arc<AtomicBool>>,
     pub textures: Option<FrameTextures>,
+    /// The pose on every contact frame.
+    pub track: crate::track_view::TrackView,
 }
 
 /// Colour range of imprints, metres.

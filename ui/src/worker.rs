@@ -28,6 +28,8 @@ pub enum JobKind {
     Derender,
     Pose,
     Recording,
+    /// Tracking a recording's frames.
+    Track,
 }
 
 /// What a file dialog was opened for; its answer comes back with it.
@@ -67,6 +69,8 @@ pub enum WorkerMsg {
     Dataset(crate::dataset_view::DatasetMsg),
     /// A loaded recording.
     Recording(crate::recording_view::RecordingMsg),
+    /// A tracked frame of a recording, or the end of the track.
+    Track(crate::track_view::TrackMsg),
     /// A finished de-rendering run.
     Derendered(Box<crate::derender::RunResult>),
     /// A finished pose analysis.
@@ -394,6 +398,7 @@ impl JobKind {
             JobKind::Derender => ("de-render", "tnd-derender", "the sampler panicked"),
             JobKind::Pose => ("pose", "tnd-pose", "registration panicked"),
             JobKind::Recording => ("recording", "tnd-recording", "reading panicked"),
+            JobKind::Track => ("track", "tnd-track", "tracking panicked"),
         }
     }
 }

@@ -126,3 +126,57 @@ fn a_recording_opens_scrubs_and_de_renders_the_frame_under_the_cursor() {
         Some(rec.as_path())
     );
 }
+
+#[test]
+fn every_contact_frame_is_tracked_in_the_background_and_saved_as_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    // A short press: a few contact frames.
+    let seq = PressSequence::down_and_up(sequence().pose, 0.008, 2, 3);
+    let rec = dir.path().join("press.mcap");
+    let object = PreparedObject::new(ObjectSet::builtin().mesh(OBJECT).unwrap()).unwrap();
+    write_press_recording(&rec, &State::default().sim, &object, &seq).unwrap();
+    let mut state = State::default();
+    state.scene.object = ObjectSource::Library {
+        set: "builtin".into(),
+        name: OBJECT.into(),
+    };
+    // The bundled model (a random one paints contact everywhere, which registers slowly), a few cheap samples.
+    state.derender.config.samples = 2;
+    state.derender.config.sampler.steps = 5;
+    state.recording.path = Some(rec.clone());
+    state.view.tab = Tab::Recording;
+    let mut h = harness(WorkbenchApp::with_state(state));
+    h.run_ok();
+    wait_for(&mut h, "the recording", |a| a.recording.loaded.is_some());
+    let with_contact: Vec<usize> = {
+        let p = &h.state().recording.loaded.as_ref().unwrap().processed;
+        (0..p.len()).filter(|&k| p.contact_px[k] >= 10).collect()
+    };
+    assert!(with_contact.len() >= 3, "{with_contact:?}");
+    h.get_by_label("Track all frames").click();
+    h.run_ok();
+    assert!(h.state().recording.track.running);
+    assert!(h.query_by_label("Cancel tracking").is_some());
+    wait_for(&mut h, "the track", |a| !a.recording.track.running);
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    // One row per contact frame, in frame order, each scored against the recorded pose.
+    let rows = &h.state().recording.track.rows;
+    let frames: Vec<usize> = rows.iter().map(|r| r.frame).collect();
+    assert_eq!(frames, with_contact);
+    assert!(rows.iter().all(|r| r.recorded == Some(sequence().pose)));
+    assert!(h
+        .query_by_label_contains(&format!("track: {} frames", rows.len()))
+        .is_some());
+    h.get_by_label("Save track CSV").click();
+    h.run_ok();
+    let csv = std::fs::read_to_string(dir.path().join("press_track.csv")).unwrap();
+    assert_eq!(csv.lines().count(), with_contact.len() + 1);
+    assert!(csv.starts_with("frame,stamp_ns,contact_px,press_m"));
+    // A second track can be cancelled: it stops and says so.
+    h.get_by_label("Track all frames").click();
+    h.run_ok();
+    h.get_by_label("Cancel tracking").click();
+    h.run_ok();
+    assert!(!h.state().recording.track.running);
+    assert!(h.query_by_label("Track all frames").is_some());
+}

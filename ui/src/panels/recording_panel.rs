@@ -2,7 +2,8 @@
 //! imprint, signature and reference of the frame under the cursor, the contact area over time, and de-render (and
 //! register) the frame under the cursor.
 
-use egui_plot::{Line, Plot, PlotPoints, VLine};
+use egui_plot::{Line, Plot, PlotPoints, Points, VLine};
+use tactile_derender::pipeline::track::FrameTrack;
 use tactile_derender::recording::{ReferenceChoice, StreamKind};
 
 use super::image_card::{self, Scale};
@@ -153,6 +154,9 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             cmds.push(Command::DerenderFrame { pose: true });
         }
     });
+    if let Some(frame) = track_section(app, ui, cmds, &times) {
+        s.frame = frame;
+    }
     // Contact area over time; a click moves the cursor.
     let area: Vec<[f64; 2]> = times
         .iter()
@@ -272,4 +276,140 @@ fn short_list(frames: &[usize]) -> String {
         i = j + 1;
     }
     parts.join(", ")
+}
+
+/// The track: start / cancel / save, its progress, and the pose over time (a click moves the cursor there).
+fn track_section(
+    app: &WorkbenchApp,
+    ui: &mut egui::Ui,
+    cmds: &mut Vec<Command>,
+    times: &[f64],
+) -> Option<usize> {
+    let t = &app.recording.track;
+    ui.horizontal(|ui| {
+        if t.running {
+            let (done, total) = t.progress.unwrap_or((0, 0));
+            ui.label(format!("tracking… {done}/{total} frames"));
+            ui.add(
+                egui::ProgressBar::new(if total > 0 {
+                    done as f32 / total as f32
+                } else {
+                    0.0
+                })
+                .desired_width(200.0),
+            );
+            if ui.button("Cancel tracking").clicked() {
+                cmds.push(Command::CancelTrack);
+            }
+        } else if ui
+            .button("Track all frames")
+            .on_hover_text(
+                "de-render and register every frame with contact (the De-render tab's model, samples and sampler; \
+                 the Scene panel's object; the press found per frame), as `tnd recording track` does",
+            )
+            .clicked()
+        {
+            cmds.push(Command::TrackRecording);
+        }
+        if !t.rows.is_empty()
+            && !t.running
+            && ui
+                .button("Save track CSV")
+                .on_hover_text("write the rows as <recording>_track.csv beside the recording")
+                .clicked()
+        {
+            cmds.push(Command::SaveTrack);
+        }
+    });
+    let same = t.recording.as_ref() == app.recording.loaded.as_ref().map(|l| &l.path);
+    if t.rows.is_empty() || !same {
+        return None;
+    }
+    let at = |frame: usize| times.get(frame).copied().unwrap_or(0.0);
+    let series = |get: fn(&FrameTrack) -> Option<f64>| -> Vec<[f64; 2]> {
+        t.rows
+            .iter()
+            .filter_map(|r| get(r).map(|v| [at(r.frame), v]))
+            .collect()
+    };
+    let scored = t.rows.iter().any(|r| r.recorded.is_some());
+    let errors: Vec<f64> = t
+        .rows
+        .iter()
+        .filter_map(|r| r.estimate_error.map(|e| e.0))
+        .collect();
+    ui.label(if errors.is_empty() {
+        format!("track: {} frames", t.rows.len())
+    } else {
+        format!(
+            "track: {} frames; position error against the recorded pose {:.2} mm mean",
+            t.rows.len(),
+            errors.iter().sum::<f64>() / errors.len() as f64
+        )
+    });
+    let width = (ui.available_width() / 2.0 - 8.0).max(200.0);
+    let mut clicked = None;
+    ui.horizontal(|ui| {
+        let position = Plot::new("rec_track_xy")
+            .height(160.0)
+            .width(width)
+            .legend(egui_plot::Legend::default())
+            .x_axis_label("time (s)")
+            .y_axis_label("position (mm)")
+            .allow_drag(false)
+            .show(ui, |pl| {
+                let x = series(|r| r.estimate.map(|p| p.x * 1e3));
+                let y = series(|r| r.estimate.map(|p| p.y * 1e3));
+                pl.points(Points::new("x estimate", x).radius(2.5));
+                pl.points(Points::new("y estimate", y).radius(2.5));
+                if scored {
+                    let x = series(|r| r.recorded.map(|p| p.x * 1e3));
+                    let y = series(|r| r.recorded.map(|p| p.y * 1e3));
+                    pl.line(Line::new("x recorded", PlotPoints::from(x)));
+                    pl.line(Line::new("y recorded", PlotPoints::from(y)));
+                }
+                pl.pointer_coordinate()
+            });
+        // θ against the recorded pose where there is one (the error knows the object's symmetry), else θ itself.
+        let (label, theta): (&str, Vec<[f64; 2]>) = if scored {
+            (
+                "θ error (°)",
+                series(|r| r.estimate_error.and_then(|e| e.1)),
+            )
+        } else {
+            (
+                "θ (°)",
+                series(|r| {
+                    r.estimate.map(|p| {
+                        let pi = std::f64::consts::PI;
+                        ((p.theta + pi).rem_euclid(2.0 * pi) - pi).to_degrees()
+                    })
+                }),
+            )
+        };
+        let angle = Plot::new("rec_track_theta")
+            .height(160.0)
+            .width(width)
+            .x_axis_label("time (s)")
+            .y_axis_label(label)
+            .allow_drag(false)
+            .show(ui, |pl| {
+                pl.points(Points::new("θ", theta).radius(2.5));
+                pl.pointer_coordinate()
+            });
+        for p in [position, angle] {
+            if let (true, Some(pointer)) = (p.response.clicked(), p.inner) {
+                clicked = t
+                    .rows
+                    .iter()
+                    .min_by(|a, b| {
+                        (at(a.frame) - pointer.x)
+                            .abs()
+                            .total_cmp(&(at(b.frame) - pointer.x).abs())
+                    })
+                    .map(|r| r.frame);
+            }
+        }
+    });
+    clicked
 }

@@ -1,0 +1,225 @@
+//! The Recording tab's **track**: the object's pose on every contact frame of the loaded recording
+//! ([`tactile_derender::pipeline::track`], as `tnd recording track`), on a background thread, frame by frame with
+//! progress and cancel; each frame's row arrives as it is done, so the pose-over-time plot fills while it runs.
+//! The De-render tab's model and settings draw the samples, the Scene panel's object is registered, and the press
+//! is found per frame.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use anyhow::{anyhow, Context, Result};
+use tactile_derender::metrics::evaluate::EvalConfig;
+use tactile_derender::model::DiffusionModel;
+use tactile_derender::pipeline::track::{track_frame, FrameTrack, PressChoice, TrackContext};
+use tactile_derender::pipeline::{DerenderConfig, PipelineError};
+use tactile_derender::recording::ProcessedRecording;
+use tactile_derender::sensor::Se2;
+use tactile_derender::sim::{PreparedObject, SimConfig, Simulator};
+
+use crate::state::ObjectSource;
+use crate::worker::{JobKind, WorkerMsg};
+
+/// Frames with fewer contact pixels than this are not tracked (as `tnd recording track`'s default).
+pub const MIN_CONTACT_PX: usize = 10;
+
+/// Live state of the track.
+#[derive(Default)]
+pub struct TrackView {
+    /// The rows so far, in frame order.
+    pub rows: Vec<FrameTrack>,
+    /// The recording the rows are of.
+    pub recording: Option<PathBuf>,
+    pub running: bool,
+    pub progress: Option<(usize, usize)>,
+    pub cancel: Option<Arc<AtomicBool>>,
+    pub generation: u64,
+}
+
+/// The track thread's messages.
+pub enum TrackMsg {
+    /// One frame done.
+    Row {
+        generation: u64,
+        row: Box<FrameTrack>,
+    },
+    /// Every frame done (or the run was cancelled).
+    Done { generation: u64, cancelled: bool },
+}
+
+/// What one track run needs.
+pub struct TrackRequest {
+    pub generation: u64,
+    pub recording: Arc<ProcessedRecording>,
+    /// The recorded pose per frame (scoring only).
+    pub poses: Vec<Option<Se2>>,
+    pub object: ObjectSource,
+    pub model: PathBuf,
+    pub derender: DerenderConfig,
+    pub sim: SimConfig,
+}
+
+impl TrackRequest {
+    /// The frames to track: those with contact.
+    pub fn frames(&self) -> Vec<usize> {
+        (0..self.recording.len())
+            .filter(|&k| self.recording.contact_px[k] >= MIN_CONTACT_PX)
+            .collect()
+    }
+}
+
+/// Run `req` on its own thread; rows and the end come back as [`WorkerMsg::Track`].
+pub fn spawn(
+    req: TrackRequest,
+    cancel: Arc<AtomicBool>,
+    tx: std::sync::mpsc::Sender<WorkerMsg>,
+    ctx: egui::Context,
+) -> Result<()> {
+    let generation = req.generation;
+    let rows_tx = tx.clone();
+    crate::worker::spawn_job(JobKind::Track, generation, tx, ctx, move |progress| {
+        let frames = req.frames();
+        progress(0, frames.len());
+        let sim = Simulator::new(req.sim.clone()).context("sensor configuration")?;
+        let object = req.object.spec().load()?;
+        let prepared = PreparedObject::new(object.mesh.clone())?;
+        let device = tactile_derender::model::device::open_device(&req.derender.device)?;
+        let model = DiffusionModel::load_on(&req.model, &device)?;
+        let eval = EvalConfig::default();
+        let track = TrackContext {
+            model: &model,
+            object: &object,
+            prepared: &prepared,
+            sim: &sim,
+            derender: &req.derender,
+            eval: &eval,
+            press: PressChoice::Auto,
+        };
+        let mut cancelled = false;
+        for (i, &k) in frames.iter().enumerate() {
+            let recorded = req.poses.get(k).copied().flatten();
+            let row = match track_frame(&track, &req.recording, k, recorded, &mut |_, _| {
+                !cancel.load(Ordering::Relaxed)
+            }) {
+                Ok(row) => row,
+                Err(PipelineError::Cancelled) => {
+                    cancelled = true;
+                    break;
+                }
+                Err(e) => {
+                    return Err(anyhow!(
+                        "frame {k}: {}",
+                        tactile_derender::error::render(&e)
+                    ))
+                }
+            };
+            let _ = rows_tx.send(WorkerMsg::Track(TrackMsg::Row {
+                generation,
+                row: Box::new(row),
+            }));
+            progress(i + 1, frames.len());
+            if cancel.load(Ordering::Relaxed) {
+                cancelled = true;
+                break;
+            }
+        }
+        Ok(WorkerMsg::Track(TrackMsg::Done {
+            generation,
+            cancelled,
+        }))
+    })
+}
+
+impl crate::app::WorkbenchApp {
+    /// Track every contact frame of the loaded recording (cancelling a running track).
+    pub(crate) fn start_track(&mut self) -> Result<()> {
+        let loaded = self
+            .recording
+            .loaded
+            .as_ref()
+            .ok_or_else(|| anyhow!("open a recording first"))?;
+        self.state.derender.config.validate(None)?;
+        let w = self
+            .worker
+            .as_ref()
+            .ok_or_else(|| anyhow!("the workbench is still starting"))?;
+        let (tx, ctx) = (w.sender(), w.context());
+        let model = self.model_path();
+        let view = &mut self.recording.track;
+        crate::worker::raise_cancel(&mut view.cancel);
+        view.generation += 1;
+        let req = TrackRequest {
+            generation: view.generation,
+            recording: loaded.processed.clone(),
+            poses: loaded.poses.clone(),
+            object: self.state.scene.object.clone(),
+            model,
+            derender: self.state.derender.config.clone(),
+            sim: self.state.sim.clone(),
+        };
+        if req.frames().is_empty() {
+            return Err(anyhow!(
+                "no frame has {MIN_CONTACT_PX} contact pixels (imprint over 3 mm) to track"
+            ));
+        }
+        view.rows.clear();
+        view.recording = Some(loaded.path.clone());
+        view.running = true;
+        view.progress = Some((0, req.frames().len()));
+        let cancel = Arc::new(AtomicBool::new(false));
+        view.cancel = Some(cancel.clone());
+        if let Err(e) = spawn(req, cancel, tx, ctx) {
+            self.recording.track.running = false;
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    pub(crate) fn cancel_track(&mut self) {
+        crate::worker::raise_cancel(&mut self.recording.track.cancel);
+        self.recording.track.running = false;
+    }
+
+    /// Take in a row or the end of a track.
+    pub(crate) fn track_message(&mut self, msg: TrackMsg) {
+        let view = &mut self.recording.track;
+        match msg {
+            TrackMsg::Row { generation, row } if generation == view.generation => {
+                view.rows.push(*row);
+                view.rows.sort_by_key(|r| r.frame);
+            }
+            TrackMsg::Done {
+                generation,
+                cancelled,
+            } if generation == view.generation => {
+                view.running = false;
+                view.cancel = None;
+                let with = view.rows.iter().filter(|r| r.estimate.is_some()).count();
+                self.notice = Some(format!(
+                    "track {}: {} frames, {with} with a pose",
+                    if cancelled { "cancelled" } else { "done" },
+                    view.rows.len()
+                ));
+            }
+            _ => {}
+        }
+    }
+
+    /// Write the track as `<recording>_track.csv` beside the recording (atomically); its path.
+    pub(crate) fn save_track(&mut self) -> Result<PathBuf> {
+        let view = &self.recording.track;
+        let rec = view
+            .recording
+            .as_ref()
+            .ok_or_else(|| anyhow!("track a recording first"))?;
+        let stem = rec
+            .file_stem()
+            .map_or_else(|| "recording".into(), |s| s.to_string_lossy().into_owned());
+        // Beside the recording: a frame folder's track goes next to the folder, not into it.
+        let dir = rec.parent().map(PathBuf::from).unwrap_or_default();
+        let path = dir.join(format!("{stem}_track.csv"));
+        tactile_derender::io::write_atomic(&path, FrameTrack::csv(&view.rows).as_bytes())
+            .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
+        Ok(path)
+    }
+}
