@@ -632,5 +632,51 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
     let refused = output(&other);
     assert!(!refused.status.success());
     let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert!(stderr.contains("other settings (press)"), "{stderr}");
+    assert!(
+        stderr.contains("other settings (press: \"auto\" -> \"0.005\")"),
+        "{stderr}"
+    );
+    // Poses given later rescore the finished track without tracking again: the same object 1 mm further along x.
+    let mut table = String::from("frame,x,y,theta\n");
+    for k in 0..presses.len() {
+        table.push_str(&format!("{k},0.004,-0.002,0.4\n"));
+    }
+    std::fs::write(dir.path().join("shifted.csv"), table).unwrap();
+    let mut rescored = track.to_vec();
+    rescored.extend(["--poses", "shifted.csv"]);
+    let again = run(&rescored);
+    assert_eq!(again["this_run"], 0, "{again}");
+    assert_eq!(again["scored_against"], "shifted.csv");
+    let before = summary["position_err_mm"]["mean"].as_f64().unwrap();
+    let after = again["position_err_mm"]["mean"].as_f64().unwrap();
+    assert!(after > before + 0.3, "{before} -> {after}");
+    // A failed start (an unknown object) leaves nothing behind that would block the corrected command.
+    let mut wrong = track.to_vec();
+    wrong[4] = "no_such_object";
+    wrong[8] = "fresh";
+    assert!(!output(&wrong).status.success());
+    assert!(!dir.path().join("fresh").exists());
+    // Another recording under the same name is not resumed into.
+    let resimulated = output(&[
+        "recording",
+        "simulate",
+        "press.mcap",
+        "--object",
+        "cross_w12_s50",
+        "--pose",
+        "0.003,-0.002,0.4",
+        "--max-press",
+        "0.007",
+        "--rest",
+        "3",
+        "--ramp",
+        "5",
+    ]);
+    assert!(resimulated.status.success());
+    let refused = output(&track);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && stderr.contains("holds a track of another recording"),
+        "{stderr}"
+    );
 }

@@ -16,6 +16,7 @@ use super::press::SensorPlacement;
 use super::{LoadedObject, PipelineError, PoseInput, Progress};
 use crate::metrics::evaluate::EvalConfig;
 use crate::model::DiffusionModel;
+use crate::objects::Symmetry;
 use crate::recording::ProcessedRecording;
 use crate::sensor::Se2;
 use crate::sim::{PreparedObject, Simulator};
@@ -41,24 +42,83 @@ pub struct FrameTrack {
     pub multi_sample: Option<Se2>,
     /// The threshold baseline's pose.
     pub baseline: Option<Se2>,
-    /// The recorded pose, when the recording has one for this frame.
+    /// How far the registered samples' poses spread (from two): RMS distance of their positions from their mean,
+    /// mm, and the standard deviation of their θ against the estimate's, degrees (`None`: continuous symmetry).
+    /// The paper's uncertainty, one number each: a large spread says the frame's pose is not to be trusted.
+    pub spread_mm: Option<f64>,
+    pub theta_spread_deg: Option<f64>,
+    /// The recorded pose and press, when the recording (or the pose table) has them for this frame.
     pub recorded: Option<Se2>,
-    /// Errors against the recorded pose: position mm, θ degrees (`None` θ: continuous symmetry).
+    pub recorded_press_m: Option<f64>,
+    /// Errors against the recorded pose ([`Self::score`]): position mm, θ degrees (`None` θ: continuous
+    /// symmetry), both reduced by the object's symmetry as `tnd eval` does.
     pub estimate_error: Option<(f64, Option<f64>)>,
     pub multi_sample_error: Option<(f64, Option<f64>)>,
     pub baseline_error: Option<(f64, Option<f64>)>,
 }
 
-impl FrameTrack {
-    /// The header of [`Self::csv_row`].
-    pub const CSV_HEADER: &'static str = "frame,stamp_ns,contact_px,press_m,samples,registered,\
-x,y,theta,multi_x,multi_y,multi_theta,baseline_x,baseline_y,baseline_theta,\
-recorded_x,recorded_y,recorded_theta,position_err_mm,theta_err_deg,\
-multi_position_err_mm,multi_theta_err_deg,baseline_position_err_mm,baseline_theta_err_deg";
+/// Columns of [`FrameTrack::csv_row`].
+const CSV_COLUMNS: [&str; 27] = [
+    "frame",
+    "stamp_ns",
+    "contact_px",
+    "press_m",
+    "samples",
+    "registered",
+    "x",
+    "y",
+    "theta",
+    "multi_x",
+    "multi_y",
+    "multi_theta",
+    "baseline_x",
+    "baseline_y",
+    "baseline_theta",
+    "spread_mm",
+    "theta_spread_deg",
+    "recorded_x",
+    "recorded_y",
+    "recorded_theta",
+    "recorded_press_m",
+    "position_err_mm",
+    "theta_err_deg",
+    "multi_position_err_mm",
+    "multi_theta_err_deg",
+    "baseline_position_err_mm",
+    "baseline_theta_err_deg",
+];
 
-    /// `rows` as a CSV table with [`Self::CSV_HEADER`] (what `tnd recording track` writes as track.csv).
+impl FrameTrack {
+    /// A frame with nothing estimated yet.
+    pub fn new(frame: usize, stamp_ns: u64, contact_px: usize, samples: usize) -> Self {
+        Self {
+            frame,
+            stamp_ns,
+            contact_px,
+            press_m: None,
+            samples,
+            registered: 0,
+            estimate: None,
+            multi_sample: None,
+            baseline: None,
+            spread_mm: None,
+            theta_spread_deg: None,
+            recorded: None,
+            recorded_press_m: None,
+            estimate_error: None,
+            multi_sample_error: None,
+            baseline_error: None,
+        }
+    }
+
+    /// The CSV header of [`Self::csv_row`].
+    pub fn csv_header() -> String {
+        CSV_COLUMNS.join(",")
+    }
+
+    /// `rows` as a CSV table (what `tnd recording track` writes as track.csv).
     pub fn csv(rows: &[FrameTrack]) -> String {
-        let mut text = format!("{}\n", Self::CSV_HEADER);
+        let mut text = format!("{}\n", Self::csv_header());
         for r in rows {
             text.push_str(&r.csv_row());
             text.push('\n');
@@ -66,33 +126,135 @@ multi_position_err_mm,multi_theta_err_deg,baseline_position_err_mm,baseline_thet
         text
     }
 
-    /// The frame as one CSV row (metres, radians; errors in mm and degrees; empty where unknown).
+    /// The frame as one CSV row (metres, radians; spreads and errors in mm and degrees; empty where unknown). Numbers
+    /// are written so that [`Self::from_csv_row`] reads them back exactly.
     pub fn csv_row(&self) -> String {
+        let num = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
         let pose = |p: Option<Se2>| match p {
             Some(p) => format!("{},{},{}", p.x, p.y, p.theta),
             None => ",,".into(),
         };
         let err = |e: Option<(f64, Option<f64>)>| match e {
-            Some((mm, deg)) => format!("{mm},{}", deg.map_or(String::new(), |d| d.to_string())),
+            Some((mm, deg)) => format!("{mm},{}", num(deg)),
             None => ",".into(),
         };
-        format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            self.frame,
-            self.stamp_ns,
-            self.contact_px,
-            self.press_m.map_or(String::new(), |p| p.to_string()),
-            self.samples,
-            self.registered,
+        [
+            self.frame.to_string(),
+            self.stamp_ns.to_string(),
+            self.contact_px.to_string(),
+            num(self.press_m),
+            self.samples.to_string(),
+            self.registered.to_string(),
             pose(self.estimate),
             pose(self.multi_sample),
             pose(self.baseline),
+            num(self.spread_mm),
+            num(self.theta_spread_deg),
             pose(self.recorded),
+            num(self.recorded_press_m),
             err(self.estimate_error),
             err(self.multi_sample_error),
             err(self.baseline_error),
-        )
+        ]
+        .join(",")
     }
+
+    /// Read a row written by [`Self::csv_row`].
+    pub fn from_csv_row(line: &str) -> Result<Self, String> {
+        let cells: Vec<&str> = line.split(',').collect();
+        if cells.len() != CSV_COLUMNS.len() {
+            return Err(format!(
+                "{} columns, a track row has {}",
+                cells.len(),
+                CSV_COLUMNS.len()
+            ));
+        }
+        let num = |k: usize| -> Result<Option<f64>, String> {
+            match cells[k] {
+                "" => Ok(None),
+                c => c
+                    .parse::<f64>()
+                    .map(Some)
+                    .map_err(|_| format!("{} '{c}' is not a number", CSV_COLUMNS[k])),
+            }
+        };
+        let int = |k: usize| -> Result<u64, String> {
+            cells[k]
+                .parse::<u64>()
+                .map_err(|_| format!("{} '{}' is not a whole number", CSV_COLUMNS[k], cells[k]))
+        };
+        let pose = |k: usize| -> Result<Option<Se2>, String> {
+            Ok(match (num(k)?, num(k + 1)?, num(k + 2)?) {
+                (Some(x), Some(y), Some(t)) => Some(Se2::new(x, y, t)),
+                _ => None,
+            })
+        };
+        let err = |k: usize| -> Result<Option<(f64, Option<f64>)>, String> {
+            Ok(num(k)?.map(|mm| (mm, num(k + 1).ok().flatten())))
+        };
+        Ok(Self {
+            frame: int(0)? as usize,
+            stamp_ns: int(1)?,
+            contact_px: int(2)? as usize,
+            press_m: num(3)?,
+            samples: int(4)? as usize,
+            registered: int(5)? as usize,
+            estimate: pose(6)?,
+            multi_sample: pose(9)?,
+            baseline: pose(12)?,
+            spread_mm: num(15)?,
+            theta_spread_deg: num(16)?,
+            recorded: pose(17)?,
+            recorded_press_m: num(20)?,
+            estimate_error: err(21)?,
+            multi_sample_error: err(23)?,
+            baseline_error: err(25)?,
+        })
+    }
+
+    /// Score the estimates against the recorded pose and press of the frame (none: no errors), for an object with
+    /// `symmetry`.
+    pub fn score(&mut self, recorded: Option<(Se2, Option<f64>)>, symmetry: &Symmetry) {
+        self.recorded = recorded.map(|r| r.0);
+        self.recorded_press_m = recorded.and_then(|r| r.1);
+        let error = |pose: Option<Se2>| {
+            pose.zip(self.recorded).map(|(p, r)| {
+                let e = SampleError::new(p, 0.0, r, symmetry);
+                (e.position_mm, e.theta_deg)
+            })
+        };
+        self.estimate_error = error(self.estimate);
+        self.multi_sample_error = error(self.multi_sample);
+        self.baseline_error = error(self.baseline);
+    }
+}
+
+/// RMS distance of `poses` from their mean position, mm (from two poses).
+fn position_spread_mm(poses: &[Se2]) -> Option<f64> {
+    if poses.len() < 2 {
+        return None;
+    }
+    let n = poses.len() as f64;
+    let (mx, my) = (
+        poses.iter().map(|p| p.x).sum::<f64>() / n,
+        poses.iter().map(|p| p.y).sum::<f64>() / n,
+    );
+    let ms = poses
+        .iter()
+        .map(|p| (p.x - mx).powi(2) + (p.y - my).powi(2))
+        .sum::<f64>()
+        / n;
+    Some(ms.sqrt() * 1e3)
+}
+
+/// Standard deviation of `values` (from two).
+fn std_dev(values: &[f64]) -> Option<f64> {
+    if values.len() < 2 {
+        return None;
+    }
+    let n = values.len() as f64;
+    let m = values.iter().sum::<f64>() / n;
+    Some((values.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n).sqrt())
 }
 
 /// What one frame's estimate needs besides the frame.
@@ -107,13 +269,12 @@ pub struct TrackContext<'a> {
     pub press: PressChoice,
 }
 
-/// De-render frame `frame` of `recording` and estimate the object's pose (module docs); `recorded` is the pose the
-/// recording gives for the frame, used only to score the estimates. `progress` counts sampling steps, then fits.
+/// De-render frame `frame` of `recording` and estimate the object's pose (module docs); the row is not scored
+/// ([`FrameTrack::score`]). `progress` counts sampling steps, then fits; returning `false` cancels.
 pub fn track_frame(
     ctx: &TrackContext<'_>,
     recording: &ProcessedRecording,
     frame: usize,
-    recorded: Option<Se2>,
     progress: Progress<'_>,
 ) -> Result<FrameTrack, PipelineError> {
     let (Some(imprint), Some(signature)) = (
@@ -134,23 +295,14 @@ pub fn track_frame(
         guidance.as_ref(),
         &derender,
         ctx.eval.consensus_probability,
-        progress,
+        &mut *progress,
     )?;
-    let mut row = FrameTrack {
+    let mut row = FrameTrack::new(
         frame,
-        stamp_ns: recording.stamps_ns.get(frame).copied().unwrap_or(0),
-        contact_px: recording.contact_px.get(frame).copied().unwrap_or(0),
-        press_m: None,
-        samples: out.samples.len(),
-        registered: 0,
-        estimate: None,
-        multi_sample: None,
-        baseline: None,
-        recorded,
-        estimate_error: None,
-        multi_sample_error: None,
-        baseline_error: None,
-    };
+        recording.stamps_ns.get(frame).copied().unwrap_or(0),
+        recording.contact_px.get(frame).copied().unwrap_or(0),
+        out.samples.len(),
+    );
     let placement = SensorPlacement {
         sim: ctx.sim,
         object: ctx.object,
@@ -174,7 +326,7 @@ pub fn track_frame(
         samples: &out.samples,
         imprint,
         signature: Some(signature),
-        truth: recorded,
+        truth: None,
     };
     let estimate = match super::estimate_pose(
         ctx.object,
@@ -182,26 +334,22 @@ pub fn track_frame(
         &input,
         ctx.eval,
         derender.seed,
-        &mut |_, _| true,
+        &mut |done, total| progress(done, total),
     ) {
         Ok(e) => e,
         Err(PipelineError::NoContact) => return Ok(row),
         Err(e) => return Err(e),
     };
     let report = &estimate.report;
-    let error = |pose: Se2| {
-        recorded.map(|r| {
-            let e = SampleError::new(pose, 0.0, r, &ctx.object.symmetry);
-            (e.position_mm, e.theta_deg)
-        })
-    };
     row.registered = report.samples.len();
     row.estimate = estimate.best();
     row.multi_sample = report.multi_sample.as_ref().map(|m| m.pose);
     row.baseline = report.baseline.as_ref().map(|b| b.pose);
-    row.estimate_error = row.estimate.and_then(error);
-    row.multi_sample_error = row.multi_sample.and_then(error);
-    row.baseline_error = row.baseline.and_then(error);
+    let poses: Vec<Se2> = report.samples.iter().map(|e| e.pose).collect();
+    row.spread_mm = position_spread_mm(&poses);
+    // θ of each sample against the reference (the estimate), reduced by the object's symmetry.
+    let thetas: Option<Vec<f64>> = report.samples.iter().map(|e| e.theta_deg).collect();
+    row.theta_spread_deg = thetas.as_deref().and_then(std_dev);
     Ok(row)
 }
 
@@ -210,32 +358,39 @@ mod tests {
     use super::*;
 
     #[test]
-    fn csv_rows_have_the_header_s_columns() {
-        let columns = FrameTrack::CSV_HEADER.split(',').count();
-        let mut row = FrameTrack {
-            frame: 3,
-            stamp_ns: 100,
-            contact_px: 40,
-            press_m: Some(0.004),
-            samples: 2,
-            registered: 0,
-            estimate: None,
-            multi_sample: None,
-            baseline: None,
-            recorded: None,
-            estimate_error: None,
-            multi_sample_error: None,
-            baseline_error: None,
-        };
+    fn csv_rows_have_the_header_s_columns_and_read_back_exactly() {
+        let columns = FrameTrack::csv_header().split(',').count();
+        let mut row = FrameTrack::new(3, 100, 40, 2);
         assert_eq!(row.csv_row().split(',').count(), columns);
+        assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
+        row.press_m = Some(0.004);
         row.estimate = Some(Se2::new(0.001, 0.002, 0.3));
-        row.recorded = Some(Se2::new(0.0, 0.0, 0.0));
-        row.estimate_error = Some((2.2, None));
-        row.baseline_error = Some((1.0, Some(-3.0)));
+        row.baseline = Some(Se2::new(1.0 / 3.0, -0.002, -2.9));
+        row.spread_mm = Some(0.25);
+        row.score(
+            Some((Se2::new(0.0, 0.0, 0.0), Some(0.005))),
+            &Symmetry::default(),
+        );
         let cells: Vec<String> = row.csv_row().split(',').map(String::from).collect();
         assert_eq!(cells.len(), columns);
         assert_eq!(cells[6..9], ["0.001", "0.002", "0.3"]);
-        assert_eq!(cells[18..20], ["2.2", ""]);
-        assert_eq!(cells[22..24], ["1", "-3"]);
+        // Independent truth: |(1, 2)| mm and 0.3 rad in degrees.
+        let (mm, deg) = row.estimate_error.unwrap();
+        assert!(
+            (mm - 5f64.sqrt()).abs() < 1e-9 && (deg.unwrap() - 0.3f64.to_degrees()).abs() < 1e-9
+        );
+        assert_eq!(row.multi_sample_error, None);
+        assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row));
+        assert!(FrameTrack::from_csv_row("1,2,3")
+            .unwrap_err()
+            .contains("3 columns"));
+    }
+
+    #[test]
+    fn spreads_are_rms_distances_and_standard_deviations() {
+        let poses = [Se2::new(0.001, 0.0, 0.0), Se2::new(-0.001, 0.0, 0.0)];
+        assert!((position_spread_mm(&poses).unwrap() - 1.0).abs() < 1e-12);
+        assert_eq!(position_spread_mm(&poses[..1]), None);
+        assert!((std_dev(&[1.0, 3.0]).unwrap() - 1.0).abs() < 1e-12);
     }
 }

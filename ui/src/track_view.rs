@@ -97,8 +97,7 @@ pub fn spawn(
         };
         let mut cancelled = false;
         for (i, &k) in frames.iter().enumerate() {
-            let recorded = req.poses.get(k).copied().flatten();
-            let row = match track_frame(&track, &req.recording, k, recorded, &mut |_, _| {
+            let mut row = match track_frame(&track, &req.recording, k, &mut |_, _| {
                 !cancel.load(Ordering::Relaxed)
             }) {
                 Ok(row) => row,
@@ -113,6 +112,8 @@ pub fn spawn(
                     ))
                 }
             };
+            let recorded = req.poses.get(k).copied().flatten();
+            row.score(recorded.map(|p| (p, None)), &object.symmetry);
             let _ = rows_tx.send(WorkerMsg::Track(TrackMsg::Row {
                 generation,
                 row: Box::new(row),

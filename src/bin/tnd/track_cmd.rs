@@ -16,7 +16,7 @@ use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::track::{track_frame, FrameTrack, PressChoice, TrackContext};
 use tactile_derender::pipeline::{DerenderConfig, ObjectSpec};
 use tactile_derender::recording::source::DEFAULT_MAX_POSE_GAP_S;
-use tactile_derender::recording::{self, Recording, StreamKind};
+use tactile_derender::recording::{self, ProcessedRecording, Recording, StreamKind};
 use tactile_derender::sim::{PreparedObject, Simulator};
 
 use crate::args::SensorArgs;
@@ -38,12 +38,14 @@ pub struct TrackArgs {
     pub model: String,
     #[command(flatten)]
     pub derender: DerenderConfig,
-    /// How far the sensor is pressed into the object, to place it over the object: "auto" (per frame, the samples'
-    /// highest contact point on the object's top) or metres for every frame.
-    #[arg(long, default_value = "auto")]
+    /// How far the sensor is pressed into the object, to place it over the object: "auto" (per frame: from the
+    /// samples' highest contact point on the object's top, 1 mm shallower to 6 mm deeper, the press whose registered
+    /// pose best explains the signature) or metres for every frame (faster).
+    #[arg(long, default_value = "auto", allow_hyphen_values = true)]
     pub press: PressChoice,
-    /// Recorded poses to score the estimates against: a CSV (columns frame or stamp_ns, x, y, theta); default: the
-    /// recording's pose topic when it has exactly one.
+    /// Recorded poses to score the estimates against: a CSV (columns frame or stamp_ns, x, y, theta, optional
+    /// press); default: the recording's pose topic when it has exactly one. Adding them to a finished track rescores
+    /// it without tracking again.
     #[arg(long, conflicts_with = "pose_topic")]
     pub poses: Option<PathBuf>,
     /// The recording's object-pose topic to score against.
@@ -60,26 +62,45 @@ pub struct TrackArgs {
     pub out: PathBuf,
 }
 
-/// The settings a track's rows depend on; a resumed run must have the same.
-fn settings(
-    a: &TrackArgs,
-    sim: &tactile_derender::sim::SimConfig,
-    poses: &Option<PoseSource>,
-) -> Value {
+/// `path` made absolute (the same file however it is named); as given when it does not exist.
+fn canonical(path: &Path) -> PathBuf {
+    std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
+}
+
+/// The settings a track's rows depend on; a resumed run must have the same. (The recorded poses are not among
+/// them: every run scores all rows against the poses it is given.)
+fn settings(a: &TrackArgs, sim: &tactile_derender::sim::SimConfig) -> Value {
+    let mut object = a.object.clone();
+    if Path::new(&object.object).exists() {
+        object.object = canonical(Path::new(&object.object)).display().to_string();
+    }
+    let model = if Path::new(&a.model).exists() {
+        canonical(Path::new(&a.model)).display().to_string()
+    } else {
+        a.model.clone()
+    };
     json!({
-        "recording": a.recording, "topic": a.read.topic, "reference": a.read.reference,
+        "recording": canonical(&a.recording), "topic": a.read.topic, "reference": a.read.reference,
         "contact_threshold_m": a.read.contact_threshold, "npy_scale": a.read.npy_scale,
         "png_scale": a.read.png_scale, "fps": a.read.fps,
-        "object": a.object, "model": a.model, "derender": a.derender, "press": a.press.to_string(),
-        "poses": poses, "every": a.every, "min_contact_px": a.min_contact_px, "sim": sim,
+        "object": object, "model": model, "derender": a.derender, "press": a.press.to_string(),
+        "every": a.every, "min_contact_px": a.min_contact_px, "sim": sim,
     })
 }
 
-/// The rows of an earlier run into `out` with the same settings (frame, CSV line); none when there is no earlier
-/// run. Another run's directory is refused.
-fn earlier_rows(out: &Path, settings: &Value) -> Result<Vec<(usize, String)>> {
+/// What the recording's frames were when the track began: frame count, time stamps and contact areas (a recording
+/// replaced under the same name is not resumed into).
+fn fingerprint(p: &ProcessedRecording) -> Value {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    std::hash::Hash::hash(&p.stamps_ns, &mut h);
+    std::hash::Hash::hash(&p.contact_px, &mut h);
+    std::hash::Hash::hash(&p.reference_frames, &mut h);
+    json!({"frames": p.len(), "hash": format!("{:016x}", std::hash::Hasher::finish(&h))})
+}
+
+/// An earlier run into `out`: its settings file (`None`: none yet). A folder holding anything else is refused.
+fn earlier_run(out: &Path) -> Result<Option<Value>> {
     let json_path = out.join("track.json");
-    let csv_path = out.join("track.csv");
     if !json_path.exists() {
         if out
             .read_dir()
@@ -91,37 +112,31 @@ fn earlier_rows(out: &Path, settings: &Value) -> Result<Vec<(usize, String)>> {
                 out.display()
             );
         }
-        return Ok(Vec::new());
+        return Ok(None);
     }
     let text = std::fs::read_to_string(&json_path)
         .with_context(|| format!("{}: cannot read", json_path.display()))?;
     let earlier: Value = serde_json::from_str(&text)
         .map_err(|e| anyhow!("{}: not a track's settings: {e}", json_path.display()))?;
-    if earlier.get("settings") != Some(settings) {
-        let mut differing = Vec::new();
-        differences("", settings, &earlier["settings"], &mut differing);
-        bail!(
-            "{}: holds a track made with other settings ({}); choose a new --out or the same settings",
-            out.display(),
-            differing.join(", ")
-        );
-    }
-    let Ok(text) = std::fs::read_to_string(&csv_path) else {
-        return Ok(Vec::new());
-    };
-    let mut rows = Vec::new();
-    for (i, line) in text.lines().enumerate().skip(1) {
-        let frame = line
-            .split(',')
-            .next()
-            .and_then(|f| f.parse::<usize>().ok())
-            .ok_or_else(|| anyhow!("{}: line {}: no frame number", csv_path.display(), i + 1))?;
-        rows.push((frame, line.to_string()));
-    }
-    Ok(rows)
+    Ok(Some(earlier))
 }
 
-/// The dotted names of the settings where `now` and `then` differ (`derender.samples`).
+/// Refuse `earlier` unless it was made with `settings`, naming the settings that differ and their values.
+fn check_same(out: &Path, earlier: &Value, key: &str, now: &Value, what: &str) -> Result<()> {
+    let then = earlier.get(key).unwrap_or(&Value::Null);
+    if then == now {
+        return Ok(());
+    }
+    let mut differing = Vec::new();
+    differences("", now, then, &mut differing);
+    bail!(
+        "{}: holds a track of {what} ({}); choose a new --out, or the same settings to resume",
+        out.display(),
+        differing.join("; ")
+    );
+}
+
+/// The settings where `now` and `then` differ, as `name: then -> now` (`derender.samples: 2 -> 3`).
 fn differences(prefix: &str, now: &Value, then: &Value, out: &mut Vec<String>) {
     match (now, then) {
         (Value::Object(a), Value::Object(b)) => {
@@ -134,19 +149,31 @@ fn differences(prefix: &str, now: &Value, then: &Value, out: &mut Vec<String>) {
                 differences(&name, v, b.get(k).unwrap_or(&Value::Null), out);
             }
         }
-        (a, b) if a != b => out.push(prefix.to_string()),
+        (a, b) if a != b => out.push(format!("{prefix}: {b} -> {a}")),
         _ => {}
     }
 }
 
-fn write_rows(out: &Path, rows: &[(usize, String)]) -> Result<()> {
-    let mut text = format!("{}\n", FrameTrack::CSV_HEADER);
-    for (_, line) in rows {
-        text.push_str(line);
-        text.push('\n');
-    }
+/// The rows of an earlier run's track.csv (none when there is none).
+fn earlier_rows(out: &Path) -> Result<Vec<FrameTrack>> {
     let path = out.join("track.csv");
-    write_atomic(&path, text.as_bytes())
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return Ok(Vec::new());
+    };
+    text.lines()
+        .enumerate()
+        .skip(1)
+        .filter(|(_, l)| !l.is_empty())
+        .map(|(i, l)| {
+            FrameTrack::from_csv_row(l)
+                .map_err(|e| anyhow!("{}: line {}: {e}", path.display(), i + 1))
+        })
+        .collect()
+}
+
+fn write_rows(out: &Path, rows: &[FrameTrack]) -> Result<()> {
+    let path = out.join("track.csv");
+    write_atomic(&path, FrameTrack::csv(rows).as_bytes())
         .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))
 }
 
@@ -156,7 +183,7 @@ fn write_json(out: &Path, value: &Value) -> Result<()> {
         .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))
 }
 
-/// Mean and median of `v` (None when empty).
+/// Mean and median of `v` (null when empty).
 fn mean_median(mut v: Vec<f64>) -> Value {
     if v.is_empty() {
         return Value::Null;
@@ -170,6 +197,12 @@ pub fn run(a: TrackArgs) -> Result<()> {
         bail!("--every must be at least 1");
     }
     let sim_config = a.sensor.sim_config()?;
+    let settings = settings(&a, &sim_config);
+    // Refuse another run's folder before any long work; nothing is written until the track can start.
+    let earlier = earlier_run(&a.out)?;
+    if let Some(e) = &earlier {
+        check_same(&a.out, e, "settings", &settings, "other settings")?;
+    }
     let sim = Simulator::new(sim_config.clone())?;
     let rec = Recording::open(&a.recording, &a.read.folder())?;
     let stream = rec.depth_stream(a.read.topic.as_deref())?.clone();
@@ -185,19 +218,16 @@ pub fn run(a: TrackArgs) -> Result<()> {
             (topics.len() == 1).then(|| PoseSource::Topic(Some(topics[0].name.clone())))
         }
     };
-    let settings = settings(&a, &sim_config, &poses);
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("{}: cannot create", a.out.display()))?;
-    let mut rows = earlier_rows(&a.out, &settings)?;
-    write_json(&a.out, &json!({"settings": settings}))?;
-
     let object = a.object.load()?;
-    for w in &object.warnings {
-        eprintln!("warning: {w}");
+    if let Some(w) = object.warnings.first() {
+        // A mis-scaled object registers to nothing sensible; say so before hours of tracking.
+        bail!("{w}; a track of it would be meaningless");
     }
     let prepared = PreparedObject::new(object.mesh.clone())?;
     let device = tactile_derender::model::device::open_device(&a.derender.device)?;
     let model = DiffusionModel::load_on(Path::new(&a.model), &device)?;
+    a.derender
+        .validate(Some(model.config().tactile_derender.num_train_timesteps))?;
 
     let mut bar = progress::bar("reading", " frames", stream.messages);
     let processed = recording::process(
@@ -213,6 +243,10 @@ pub fn run(a: TrackArgs) -> Result<()> {
         Some(p) => frame_poses(&rec, &processed.stamps_ns, p, DEFAULT_MAX_POSE_GAP_S)?,
         None => vec![None; processed.len()],
     };
+    let frames = fingerprint(&processed);
+    if let Some(e) = &earlier {
+        check_same(&a.out, e, "recording", &frames, "another recording")?;
+    }
     let todo: Vec<usize> = (0..processed.len())
         .step_by(a.every)
         .filter(|&k| processed.contact_px[k] >= a.min_contact_px)
@@ -230,7 +264,11 @@ pub fn run(a: TrackArgs) -> Result<()> {
             a.read.contact_threshold * 1e3
         );
     }
-    let done: BTreeSet<usize> = rows.iter().map(|r| r.0).collect();
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("{}: cannot create", a.out.display()))?;
+    let mut rows = earlier_rows(&a.out)?;
+    write_json(&a.out, &json!({"settings": settings, "recording": frames}))?;
+    let done: BTreeSet<usize> = rows.iter().map(|r| r.frame).collect();
     if !done.is_empty() {
         eprintln!(
             "resuming the track in {}: {} of {} frames done",
@@ -249,53 +287,55 @@ pub fn run(a: TrackArgs) -> Result<()> {
         eval: &eval,
         press: a.press,
     };
+    let score = |row: &mut FrameTrack| {
+        let r = recorded.get(row.frame).copied().flatten();
+        row.score(r.map(|p| (p.pose, p.press)), &object.symmetry);
+    };
     let mut bar = progress::bar("tracking", " frames", todo.len());
-    let mut tracked = Vec::new();
+    let mut this_run = 0;
     for (i, &k) in todo.iter().enumerate() {
         if !done.contains(&k) {
-            let row = track_frame(
-                &ctx,
-                &processed,
-                k,
-                recorded[k].map(|p| p.pose),
-                &mut |_, _| true,
-            )?;
-            rows.push((k, row.csv_row()));
-            rows.sort_by_key(|r| r.0);
+            let mut row = track_frame(&ctx, &processed, k, &mut |_, _| true)?;
+            score(&mut row);
+            rows.push(row);
+            rows.sort_by_key(|r| r.frame);
             write_rows(&a.out, &rows)?;
-            tracked.push(row);
+            this_run += 1;
         }
         let _ = kdam::BarExt::update_to(&mut bar, i + 1);
     }
     progress::finish(&mut bar);
+    // Every row scored against the poses given now (an earlier run may have had none).
+    rows.iter_mut().for_each(score);
+    write_rows(&a.out, &rows)?;
 
-    // The summary over every row of the track (those of an earlier, interrupted run too).
-    let text = std::fs::read_to_string(a.out.join("track.csv"))?;
-    let column = |name: &str| -> Vec<f64> {
-        let Some(c) = FrameTrack::CSV_HEADER.split(',').position(|h| h == name) else {
-            return Vec::new();
-        };
-        text.lines()
-            .skip(1)
-            .filter_map(|l| l.split(',').nth(c).and_then(|v| v.parse::<f64>().ok()))
-            .collect()
+    let column = |get: fn(&FrameTrack) -> Option<f64>| -> Value {
+        mean_median(rows.iter().filter_map(get).collect())
     };
     let summary = json!({
         "recording": a.recording, "depth_topic": stream.name, "object": object.name,
         "frames": processed.len(), "reference_frames": processed.reference_frames,
-        "tracked": rows.len(), "this_run": tracked.len(),
-        "no_estimate": rows.len() - column("x").len(),
+        "tracked": rows.len(), "this_run": this_run,
+        "no_estimate": rows.iter().filter(|r| r.estimate.is_none()).count(),
         "scored_against": poses.as_ref().map(|p| match p {
             PoseSource::Csv(c) => c.display().to_string(),
             PoseSource::Topic(t) => t.clone().unwrap_or_default(),
         }),
-        "position_err_mm": mean_median(column("position_err_mm")),
-        "multi_position_err_mm": mean_median(column("multi_position_err_mm")),
-        "baseline_position_err_mm": mean_median(column("baseline_position_err_mm")),
-        "press_m": mean_median(column("press_m")),
+        "position_err_mm": column(|r| r.estimate_error.map(|e| e.0)),
+        "theta_err_deg": column(|r| r.estimate_error.and_then(|e| e.1).map(f64::abs)),
+        "multi_position_err_mm": column(|r| r.multi_sample_error.map(|e| e.0)),
+        "multi_theta_err_deg": column(|r| r.multi_sample_error.and_then(|e| e.1).map(f64::abs)),
+        "baseline_position_err_mm": column(|r| r.baseline_error.map(|e| e.0)),
+        "baseline_theta_err_deg": column(|r| r.baseline_error.and_then(|e| e.1).map(f64::abs)),
+        "spread_mm": column(|r| r.spread_mm),
+        "press_m": column(|r| r.press_m),
+        "press_err_mm": column(|r| r.press_m.zip(r.recorded_press_m).map(|(p, q)| (p - q).abs() * 1e3)),
         "out": a.out.join("track.csv"),
     });
-    write_json(&a.out, &json!({"settings": settings, "summary": summary}))?;
+    write_json(
+        &a.out,
+        &json!({"settings": settings, "recording": frames, "summary": summary}),
+    )?;
     println!("{summary}");
     Ok(())
 }
