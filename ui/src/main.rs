@@ -59,8 +59,26 @@ fn object_units(path: &std::path::Path, units: Option<Units>) -> Units {
     })
 }
 
-fn main() -> Result<()> {
-    let args = Args::parse();
+fn main() -> std::process::ExitCode {
+    match run(Args::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", tactile_derender::error::render_anyhow(&e));
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: Args) -> Result<()> {
+    // Files named on the command line are checked before a window opens, so that a typo fails like any command
+    // (a screenshot run would otherwise save the default scene and exit 0).
+    for (flag, path) in [("--session", &args.session), ("--object", &args.object)] {
+        if let Some(p) = path {
+            if !p.is_file() {
+                return Err(anyhow!("{flag} {}: no such file", p.display()));
+            }
+        }
+    }
     // The model's process-wide settings, the same as `tnd`'s (before any thread starts); a variable the user set is
     // kept.
     let kernels = tactile_derender::model::kernels::KernelSettings::default();

@@ -170,3 +170,20 @@ fn recent_sessions_list_the_newest_first_and_reopen() {
     assert_eq!(h.state().recent, vec![b, a]);
     assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
 }
+
+#[test]
+fn a_missing_session_or_mesh_on_the_command_line_fails_before_any_window_opens() {
+    // No display is needed: the files are checked first, and a typo fails like any command, with one line.
+    for (flag, path) in [
+        ("--session", "no_such_session.json"),
+        ("--object", "no_such_part.stl"),
+    ] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_tnd-workbench"))
+            .args([flag, path, "--screenshot", "never.png"])
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(stderr.trim(), format!("error: {flag} {path}: no such file"));
+    }
+}
