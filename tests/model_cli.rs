@@ -345,4 +345,70 @@ fn train_starts_resumes_and_refuses_other_inputs() {
     let (ok, err) = train("ds", "3", "1");
     assert!(!ok);
     assert!(err.contains("--batch 2 (now 1)"), "{err}");
+
+    // SIGTERM (a scheduler's kill, Ctrl-C's SIGINT alike) stops a long run after its step with a checkpoint to resume
+    // from, long before the minute between checkpoints is up.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tnd"))
+        .args([
+            "train",
+            "-q",
+            "--data",
+            "ds",
+            "--out",
+            "long",
+            "--steps",
+            "100000",
+            "--batch",
+            "2",
+            "--config",
+            "small",
+            "--log-every",
+            "1",
+        ])
+        .current_dir(dir.path())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let log = dir.path().join("long/log.jsonl");
+    let t0 = std::time::Instant::now();
+    while !log.exists() {
+        assert!(t0.elapsed().as_secs() < 120, "no training step logged");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    // SAFETY: signals the child started above.
+    unsafe {
+        libc::kill(child.id() as libc::pid_t, libc::SIGTERM);
+    }
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("checkpoint saved in long; the same command resumes"),
+        "{err}"
+    );
+    assert!(t0.elapsed().as_secs() < 60, "{err}");
+    let step: u64 = err
+        .split("interrupted at step ")
+        .nth(1)
+        .and_then(|r| r.split(':').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{err}"));
+    let o = run(&[
+        "train",
+        "-q",
+        "--data",
+        "ds",
+        "--out",
+        "long",
+        "--steps",
+        &(step + 1).to_string(),
+        "--batch",
+        "2",
+        "--config",
+        "small",
+        "--log-every",
+        "1",
+    ]);
+    let resumed: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(resumed["resumed_from"].as_u64(), Some(step), "{resumed}");
 }

@@ -1,7 +1,9 @@
 //! `tnd train`: pre-train the conditional DDPM on a dataset, or fine-tune from `--init` (paper IV.B, V.B). Running
-//! the same command again resumes from the run directory's last checkpoint (also after kill -9).
+//! the same command again resumes from the run directory's last checkpoint (also after kill -9); Ctrl-C or SIGTERM
+//! stop it after the step under way with a fresh checkpoint.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
@@ -11,6 +13,31 @@ use tactile_derender::dataset::Dataset;
 use tactile_derender::model::train::{train, TrainConfig};
 use tactile_derender::model::train_data::DatasetTraining;
 use tactile_derender::model::UNet2DConfig;
+
+/// Set by SIGINT or SIGTERM: the run stops after its current step and writes a checkpoint.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+#[cfg(unix)]
+extern "C" fn on_stop_signal(signal: libc::c_int) {
+    STOP.store(true, Ordering::Relaxed);
+    // A second Ctrl-C stops at once (both calls are async-signal-safe).
+    // SAFETY: restoring the default disposition of the signal being handled.
+    unsafe {
+        libc::signal(signal, libc::SIG_DFL);
+    }
+}
+
+/// Ctrl-C or `kill` (SIGINT, SIGTERM) stop training at the end of the step under way, with a checkpoint, instead of
+/// losing up to a checkpoint interval of work.
+fn stop_on_signals() {
+    #[cfg(unix)]
+    for signal in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: installs a handler that only stores to an atomic and resets its own disposition.
+        unsafe {
+            libc::signal(signal, on_stop_signal as *const () as libc::sighandler_t);
+        }
+    }
+}
 
 #[derive(Args, Debug)]
 pub struct TrainArgs {
@@ -140,17 +167,26 @@ pub fn run(a: TrainArgs) -> Result<()> {
     }
     check_run_inputs(&a)?;
     let mut bar = super::progress::bar("training", " steps", 0);
-    let summary = train(&a.out, &tc, &cfg, a.init.as_deref(), &mut data, &mut |p| {
+    stop_on_signals();
+    let mut at_step = 0;
+    let result = train(&a.out, &tc, &cfg, a.init.as_deref(), &mut data, &mut |p| {
         bar.total = p.total as usize;
         bar.set_postfix(format!(
             "loss={:.4}, {:.1} samples/s",
             p.loss, p.samples_per_s
         ));
         let _ = bar.update_to(p.step as usize);
-        true
-    })
-    .with_context(|| format!("training in {}", a.out.display()))?;
+        at_step = p.step;
+        !STOP.load(Ordering::Relaxed)
+    });
     super::progress::finish(&mut bar);
+    if let Err(tactile_derender::model::ModelError::Cancelled) = result {
+        bail!(
+            "interrupted at step {at_step}: checkpoint saved in {}; the same command resumes from it",
+            a.out.display()
+        );
+    }
+    let summary = result.with_context(|| format!("training in {}", a.out.display()))?;
     println!(
         "{}",
         json!({"steps": summary.steps, "resumed_from": summary.resumed_from, "last_loss": summary.last_loss,
