@@ -348,7 +348,7 @@ fn train_starts_resumes_and_refuses_other_inputs() {
 
     // SIGTERM (a scheduler's kill, Ctrl-C's SIGINT alike) stops a long run after its step with a checkpoint to resume
     // from, long before the minute between checkpoints is up.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_tnd"))
+    let child = Command::new(env!("CARGO_BIN_EXE_tnd"))
         .args([
             "train",
             "-q",
