@@ -56,10 +56,10 @@ pub struct PoseArgs {
     /// estimate).
     #[arg(long)]
     pub truth: Option<String>,
-    /// Press depth of the sensor apex below the object's top, metres (places the sensor as `tnd sim` does; give the
-    /// simulation's --press), or "auto" for a measured imprint: found from the samples (and the signature, with
-    /// --signature) as `tnd recording track` does.
-    #[arg(long, default_value_t = PressChoice::Fixed(tactile_derender::sim::DEFAULT_PRESS_M))]
+    /// Press depth of the sensor apex below the object's top, to place the sensor over the object: "auto" (found
+    /// from the samples and, with --signature, the press whose registered pose best explains the signature, as
+    /// `tnd recording track` does; a sensor does not measure it) or metres (a simulation's --press).
+    #[arg(long, default_value = "auto", allow_hyphen_values = true)]
     pub press: PressChoice,
     #[command(flatten)]
     pub derender: DerenderConfig,
