@@ -175,6 +175,8 @@ impl crate::app::WorkbenchApp {
             self.inputs.recording_path = p.display().to_string();
         }
         self.cancel_recording();
+        // A track belongs to the frames it was made of.
+        self.cancel_track();
         let view = &mut self.recording;
         view.generation += 1;
         view.loading = true;

@@ -179,7 +179,8 @@ fn simulate(a: SimulateArgs) -> Result<()> {
             "pose_topic": seq.pose_topic,
             "encoding": seq.encoding,
             "pose": [pose.x, pose.y, pose.theta],
-            "presses_m": seq.presses,
+            // To the nanometre: 0.0021, not 0.0021000000000000003.
+            "presses_m": seq.presses.iter().map(|p| (p * 1e9).round() / 1e9).collect::<Vec<_>>(),
         })
     );
     Ok(())
