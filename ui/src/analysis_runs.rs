@@ -365,6 +365,7 @@ impl WorkbenchApp {
                         t_world_camera: sim.t_world_camera,
                         signature: out.signature.clone(),
                         sim: self.state.sim.clone(),
+                        find_press: false,
                     }),
                     imprint: out.imprint.clone(),
                     truth: Some(out.target.clone()),

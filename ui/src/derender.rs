@@ -50,6 +50,10 @@ pub struct PoseContext {
     pub signature: Image,
     /// The sensor configuration the input was made with (intrinsics, membrane).
     pub sim: tactile_derender::sim::SimConfig,
+    /// The sensor's press is not known (a recording frame without a recorded pose): the pose job finds it from the
+    /// samples and the signature (`pipeline::press`, as `tnd recording track`) and places the sensor there, over
+    /// the object at the origin, instead of `t_world_camera`.
+    pub find_press: bool,
 }
 
 impl PoseContext {
@@ -69,6 +73,7 @@ impl PoseContext {
             t_world_camera: pair.meta.sensor.t_world_sensor() * sim.mount.t_sensor_camera(),
             signature: pair.signature.clone(),
             sim,
+            find_press: false,
         })
     }
 }
@@ -151,7 +156,7 @@ impl RecordingFrameInput {
             None => {
                 let scene = crate::worker::scene_of(&self.scene, &sim, &object);
                 let label = format!(
-                    "{} frame {k} (t = {t:.2} s); no recorded pose: sensor placed as in the Scene panel",
+                    "{} frame {k} (t = {t:.2} s); no recorded pose: the press found from the samples",
                     self.name
                 );
                 (scene, None, label)
@@ -164,6 +169,7 @@ impl RecordingFrameInput {
                 t_world_camera: sim.t_world_camera(&scene.sensor),
                 signature,
                 sim: self.sim,
+                find_press: truth.is_none(),
             }),
             imprint,
             truth,

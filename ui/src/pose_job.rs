@@ -10,8 +10,9 @@ use std::sync::Arc;
 use anyhow::{Context, Result};
 use tactile_derender::image::Image;
 use tactile_derender::metrics::evaluate::EvalConfig;
+use tactile_derender::pipeline::press::{PressChoice, SensorPlacement};
 use tactile_derender::pipeline::{self, PoseInput};
-use tactile_derender::sim::Simulator;
+use tactile_derender::sim::{PreparedObject, Simulator};
 
 use crate::derender::PoseContext;
 use crate::pose_view::{outline, PoseAnalysis};
@@ -40,9 +41,38 @@ pub fn run(
     cancel: &AtomicBool,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<PoseAnalysis> {
+    let sim = Simulator::new(req.context.sim.clone()).context("sensor configuration")?;
+    let object = req.context.object.spec().load()?;
+    let eval = EvalConfig {
+        check_signature: req.check_signature,
+        imprint_proposals: req.imprint_proposals,
+        ..EvalConfig::default()
+    };
+    // Where the press is not known, the sensor goes where the samples and the signature say (as `tnd pose`).
+    let mut req = req.clone();
+    let mut press_found_m = None;
+    if req.context.find_press {
+        let prepared = PreparedObject::new(object.mesh.clone())?;
+        let placement = SensorPlacement {
+            sim: &sim,
+            object: &object,
+            prepared: &prepared,
+            eval: &eval,
+        };
+        let c = &req.context;
+        press_found_m = placement.press(
+            PressChoice::Auto,
+            &req.samples,
+            Some(&c.signature),
+            &req.imprint,
+            req.seed,
+        )?;
+        if let Some(p) = press_found_m {
+            req.context.t_world_camera =
+                sim.t_world_camera(&sim.pressing_pose(&prepared, 0.0, 0.0, 0.0, p));
+        }
+    }
     let c = &req.context;
-    let sim = Simulator::new(c.sim.clone()).context("sensor configuration")?;
-    let object = c.object.spec().load()?;
     let input = PoseInput {
         t_world_camera: c.t_world_camera,
         samples: &req.samples,
@@ -54,11 +84,7 @@ pub fn run(
         &object,
         &sim,
         &input,
-        &EvalConfig {
-            check_signature: req.check_signature,
-            imprint_proposals: req.imprint_proposals,
-            ..EvalConfig::default()
-        },
+        &eval,
         req.seed,
         &mut |done, total| {
             progress(done, total);
@@ -83,6 +109,7 @@ pub fn run(
         sample_index: estimate.with_contact,
         anchor_shift_m: estimate.anchor_shift_m,
         inputs: Some(Box::new(req.clone())),
+        press_found_m,
     })
 }
 

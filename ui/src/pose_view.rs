@@ -35,6 +35,9 @@ pub struct PoseAnalysis {
     pub anchor_shift_m: Vec<f64>,
     /// What the analysis registered, for exporting its geometry.
     pub inputs: Option<Box<crate::pose_job::PoseRequest>>,
+    /// The press found from the samples where it was not known ([`crate::derender::PoseContext::find_press`]),
+    /// metres.
+    pub press_found_m: Option<f64>,
 }
 
 impl PoseAnalysis {

@@ -180,3 +180,54 @@ fn every_contact_frame_is_tracked_in_the_background_and_saved_as_csv() {
     assert!(!h.state().recording.track.running);
     assert!(h.query_by_label("Track all frames").is_some());
 }
+
+#[test]
+fn a_frame_without_a_recorded_pose_is_registered_at_the_press_its_samples_say() {
+    // Independent truth: the press the recording was simulated at (the recording has no pose topic, so nothing in
+    // it says how deep the sensor went).
+    let dir = tempfile::tempdir().unwrap();
+    let mut seq = PressSequence::down_and_up(sequence().pose, 0.006, 2, 3);
+    seq.pose_topic = None;
+    let rec = dir.path().join("nopose.mcap");
+    let object = PreparedObject::new(ObjectSet::builtin().mesh("cross_w12_s50").unwrap()).unwrap();
+    write_press_recording(&rec, &State::default().sim, &object, &seq).unwrap();
+    let mut state = State::default();
+    state.scene.object = ObjectSource::Library {
+        set: "builtin".into(),
+        name: "cross_w12_s50".into(),
+    };
+    state.derender.config.samples = 2;
+    state.recording.path = Some(rec);
+    state.view.tab = Tab::Recording;
+    let deepest = 2 + 3 - 1;
+    state.recording.frame = deepest;
+    let mut h = harness(WorkbenchApp::with_state(state));
+    h.run_ok();
+    wait_for(&mut h, "the recording", |a| a.recording.loaded.is_some());
+    assert!(h
+        .query_by_label_contains("none recorded (registering finds the press from the samples)")
+        .is_some());
+    h.get_by_label("De-render and register this frame").click();
+    h.run_ok();
+    wait_for(&mut h, "the fit", |a| {
+        a.analysis.pose.result.is_some() && !a.busy()
+    });
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    let found = h
+        .state()
+        .analysis
+        .pose
+        .result
+        .as_ref()
+        .unwrap()
+        .press_found_m
+        .unwrap();
+    assert!(
+        (found - seq.presses[deepest]).abs() < 5e-4,
+        "{found} for {}",
+        seq.presses[deepest]
+    );
+    assert!(h
+        .query_by_label_contains("found from the samples")
+        .is_some());
+}

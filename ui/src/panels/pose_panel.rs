@@ -232,6 +232,14 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
         "{}: hypotheses of sample {} (best first)",
         r.object, r.registered_sample
     ));
+    if let Some(p) = r.press_found_m {
+        ui.label(format!("press {:.2} mm, found from the samples", p * 1e3))
+            .on_hover_text(
+                "The recording gives no pose, so nothing says how deep the sensor was pressed: the press is the one \
+                 whose registered pose best explains the signature, from the samples' highest contact point on the \
+                 object's top to 6 mm deeper (as `tnd recording track` and `tnd pose --press auto`).",
+            );
+    }
     if let Some(&shift) = r.anchor_shift_m.get(r.registered_sample) {
         ui.label(if shift == 0.0 {
             "contact depths as generated (no offset to the signature to correct)".to_string()

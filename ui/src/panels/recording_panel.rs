@@ -96,7 +96,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         if has_pose {
             "from the recording's pose topic"
         } else {
-            "none recorded (de-rendering places the sensor as the Scene panel does)"
+            "none recorded (registering finds the press from the samples)"
         }
     ));
     // Timeline.
