@@ -274,6 +274,22 @@ fn csv_poses_with_presses_and_bad_recordings_give_one_line_errors() {
         e.contains("press.mcap") && e.contains("no pose topic"),
         "{e}"
     );
+    // A mesh file named as the object: a pair names an object of a set, and the error says how to make one.
+    let ic = RecordingImportConfig::new("parts/screw.stl", PoseSource::Topic(None));
+    let e = import_recording(
+        &path,
+        &dir.path().join("a"),
+        &config,
+        &ObjectSet::builtin(),
+        &ic,
+        &mut |_, _| true,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("tnd objects import parts") && e.contains("--objects parts --object screw"),
+        "{e}"
+    );
     // A CSV with the poses and presses of frames 8..=12 (presses of 5..8 mm).
     let mut csv = String::from("frame,x,y,theta,press\n");
     for f in 8..=12 {

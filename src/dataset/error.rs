@@ -62,7 +62,7 @@ pub enum DatasetError {
         index: usize,
         len: usize,
     },
-    #[error("invalid generation configuration: {0}")]
+    #[error("settings: {0}")]
     Config(String),
     #[error("no object of the set makes a contact of at least {min_pixels} pixels in {attempts} draws of pose and press; lower --min-contact or widen --press")]
     NoPressableObject { min_pixels: usize, attempts: usize },

@@ -123,8 +123,27 @@ pub fn import_recording(
         .iter()
         .position(|e| e.name == config.object)
         .ok_or_else(|| {
+            // A pair names its object in the dataset's set, so a mesh file has to join a set first.
+            let path = Path::new(&config.object);
+            let hint = if path.extension().is_some() || path.exists() {
+                let dir = path
+                    .parent()
+                    .filter(|d| !d.as_os_str().is_empty())
+                    .unwrap_or(Path::new("."));
+                let name = path
+                    .file_stem()
+                    .map_or_else(|| config.object.clone(), |s| s.to_string_lossy().into_owned());
+                format!(
+                    "; a mesh file becomes an object of a set with `tnd objects import {}` (its folder), then \
+                     --objects {} --object {name}",
+                    dir.display(),
+                    dir.display()
+                )
+            } else {
+                String::new()
+            };
             DatasetError::Config(format!(
-                "object '{}' is not in the object set {}",
+                "object '{}' is not in the object set {}{hint}",
                 config.object,
                 set.spec()
             ))
