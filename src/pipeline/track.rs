@@ -47,6 +47,10 @@ pub struct FrameTrack {
     /// The paper's uncertainty, one number each: a large spread says the frame's pose is not to be trusted.
     pub spread_mm: Option<f64>,
     pub theta_spread_deg: Option<f64>,
+    /// How many distinct poses hold a fair share of the registered samples
+    /// ([`crate::uncertainty::UncertaintyReport::major_modes`]): 1 is one pose, 2 or more an ambiguous contact, 0
+    /// too few samples to say.
+    pub pose_modes: usize,
     /// The recorded pose and press, when the recording (or the pose table) has them for this frame.
     pub recorded: Option<Se2>,
     pub recorded_press_m: Option<f64>,
@@ -58,7 +62,7 @@ pub struct FrameTrack {
 }
 
 /// Columns of [`FrameTrack::csv_row`].
-const CSV_COLUMNS: [&str; 27] = [
+const CSV_COLUMNS: [&str; 28] = [
     "frame",
     "stamp_ns",
     "contact_px",
@@ -76,6 +80,7 @@ const CSV_COLUMNS: [&str; 27] = [
     "baseline_theta",
     "spread_mm",
     "theta_spread_deg",
+    "pose_modes",
     "recorded_x",
     "recorded_y",
     "recorded_theta",
@@ -103,6 +108,7 @@ impl FrameTrack {
             baseline: None,
             spread_mm: None,
             theta_spread_deg: None,
+            pose_modes: 0,
             recorded: None,
             recorded_press_m: None,
             estimate_error: None,
@@ -150,6 +156,7 @@ impl FrameTrack {
             pose(self.baseline),
             num(self.spread_mm),
             num(self.theta_spread_deg),
+            self.pose_modes.to_string(),
             pose(self.recorded),
             num(self.recorded_press_m),
             err(self.estimate_error),
@@ -204,11 +211,12 @@ impl FrameTrack {
             baseline: pose(12)?,
             spread_mm: num(15)?,
             theta_spread_deg: num(16)?,
-            recorded: pose(17)?,
-            recorded_press_m: num(20)?,
-            estimate_error: err(21)?,
-            multi_sample_error: err(23)?,
-            baseline_error: err(25)?,
+            pose_modes: int(17)? as usize,
+            recorded: pose(18)?,
+            recorded_press_m: num(21)?,
+            estimate_error: err(22)?,
+            multi_sample_error: err(24)?,
+            baseline_error: err(26)?,
         })
     }
 
@@ -350,6 +358,11 @@ pub fn track_frame(
     // θ of each sample against the reference (the estimate), reduced by the object's symmetry.
     let thetas: Option<Vec<f64>> = report.samples.iter().map(|e| e.theta_deg).collect();
     row.theta_spread_deg = thetas.as_deref().and_then(std_dev);
+    row.pose_modes = if report.samples.len() >= 2 {
+        report.major_modes().len()
+    } else {
+        0
+    };
     Ok(row)
 }
 

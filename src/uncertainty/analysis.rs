@@ -187,6 +187,7 @@ pub fn analyse_with_progress(
         UncertaintyReport::new(reference, sig.truth.is_some(), init, samples, baseline);
     report.multi_sample = multi_sample;
     report.failed = failed;
+    report.modes = super::pose_modes(&report.samples, &object.symmetry);
     Ok(report)
 }
 

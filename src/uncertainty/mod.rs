@@ -66,6 +66,46 @@ impl SampleError {
     }
 }
 
+/// Samples whose registered poses are this close (position mm, θ degrees, both reduced by the object's symmetry)
+/// are one pose.
+pub const MODE_POSITION_MM: f64 = 2.0;
+pub const MODE_THETA_DEG: f64 = 15.0;
+
+/// One of the distinct poses the samples of a signature register to.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseMode {
+    /// The pose of its lowest-cost sample.
+    pub pose: Se2,
+    /// How many samples registered to it.
+    pub samples: usize,
+}
+
+/// The distinct poses among `samples` for an object with `symmetry`: each sample, lowest registration cost first,
+/// joins the first mode within [`MODE_POSITION_MM`] and [`MODE_THETA_DEG`] of its pose, or starts a new one; most
+/// samples first.
+pub fn pose_modes(samples: &[SampleError], symmetry: &Symmetry) -> Vec<PoseMode> {
+    let mut order: Vec<&SampleError> = samples.iter().collect();
+    order.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+    let mut modes: Vec<PoseMode> = Vec::new();
+    for s in order {
+        let near = |m: &PoseMode| {
+            let e = SampleError::new(s.pose, 0.0, m.pose, symmetry);
+            e.position_mm <= MODE_POSITION_MM
+                && e.theta_deg.is_none_or(|t| t.abs() <= MODE_THETA_DEG)
+        };
+        match modes.iter_mut().find(|m| near(m)) {
+            Some(m) => m.samples += 1,
+            None => modes.push(PoseMode {
+                pose: s.pose,
+                samples: 1,
+            }),
+        }
+    }
+    // Stable: equal counts keep the lower-cost mode first.
+    modes.sort_by(|a, b| b.samples.cmp(&a.samples));
+    modes
+}
+
 /// A registration of the analysis that failed (the others stand).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FailedRegistration {
@@ -100,6 +140,10 @@ pub struct UncertaintyReport {
     /// Registrations that failed; the rest of the report stands without them.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub failed: Vec<FailedRegistration>,
+    /// The distinct poses the registered samples fall into ([`pose_modes`]), most samples first; two or more with
+    /// a fair share of the samples each say the contact is ambiguous ([`Self::ambiguous`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub modes: Vec<PoseMode>,
     /// KDE of the position errors, `(mm, density)`; empty when it cannot be fitted (fewer than 2 distinct values).
     pub position_kde: Vec<(f64, f64)>,
     /// KDE of the θ errors, `(deg, density)`; empty when it cannot be fitted or θ is excluded.
@@ -143,6 +187,23 @@ pub fn kde_curve_nonnegative(values: &[f64], points: usize) -> Vec<(f64, f64)> {
 }
 
 impl UncertaintyReport {
+    /// The modes holding at least a quarter of the registered samples (and two of them): more than one says the
+    /// samples are split between poses the contact cannot tell apart (a flat face that fits either way round, a
+    /// part's two similar ends), so no single estimate is to be trusted.
+    pub fn major_modes(&self) -> Vec<PoseMode> {
+        let n = self.samples.len();
+        self.modes
+            .iter()
+            .filter(|m| m.samples >= 2 && 4 * m.samples >= n)
+            .copied()
+            .collect()
+    }
+
+    /// More than one major mode ([`Self::major_modes`]).
+    pub fn ambiguous(&self) -> bool {
+        self.major_modes().len() > 1
+    }
+
     /// Build the report and fit the KDEs (200 points per curve; the position error's reflected at 0).
     pub fn new(
         reference: Se2,
@@ -164,6 +225,7 @@ impl UncertaintyReport {
             multi_sample: None,
             estimate: None,
             failed: Vec::new(),
+            modes: Vec::new(),
         }
     }
 
@@ -238,6 +300,43 @@ impl UncertaintyReport {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn samples_split_between_two_poses_make_two_modes() {
+        // Independent truth: 6 samples near (0, 0, 0) and 4 near (6 mm, 0, π) — a part that fits either way round —
+        // and one stray: three modes, the first two major, so the report is ambiguous. For a cross (4-fold) a turn by
+        // π/2 is the same pose.
+        let at = |x: f64, theta: f64, cost: f64| SampleError {
+            pose: Se2::new(x, 0.0002 * cost, theta),
+            cost,
+            position_mm: 0.0,
+            theta_deg: Some(0.0),
+        };
+        let mut samples: Vec<SampleError> =
+            (0..6).map(|k| at(0.0, 0.01 * k as f64, k as f64)).collect();
+        samples.extend((0..4).map(|k| at(0.006, std::f64::consts::PI, 0.5 + k as f64)));
+        samples.push(at(0.02, 1.0, 9.0));
+        let none = Symmetry::default();
+        let modes = pose_modes(&samples, &none);
+        assert_eq!(
+            modes.iter().map(|m| m.samples).collect::<Vec<_>>(),
+            [6, 4, 1]
+        );
+        assert_eq!(modes[1].pose.x, 0.006);
+        let mut r =
+            UncertaintyReport::new(Se2::default(), true, Se2::default(), samples.clone(), None);
+        r.modes = modes;
+        assert!(r.ambiguous());
+        assert_eq!(r.major_modes().len(), 2);
+        // A turn by π/2 of a 4-fold symmetric object is no other pose.
+        let cross = crate::objects::ObjectSet::builtin()
+            .find("cross_w12_s50")
+            .unwrap()
+            .symmetry;
+        let turned = [at(0.0, 0.0, 0.0), at(0.0, std::f64::consts::FRAC_PI_2, 1.0)];
+        assert_eq!(pose_modes(&turned, &cross).len(), 1);
+        assert_eq!(pose_modes(&turned, &none).len(), 2);
+    }
 
     #[test]
     fn the_position_kde_is_reflected_at_zero_and_keeps_its_mass() {

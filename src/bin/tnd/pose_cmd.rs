@@ -193,6 +193,25 @@ pub fn run(a: PoseArgs) -> Result<()> {
     )?;
     progress::finish(&mut bar);
     let report = &estimate.report;
+    if report.ambiguous() {
+        let modes: Vec<String> = report
+            .major_modes()
+            .iter()
+            .map(|m| {
+                format!(
+                    "{} samples at x {:.1} mm, y {:.1} mm, θ {:.0}°",
+                    m.samples,
+                    m.pose.x * 1e3,
+                    m.pose.y * 1e3,
+                    m.pose.theta.to_degrees()
+                )
+            })
+            .collect();
+        eprintln!(
+            "warning: the samples split between poses the contact cannot tell apart ({}); the estimate is one of them",
+            modes.join("; ")
+        );
+    }
     report.write_with(&a.out, &a.figure_size)?;
     pipeline::write_fit_figure(&a.out, &object, &sim, &input, &estimate, &a.figure_size)?;
     if samples.len() > 1 {
@@ -274,7 +293,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
         "best_hypothesis": estimate.hypotheses.first().map(|h| h.pose),
         "estimate_multi_sample": report.multi_sample.map(|m| m.pose),
         "truth": truth, "baseline": report.baseline, "multi_sample": report.multi_sample,
-        "failed": report.failed, "geometry": geometry, "anchor_shift_m": estimate.anchor_shift_m,
+        "failed": report.failed, "geometry": geometry,
+        "ambiguous": report.ambiguous(), "modes": report.major_modes(), "anchor_shift_m": estimate.anchor_shift_m,
         "position_err_mm": report.samples.iter().map(|s| s.position_mm).collect::<Vec<_>>(),
         "out": a.out});
     let path = a.out.join("pose.json");

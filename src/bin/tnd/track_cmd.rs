@@ -328,6 +328,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
         "baseline_position_err_mm": column(|r| r.baseline_error.map(|e| e.0)),
         "baseline_theta_err_deg": column(|r| r.baseline_error.and_then(|e| e.1).map(f64::abs)),
         "spread_mm": column(|r| r.spread_mm),
+        "ambiguous_frames": rows.iter().filter(|r| r.pose_modes > 1).count(),
         "press_m": column(|r| r.press_m),
         "press_err_mm": column(|r| r.press_m.zip(r.recorded_press_m).map(|(p, q)| (p - q).abs() * 1e3)),
         "out": a.out.join("track.csv"),

@@ -232,6 +232,29 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
         "{}: hypotheses of sample {} (best first)",
         r.object, r.registered_sample
     ));
+    let modes = r.report.major_modes();
+    if modes.len() > 1 {
+        let list: Vec<String> = modes
+            .iter()
+            .map(|m| {
+                format!(
+                    "{} at ({:.1}, {:.1}) mm, θ {:.0}°",
+                    m.samples,
+                    m.pose.x * 1e3,
+                    m.pose.y * 1e3,
+                    m.pose.theta.to_degrees()
+                )
+            })
+            .collect();
+        ui.colored_label(
+            ui.visuals().warn_fg_color,
+            format!("ambiguous: the samples split between {} poses ({})", modes.len(), list.join("; ")),
+        )
+        .on_hover_text(
+            "Each holds at least a quarter of the registered samples: the contact fits the object either way (a flat \
+             face, two similar ends). The estimate is one of them; the KDE below shows the split.",
+        );
+    }
     if let Some(p) = r.press_found_m {
         ui.label(format!("press {:.2} mm, found from the samples", p * 1e3))
             .on_hover_text(
