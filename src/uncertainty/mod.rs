@@ -102,7 +102,7 @@ pub fn pose_modes(samples: &[SampleError], symmetry: &Symmetry) -> Vec<PoseMode>
         }
     }
     // Stable: equal counts keep the lower-cost mode first.
-    modes.sort_by(|a, b| b.samples.cmp(&a.samples));
+    modes.sort_by_key(|m| std::cmp::Reverse(m.samples));
     modes
 }
 
