@@ -168,24 +168,6 @@ pub fn kde_curve(values: &[f64], points: usize) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// [`kde_curve`] for values that cannot be negative (position errors): the KDE reflected at 0 (its mass below 0
-/// folded back onto the positive side, so the curve still integrates to 1), drawn from 0 up.
-pub fn kde_curve_nonnegative(values: &[f64], points: usize) -> Vec<(f64, f64)> {
-    let Ok(kde) = GaussianKde::scott_1d(values) else {
-        return Vec::new();
-    };
-    let bw = kde.bandwidth();
-    let lo = (values.iter().copied().fold(f64::INFINITY, f64::min) - 3.0 * bw).max(0.0);
-    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max) + 3.0 * bw;
-    let n = points.max(2);
-    (0..n)
-        .map(|i| {
-            let x = lo + (hi - lo) * i as f64 / (n - 1) as f64;
-            (x, kde.density(&[x]) + kde.density(&[-x]))
-        })
-        .collect()
-}
-
 impl UncertaintyReport {
     /// The modes holding at least a quarter of the registered samples (and two of them): more than one says the
     /// samples are split between poses the contact cannot tell apart (a flat face that fits either way round, a
@@ -204,7 +186,7 @@ impl UncertaintyReport {
         self.major_modes().len() > 1
     }
 
-    /// Build the report and fit the KDEs (200 points per curve; the position error's reflected at 0).
+    /// Build the report and fit the KDEs (200 points per curve).
     pub fn new(
         reference: Se2,
         reference_is_truth: bool,
@@ -218,7 +200,7 @@ impl UncertaintyReport {
             reference,
             reference_is_truth,
             init,
-            position_kde: kde_curve_nonnegative(&pos, 200),
+            position_kde: kde_curve(&pos, 200),
             theta_kde: kde_curve(&theta, 200),
             samples,
             baseline,
@@ -300,6 +282,8 @@ impl UncertaintyReport {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+    use crate::objects::RotationSymmetry;
 
     #[test]
     fn samples_split_between_two_poses_make_two_modes() {
@@ -337,33 +321,6 @@ mod tests {
         assert_eq!(pose_modes(&turned, &cross).len(), 1);
         assert_eq!(pose_modes(&turned, &none).len(), 2);
     }
-
-    #[test]
-    fn the_position_kde_is_reflected_at_zero_and_keeps_its_mass() {
-        // Errors near 0: the plain KDE puts mass below 0; the reflected one starts at 0, integrates to 1 (trapezoids)
-        // and is twice the plain density at 0 (its mirror image adds the same amount there).
-        let values = [0.05, 0.1, 0.2, 0.3, 0.6, 0.9, 1.4];
-        let plain = kde_curve(&values, 2000);
-        assert!(plain[0].0 < 0.0);
-        let folded = kde_curve_nonnegative(&values, 2000);
-        assert_eq!(folded[0].0, 0.0);
-        let area: f64 = folded
-            .windows(2)
-            .map(|w| (w[1].0 - w[0].0) * 0.5 * (w[0].1 + w[1].1))
-            .sum();
-        assert!((area - 1.0).abs() < 1e-3, "{area}");
-        let kde = GaussianKde::scott_1d(&values).unwrap();
-        assert!((folded[0].1 - 2.0 * kde.density(&[0.0])).abs() < 1e-12);
-        // Far from 0 the reflection adds nothing.
-        let far = [10.0, 10.5, 11.0, 12.0];
-        let (a, b) = (kde_curve(&far, 50), kde_curve_nonnegative(&far, 50));
-        for (p, q) in a.iter().zip(&b) {
-            assert!((p.0 - q.0).abs() < 1e-12 && (p.1 - q.1).abs() < 1e-12);
-        }
-    }
-
-    use super::*;
-    use crate::objects::RotationSymmetry;
 
     #[test]
     fn sample_errors_are_signed_and_wrapped() {
@@ -418,7 +375,6 @@ mod tests {
             .map(|w| (w[1].0 - w[0].0) * w[0].1)
             .sum();
         assert!((area - 1.0).abs() < 0.01, "{area}");
-        assert!(r.position_kde[0].0 >= 0.0);
         let dir = tempfile::tempdir().unwrap();
         r.write(dir.path()).unwrap();
         let csv = std::fs::read_to_string(dir.path().join("samples.csv")).unwrap();
