@@ -80,6 +80,19 @@ pub struct PoseMode {
     pub samples: usize,
 }
 
+impl PoseMode {
+    /// "5 samples at x -0.4 mm, y 1.3 mm, θ -168°" (millimetres and degrees, for people).
+    pub fn describe(&self) -> String {
+        format!(
+            "{} samples at x {:.1} mm, y {:.1} mm, θ {:.0}°",
+            self.samples,
+            self.pose.x * 1e3,
+            self.pose.y * 1e3,
+            self.pose.theta.to_degrees()
+        )
+    }
+}
+
 /// The distinct poses among `samples` for an object with `symmetry`: each sample, lowest registration cost first,
 /// joins the first mode within [`MODE_POSITION_MM`] and [`MODE_THETA_DEG`] of its pose, or starts a new one; most
 /// samples first.

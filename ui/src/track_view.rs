@@ -158,7 +158,8 @@ impl crate::app::WorkbenchApp {
             derender: self.state.derender.config.clone(),
             sim: self.state.sim.clone(),
         };
-        if req.frames().is_empty() {
+        let frames = req.frames().len();
+        if frames == 0 {
             return Err(anyhow!(
                 "no frame has {MIN_CONTACT_PX} contact pixels (imprint over 3 mm) to track"
             ));
@@ -166,7 +167,7 @@ impl crate::app::WorkbenchApp {
         view.rows.clear();
         view.recording = Some(loaded.path.clone());
         view.running = true;
-        view.progress = Some((0, req.frames().len()));
+        view.progress = Some((0, frames));
         let cancel = Arc::new(AtomicBool::new(false));
         view.cancel = Some(cancel.clone());
         if let Err(e) = spawn(req, cancel, tx, ctx) {

@@ -194,19 +194,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     progress::finish(&mut bar);
     let report = &estimate.report;
     if report.ambiguous() {
-        let modes: Vec<String> = report
-            .major_modes()
-            .iter()
-            .map(|m| {
-                format!(
-                    "{} samples at x {:.1} mm, y {:.1} mm, θ {:.0}°",
-                    m.samples,
-                    m.pose.x * 1e3,
-                    m.pose.y * 1e3,
-                    m.pose.theta.to_degrees()
-                )
-            })
-            .collect();
+        let modes: Vec<String> = report.major_modes().iter().map(|m| m.describe()).collect();
         eprintln!(
             "warning: the samples split between poses the contact cannot tell apart ({}); the estimate is one of them",
             modes.join("; ")

@@ -234,18 +234,7 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
     ));
     let modes = r.report.major_modes();
     if modes.len() > 1 {
-        let list: Vec<String> = modes
-            .iter()
-            .map(|m| {
-                format!(
-                    "{} at ({:.1}, {:.1}) mm, θ {:.0}°",
-                    m.samples,
-                    m.pose.x * 1e3,
-                    m.pose.y * 1e3,
-                    m.pose.theta.to_degrees()
-                )
-            })
-            .collect();
+        let list: Vec<String> = modes.iter().map(|m| m.describe()).collect();
         ui.colored_label(
             ui.visuals().warn_fg_color,
             format!("ambiguous: the samples split between {} poses ({})", modes.len(), list.join("; ")),
