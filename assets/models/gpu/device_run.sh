@@ -7,6 +7,7 @@
 # Everything ends by BUDGET_S seconds after the start; the EMA checkpoints and logs go to OUT.
 #
 #     [PAIRS=300000] [INFLATION=0.027,0.033] [MODELS="a b"|a|b] [B_INIT=b.safetensors] [LR_B=3e-4] [SAVE_EVERY_S=120] \
+#         [OBJECT_SEED=2] [PAIR_SEED=41] \
 #         assets/models/gpu/device_run.sh TND OUT BUDGET_S
 set -u
 tnd=$1 out=$2 budget=$3
@@ -26,11 +27,12 @@ objs="--press 0.001,0.015 --min-contact 0.004"
 # Training objects: 6 000 procedural objects of every kind (seed 2; plates with holes and swept limbs since
 # 2026-11-26, session 9) + the built-in set (a quarter of the draws); inflation drawn
 # per pair in 27-33 mm.
-"$tnd" objects generate "$w/objects" --count 6000 --seed 2 >> "$out/gen.log" 2>&1
+# OBJECT_SEED / PAIR_SEED draw fresh training objects and pairs for a continued run (session 15: 3 / 43).
+"$tnd" objects generate "$w/objects" --count 6000 --seed "${OBJECT_SEED:-2}" >> "$out/gen.log" 2>&1
 echo "data ready to stream after $(( $(date +%s) - t0 )) s" >> "$out/gen.log"
 # INFLATION= (empty) keeps every pair at the sensor's nominal inflation.
 inflation=${INFLATION-0.027,0.033}
-nice -n 5 "$tnd" dataset gen --out "$w/train" --pairs "${PAIRS:-300000}" --seed 41 --objects "$w/objects" $objs \
+nice -n 5 "$tnd" dataset gen --out "$w/train" --pairs "${PAIRS:-300000}" --seed "${PAIR_SEED:-41}" --objects "$w/objects" $objs \
     ${inflation:+--inflation-range "$inflation"} >> "$out/gen.log" 2>&1 &
 gen=$!
 left=$(( budget - ($(date +%s) - t0) - 25 ))
