@@ -1,5 +1,5 @@
-//! `tnd model verify` and `tnd sample` end to end on the small diffusers fixture (8 × 8 model), and the sampling
-//! API's determinism, batch layout and cancellation.
+//! `tnd model verify` and `tnd sample` end to end on the small diffusers fixture (8 × 8 model), the sampling API's
+//! determinism, batch layout and cancellation, and resumable runs of `tnd train` and `tnd eval --records`.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -411,4 +411,91 @@ fn train_starts_resumes_and_refuses_other_inputs() {
     ]);
     let resumed: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(resumed["resumed_from"].as_u64(), Some(step), "{resumed}");
+}
+
+/// `tnd eval --records` as a long run is used: a run stopped after two pairs and started again with a larger
+/// `--limit` scores only the others and ends with the very records and tables of an uninterrupted run; a rerun with
+/// another seed, or into a records file of an earlier format, is refused and leaves the file as it was.
+#[test]
+fn eval_records_resume_to_the_uninterrupted_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_tnd"))
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap()
+    };
+    let o = run(&[
+        "dataset", "gen", "-q", "--out", "ds", "--pairs", "24", "--seed", "3",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let eval = |limit: &str, seed: &str, records: &str| {
+        let o = run(&[
+            "eval",
+            "-q",
+            "--json",
+            "--data",
+            "ds",
+            "--split",
+            "train",
+            "--model",
+            "small",
+            "--steps",
+            "2",
+            "--limit",
+            limit,
+            "--seed",
+            seed,
+            "--records",
+            records,
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        let json = serde_json::from_slice::<serde_json::Value>(&o.stdout).ok();
+        (o.status.success(), json, err)
+    };
+    let (ok, _, err) = eval("2", "0", "r.jsonl");
+    assert!(ok, "{err}");
+    let (ok, resumed, err) = eval("4", "0", "r.jsonl");
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("r.jsonl: 2 of the 4 pairs of train scored by an earlier run"),
+        "{err}"
+    );
+    let (ok, fresh, err) = eval("4", "0", "fresh.jsonl");
+    assert!(ok, "{err}");
+    assert!(!err.contains("earlier run"), "{err}");
+    let (resumed, fresh) = (resumed.unwrap(), fresh.unwrap());
+    assert_eq!(resumed["pairs"], 4);
+    for key in ["model", "baseline", "breakdown"] {
+        assert_eq!(resumed[key], fresh[key], "{key}");
+    }
+    let read = |name: &str| std::fs::read_to_string(dir.path().join(name)).unwrap();
+    let records = read("r.jsonl");
+    assert_eq!(records, read("fresh.jsonl"));
+    // A settings line and one line per pair, each naming its split and index.
+    let lines: Vec<serde_json::Value> = records
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 5);
+    assert_eq!(lines[0]["settings"]["seed"], 0);
+    assert_eq!(lines[4]["index"], 3);
+    assert_eq!(lines[4]["split"], "train");
+    assert!(lines[4]["record"]["model"]["depth"]["ssim"].is_number());
+    // Another seed: refused, naming it; the records stay.
+    let (ok, _, err) = eval("4", "1", "r.jsonl");
+    assert!(!ok);
+    assert!(
+        err.contains("r.jsonl: holds the records of other settings (seed: 0 -> 1)"),
+        "{err}"
+    );
+    assert_eq!(read("r.jsonl"), records);
+    // A records file of the earlier format (no settings line) is not overwritten.
+    let old = "{\"split\":\"train\",\"record\":{}}\n";
+    std::fs::write(dir.path().join("old.jsonl"), old).unwrap();
+    let (ok, _, err) = eval("1", "0", "old.jsonl");
+    assert!(!ok);
+    assert!(err.contains("old.jsonl: line 1: no settings line"), "{err}");
+    assert_eq!(read("old.jsonl"), old);
 }

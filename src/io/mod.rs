@@ -7,5 +7,6 @@ pub mod npy;
 pub mod ply;
 pub mod preview;
 pub mod rrd;
+pub mod settings;
 
 pub use atomic::write_atomic;

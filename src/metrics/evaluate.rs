@@ -537,7 +537,7 @@ impl Evaluator {
     }
 
     /// Score both methods on pair `i` of `source`.
-    fn evaluate_pair(
+    pub(crate) fn evaluate_pair(
         &self,
         source: &dyn PairSource,
         generator: &dyn Generator,
@@ -661,10 +661,7 @@ impl Evaluator {
         let mut records = Vec::with_capacity(source.len());
         let mut failed = Vec::new();
         for i in 0..source.len() {
-            let pair_seed = seed
-                .wrapping_mul(0x9E37_79B9_7F4A_7C15)
-                .wrapping_add(i as u64);
-            match self.evaluate_pair(source, generator, i, pair_seed, observe) {
+            match self.evaluate_pair(source, generator, i, pair_seed(seed, i), observe) {
                 Ok(r) => records.push(r),
                 Err(f) => failed.push(f),
             }
@@ -674,4 +671,11 @@ impl Evaluator {
         }
         Ok(EvalReport::new(generator.name(), records, failed))
     }
+}
+
+/// The seed of pair `i` of a source (its sampler and registration starts) in a run seeded with `seed`: a pair scores
+/// the same whichever pairs are scored beside it, so a resumed run equals an uninterrupted one.
+pub(crate) fn pair_seed(seed: u64, i: usize) -> u64 {
+    seed.wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        .wrapping_add(i as u64)
 }

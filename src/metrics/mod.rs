@@ -3,10 +3,11 @@
 //! ([`pose`]); [`summary`] aggregates them into mean/std rows; [`evaluate`] runs the whole loop over a
 //! [`evaluate::PairSource`] ([`sources`]: dataset splits, simulated pairs) with a [`evaluate::Generator`];
 //! [`paper_table`] sets runs side by side in the paper's layout and units; [`saved_samples`] keeps each pair's
-//! samples for analysis.
+//! samples for analysis; [`eval_log`] keeps every pair's scores as they come, so that a killed run resumes.
 
 pub mod breakdown;
 pub mod depth;
+pub mod eval_log;
 pub mod evaluate;
 pub mod hypotheses;
 pub mod model_generator;

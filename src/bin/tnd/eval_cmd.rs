@@ -8,11 +8,14 @@ use std::sync::Mutex;
 use anyhow::{anyhow, bail, Result};
 use clap::Args;
 use kdam::BarExt;
-use serde_json::json;
+use serde_json::{json, Value};
 use tactile_derender::dataset::{Dataset, SplitName};
+use tactile_derender::image::Image;
 use tactile_derender::metrics::breakdown::GroupSummary;
+use tactile_derender::metrics::eval_log::EvalLog;
 use tactile_derender::metrics::evaluate::{
-    EvalConfig, EvalReport, Evaluator, Generator, GroundTruthGenerator, MethodSummary, PairSource,
+    EvalConfig, EvalPair, EvalReport, Evaluator, Generator, GroundTruthGenerator, MethodSummary,
+    PairSource,
 };
 use tactile_derender::metrics::model_generator::ModelGenerator;
 use tactile_derender::metrics::paper_table::{paper_tables, PaperEntry};
@@ -97,7 +100,9 @@ pub struct EvalArgs {
     /// generator in the file). Repeat the option or separate files with commas.
     #[arg(long, value_name = "[LABEL=]FILE", value_delimiter = ',')]
     pub tables_from: Vec<String>,
-    /// Also write every pair's scores (both methods, estimated and true pose) as JSON lines to this file.
+    /// Also write every pair's scores (both methods, estimated and true pose) as JSON lines to this file, each pair
+    /// as it is scored. Run again with the same settings, the evaluation resumes: pairs the file holds are not
+    /// scored again (a larger --limit extends it); a file of other settings is refused, naming them.
     #[arg(long)]
     pub records: Option<PathBuf>,
     /// Also save every scored pair's imprint, signature, true X0 and model samples (all --pose-samples of them) as
@@ -126,6 +131,37 @@ pub fn generator(
         model,
         sampler: sampler.sampler_kind(),
         guidance: *guidance,
+    }))
+}
+
+/// The settings every pair's scores depend on: `--records` resumes only under the same. The model and the dataset
+/// are named by path and by content (a retrained checkpoint or a regenerated dataset under the same name is not
+/// resumed into); `--limit` is not among them (a larger limit extends a run), `--skip` is (the pairs' seeds count
+/// from it).
+fn records_settings(a: &EvalArgs, dataset: &Dataset) -> Result<Value> {
+    use tactile_derender::dataset::shard::sha256_hex;
+    let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    let model = Path::new(&a.model);
+    let model = if a.model == "ground-truth" {
+        json!("ground-truth")
+    } else if let Some((name, bytes)) = tactile_derender::model::checkpoint::bundled_name(model) {
+        json!({"bundled": name, "sha256": sha256_hex(bytes)})
+    } else {
+        let weights = if model.is_dir() {
+            model.join("diffusion_pytorch_model.safetensors")
+        } else {
+            model.to_path_buf()
+        };
+        let bytes = std::fs::read(&weights)
+            .map_err(|e| anyhow!("{}: cannot read: {e}", weights.display()))?;
+        json!({"path": canonical(model), "sha256": sha256_hex(&bytes)})
+    };
+    let manifest = serde_json::to_vec(dataset.manifest())?;
+    Ok(json!({
+        "model": model, "data": canonical(dataset.dir()), "manifest_sha256": sha256_hex(&manifest),
+        "seed": a.seed, "skip": a.skip, "pose_samples": a.pose_samples.max(1), "sampler": a.sampler,
+        "guidance": a.guidance, "anchor": !a.no_anchor, "signature_check": !a.no_signature_check,
+        "imprint_proposals": !a.no_imprint_proposals, "check_refine": a.check_refine, "inits": a.inits,
     }))
 }
 
@@ -165,7 +201,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let rrd = a.rerun.open("tnd eval")?;
     let mut pair_log = rrd.as_ref().map(PairLog::new);
     let mut markdown = String::new();
-    let mut records = String::new();
+    let mut log = match &a.records {
+        Some(path) => Some(EvalLog::open(path, records_settings(&a, &dataset)?)?),
+        None => None,
+    };
     let mut failed = 0;
     for split in splits(&a.split)? {
         let source = DatasetSource::new(&dataset, split, None)?.skip(a.skip, a.limit);
@@ -181,33 +220,53 @@ pub fn run(a: EvalArgs) -> Result<()> {
         // A recording or saving error stops the run at once (rather than after every pair is scored).
         let mut log_error = None;
         let stop = std::cell::Cell::new(false);
-        let report = evaluator.evaluate_observed(
-            &source,
-            gen.as_ref(),
-            a.seed,
-            &mut |done, _| {
-                if let Ok(mut b) = bar.lock() {
-                    let _ = b.update_to(done);
+        let mut progress = |done, _| {
+            if let Ok(mut b) = bar.lock() {
+                let _ = b.update_to(done);
+            }
+            !stop.get()
+        };
+        let mut observe = |i, pair: &EvalPair, samples: &[Image]| {
+            if log_error.is_some() {
+                return;
+            }
+            if let Some(dir) = &a.save_samples {
+                log_error = save_samples(dir, pair, samples)
+                    .err()
+                    .map(|e| anyhow!(tactile_derender::error::render(&e)));
+            }
+            if let (Some(log), Some(sample), None) = (&mut pair_log, samples.first(), &log_error) {
+                log_error = log.pair(source.context(), i, pair, sample).err();
+            }
+            stop.set(log_error.is_some());
+        };
+        let report = match &mut log {
+            Some(log) => {
+                let resumed = log.scored(split.as_str(), a.skip..a.skip + source.len());
+                if resumed > 0 {
+                    eprintln!(
+                        "{}: {resumed} of the {} pairs of {split} scored by an earlier run; scoring the others",
+                        log.path().display(),
+                        source.len()
+                    );
                 }
-                !stop.get()
-            },
-            &mut |i, pair, samples| {
-                if log_error.is_some() {
-                    return;
-                }
-                if let Some(dir) = &a.save_samples {
-                    log_error = save_samples(dir, pair, samples)
-                        .err()
-                        .map(|e| anyhow!(tactile_derender::error::render(&e)));
-                }
-                if let (Some(log), Some(sample), None) =
-                    (&mut pair_log, samples.first(), &log_error)
-                {
-                    log_error = log.pair(source.context(), i, pair, sample).err();
-                }
-                stop.set(log_error.is_some());
-            },
-        );
+                evaluator
+                    .evaluate_logged(
+                        &source,
+                        gen.as_ref(),
+                        a.seed,
+                        log,
+                        split.as_str(),
+                        a.skip,
+                        &mut progress,
+                        &mut observe,
+                    )
+                    .map_err(anyhow::Error::from)
+            }
+            None => evaluator
+                .evaluate_observed(&source, gen.as_ref(), a.seed, &mut progress, &mut observe)
+                .map_err(anyhow::Error::from),
+        };
         if let Some(e) = log_error {
             return Err(e);
         }
@@ -248,12 +307,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
         ));
         for f in &report.failed {
             eprintln!("failed: {} ({}): {}", f.name, f.object, f.reason);
-            let _ = writeln!(records, "{}", json!({"split": split.as_str(), "failed": f}));
         }
         failed += report.failed.len();
-        for r in &report.records {
-            let _ = writeln!(records, "{}", json!({"split": split.as_str(), "record": r}));
-        }
         if let Some(dir) = &a.report {
             uncertainty_plots(
                 dir,
@@ -274,10 +329,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
         markdown.push_str("## In the paper's layout\n\n");
         markdown.push_str(&tables);
     }
-    if let Some(path) = &a.records {
-        tactile_derender::io::write_atomic(path, records.as_bytes())
-            .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
-        eprintln!("records: {}", path.display());
+    if let Some(log) = &log {
+        eprintln!("records: {}", log.path().display());
     }
     if let Some(dir) = &a.report {
         std::fs::create_dir_all(dir)?;

@@ -127,31 +127,12 @@ fn check_same(out: &Path, earlier: &Value, key: &str, now: &Value, what: &str) -
     if then == now {
         return Ok(());
     }
-    let mut differing = Vec::new();
-    differences("", now, then, &mut differing);
+    let differing = tactile_derender::io::settings::setting_differences(now, then);
     bail!(
         "{}: holds a track of {what} ({}); choose a new --out, or the same settings to resume",
         out.display(),
         differing.join("; ")
     );
-}
-
-/// The settings where `now` and `then` differ, as `name: then -> now` (`derender.samples: 2 -> 3`).
-fn differences(prefix: &str, now: &Value, then: &Value, out: &mut Vec<String>) {
-    match (now, then) {
-        (Value::Object(a), Value::Object(b)) => {
-            for (k, v) in a {
-                let name = if prefix.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{prefix}.{k}")
-                };
-                differences(&name, v, b.get(k).unwrap_or(&Value::Null), out);
-            }
-        }
-        (a, b) if a != b => out.push(format!("{prefix}: {b} -> {a}")),
-        _ => {}
-    }
 }
 
 /// The rows of an earlier run's track.csv (none when there is none).
