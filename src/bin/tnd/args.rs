@@ -36,17 +36,36 @@ pub fn check_press(flag: &str, press_m: f64, positive: bool) -> Result<()> {
 }
 
 /// Parse an object pose `X,Y,THETA` given as `flag` (metres, metres, radians), refusing positions no sensor could
-/// reach (then they were given in millimetres).
+/// reach (then they were given in millimetres) and angles beyond a full turn (then they were given in degrees).
 pub fn parse_pose(flag: &str, text: &str) -> Result<tactile_derender::sensor::Se2> {
     let pose = tactile_derender::sensor::Se2::parse(text).map_err(|e| anyhow!("{flag}: {e}"))?;
     let far = pose.x.abs().max(pose.y.abs());
+    let (x, y) = if far > 0.5 {
+        (pose.x / 1000.0, pose.y / 1000.0)
+    } else {
+        (pose.x, pose.y)
+    };
+    let theta = if pose.theta.abs() > std::f64::consts::TAU {
+        pose.theta.to_radians()
+    } else {
+        pose.theta
+    };
+    let mut wrong = Vec::new();
     if far > 0.5 {
-        return Err(anyhow!(
-            "{flag} {text}: {far} m from the sensor axis is beyond any sensor's reach; positions are in metres (did \
-             you mean {},{},{}?)",
-            pose.x / 1000.0,
-            pose.y / 1000.0,
+        wrong.push(format!(
+            "{far} m from the sensor axis is beyond any sensor's reach; positions are in metres"
+        ));
+    }
+    if theta != pose.theta {
+        wrong.push(format!(
+            "θ {} is more than a full turn; θ is in radians",
             pose.theta
+        ));
+    }
+    if !wrong.is_empty() {
+        return Err(anyhow!(
+            "{flag} {text}: {} (did you mean {x},{y},{theta:.4}?)",
+            wrong.join("; ")
         ));
     }
     Ok(pose)
@@ -145,7 +164,28 @@ mod tests {
         let p = parse_pose("--pose", "0.002,-0.001,0.35").unwrap();
         assert_eq!((p.x, p.y, p.theta), (0.002, -0.001, 0.35));
         let e = parse_pose("--pose", "2,-1,20").unwrap_err().to_string();
-        assert!(e.contains("did you mean 0.002,-0.001,20?"), "{e}");
+        assert!(
+            e.contains("reach")
+                && e.contains("full turn")
+                && e.contains("did you mean 0.002,-0.001,0.3491?"),
+            "{e}"
+        );
+        let e = parse_pose("--pose", "2,-1,0.5").unwrap_err().to_string();
+        assert!(e.contains("did you mean 0.002,-0.001,0.5000?"), "{e}");
+        // θ in degrees: 90 is a quarter turn, π/2 rad.
+        let e = parse_pose("--pose", "0.003,0,90").unwrap_err().to_string();
+        assert!(
+            e.contains(
+                "θ 90 is more than a full turn; θ is in radians (did you mean 0.003,0,1.5708?)"
+            ),
+            "{e}"
+        );
+        let e = parse_pose("--pose", "3,0,-45").unwrap_err().to_string();
+        assert!(
+            e.contains("reach") && e.contains("did you mean 0.003,0,-0.7854?"),
+            "{e}"
+        );
+        assert_eq!(parse_pose("--pose", "0,0,-6.2").unwrap().theta, -6.2);
         assert!(parse_pose("--truth", "nope")
             .unwrap_err()
             .to_string()
