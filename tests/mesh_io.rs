@@ -310,6 +310,22 @@ fn bad_inputs_give_errors_naming_the_file() {
     std::fs::create_dir(d.join("directory.obj")).unwrap();
     assert_fails_naming_file(&d.join("directory.obj"));
     assert_fails_naming_file(&write(d, "model.ply", "ply\nformat ascii 1.0\n"));
+    // Not a PLY at all: one line (the parser's first), not its multi-line dump.
+    let message = assert_fails_naming_file(&write(d, "junk.ply", "junk text\nmore\n"));
+    assert!(
+        message.contains("Expected magic number") && !message.contains('\n'),
+        "{message}"
+    );
+    // A file cut inside its last face is truncated, not a mesh with a face fewer.
+    let message = assert_fails_naming_file(&write(
+        d,
+        "truncated.obj",
+        format!("{tri}v 1 1 0\nf 1 2 3\nf 2 4//"),
+    ));
+    assert!(
+        message.contains("line 6") && message.contains("truncated"),
+        "{message}"
+    );
     assert_fails_naming_file(&write(d, "no_extension", tri));
     let bad_vertex = "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0\nvertex 0 1 0\nendloop\nendfacet\n";
     let message = assert_fails_naming_file(&write(d, "bad_vertex.stl", bad_vertex));

@@ -499,3 +499,39 @@ fn eval_records_resume_to_the_uninterrupted_result() {
     assert!(err.contains("old.jsonl: line 1: no settings line"), "{err}");
     assert_eq!(read("old.jsonl"), old);
 }
+
+/// A millimetre mesh read as metres (a 40 m cube) is refused by `tnd sim` before anything is written, naming the
+/// units that fit; with `--units mm` the same file simulates.
+#[test]
+fn a_mis_scaled_mesh_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut obj = String::new();
+    for i in 0..8 {
+        let c = |bit: usize| if i >> bit & 1 == 1 { 40 } else { 0 };
+        obj.push_str(&format!("v {} {} {}\n", c(0), c(1), c(2)));
+    }
+    for f in [
+        "1 3 4 2", "5 6 8 7", "1 2 6 5", "3 7 8 4", "1 5 7 3", "2 4 8 6",
+    ] {
+        obj.push_str(&format!("f {f}\n"));
+    }
+    std::fs::write(dir.path().join("cube_mm.obj"), obj).unwrap();
+    let sim = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_tnd"))
+            .args(["sim", "-q", "--object", "cube_mm.obj", "--out", "out"])
+            .args(extra)
+            .current_dir(dir.path())
+            .output()
+            .unwrap()
+    };
+    let o = sim(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("probably in mm") && err.contains("a simulation of it would be meaningless"),
+        "{err}"
+    );
+    assert!(!dir.path().join("out").exists());
+    let o = sim(&["--units", "mm"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}

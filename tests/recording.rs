@@ -298,7 +298,7 @@ fn csv_poses_with_presses_and_bad_recordings_give_one_line_errors() {
     }
     let csv_path = dir.path().join("poses.csv");
     std::fs::write(&csv_path, csv).unwrap();
-    let ic = RecordingImportConfig::new(OBJECT, PoseSource::Csv(csv_path));
+    let ic = RecordingImportConfig::new(OBJECT, PoseSource::Csv(csv_path.clone()));
     let r = import_recording(
         &path,
         &dir.path().join("b"),
@@ -311,6 +311,23 @@ fn csv_poses_with_presses_and_bad_recordings_give_one_line_errors() {
     assert_eq!(r.press_estimated, 0);
     assert_eq!(r.written.pairs, 5);
     assert!(r.skipped_no_pose > 0);
+    // The same table in millimetres and degrees: refused, naming the row.
+    std::fs::write(&csv_path, "frame,x,y,theta\n8,3,-2,23\n").unwrap();
+    let ic = RecordingImportConfig::new(OBJECT, PoseSource::Csv(csv_path.clone()));
+    let e = import_recording(
+        &path,
+        &dir.path().join("c"),
+        &config,
+        &ObjectSet::builtin(),
+        &ic,
+        &mut |_, _| true,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("poses.csv") && e.contains("row 1") && e.contains("millimetres or degrees"),
+        "{e}"
+    );
     // Truncated file, wrong topic, not an MCAP: errors naming the file.
     let bytes = std::fs::read(&path).unwrap();
     let cut = dir.path().join("cut.mcap");

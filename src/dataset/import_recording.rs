@@ -318,9 +318,21 @@ fn csv_poses(
                 out.len()
             )));
         }
+        let (x, y, theta, press) = (need("x")?, need("y")?, need("theta")?, num("press")?);
+        // Millimetres and degrees (the usual slips) give values no sensor could see.
+        if x.abs().max(y.abs()) > 0.5
+            || theta.abs() > std::f64::consts::TAU
+            || press.unwrap_or(0.0) > 0.1
+        {
+            return Err(at(format!(
+                "x {x}, y {y}, theta {theta}{} is beyond any sensor's reach: the columns are metres and radians \
+                 (millimetres or degrees?)",
+                press.map(|p| format!(", press {p}")).unwrap_or_default()
+            )));
+        }
         out[frame] = Some(FramePose {
-            pose: Se2::new(need("x")?, need("y")?, need("theta")?),
-            press: num("press")?,
+            pose: Se2::new(x, y, theta),
+            press,
         });
     }
     Ok(out)

@@ -117,6 +117,12 @@ fn sanitize(text: &str) -> Result<String, String> {
         .count();
     let mut defined = 0usize;
     let mut out = String::with_capacity(text.len());
+    let last = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !without_comment(l).trim().is_empty())
+        .last()
+        .map(|(i, _)| i + 1);
     for (number, raw) in text.lines().enumerate() {
         let number = number + 1;
         let line = without_comment(raw);
@@ -132,6 +138,13 @@ fn sanitize(text: &str) -> Result<String, String> {
             }
             Some("f") => {
                 let corners: Vec<&str> = words.collect();
+                if corners.len() < 3 && Some(number) == last {
+                    // The file ends inside a face: cut short, with the rest of its faces missing.
+                    return Err(format!(
+                        "line {number}: the last face has {} corner(s), a face needs 3: the file looks truncated",
+                        corners.len()
+                    ));
+                }
                 if corners.len() < 3 {
                     continue; // A point or a line has no surface; tobj would ignore it too.
                 }

@@ -30,7 +30,15 @@ pub fn read(path: &Path) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), MeshError> {
 pub fn decode(bytes: &[u8]) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
     let parser = Parser::<DefaultElement>::new();
     let mut reader = bytes;
-    let ply = parser.read_ply(&mut reader).map_err(|e| e.to_string())?;
+    // The parser's error is a multi-line dump (the input line, a parser state); its first line says the problem.
+    let ply = parser.read_ply(&mut reader).map_err(|e| {
+        let text = e.to_string();
+        text.lines()
+            .map(str::trim)
+            .find(|l| !l.is_empty())
+            .unwrap_or("not a PLY file")
+            .to_string()
+    })?;
     let vertex_elements = ply
         .payload
         .get("vertex")

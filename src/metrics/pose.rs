@@ -56,15 +56,17 @@ pub fn chamfer_unidirectional(p1: &[DVec3], p2: &[DVec3]) -> Result<f64, Metrics
     if p1.is_empty() || p2.is_empty() {
         return Err(MetricsError::EmptyCloud);
     }
-    let sum: f64 = p1
+    // Nearest distances in parallel, summed in order: a parallel sum's order (and its last bit) would vary from
+    // run to run.
+    let nearest: Vec<f64> = p1
         .par_iter()
         .map(|p| {
             p2.iter()
                 .map(|q| p.distance_squared(*q))
                 .fold(f64::INFINITY, f64::min)
         })
-        .sum();
-    Ok(sum / p1.len() as f64)
+        .collect();
+    Ok(nearest.iter().sum::<f64>() / p1.len() as f64)
 }
 
 /// All pose errors of `estimate` against `truth` for an object with `symmetry` and surface samples `cloud_obj`

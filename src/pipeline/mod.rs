@@ -76,6 +76,9 @@ pub enum PipelineError {
     },
     #[error("settings: {0}")]
     Settings(String),
+    /// An object whose size says its units are wrong ([`object::LoadedObject::check_scale`]).
+    #[error("{0}")]
+    Scale(String),
     #[error("{}: cannot write: {source}", path.display())]
     Write {
         path: PathBuf,

@@ -56,6 +56,19 @@ pub struct LoadedObject {
     pub warnings: Vec<String>,
 }
 
+impl LoadedObject {
+    /// Refuse an object whose size says its units are wrong (its first [`Self::warnings`]): `what` of it (`"a
+    /// track"`, `"a pose"`) would be meaningless, so the user hears it before any work, not after.
+    pub fn check_scale(&self, what: &str) -> Result<(), PipelineError> {
+        match self.warnings.first() {
+            Some(w) => Err(PipelineError::Scale(format!(
+                "{w}; {what} of it would be meaningless"
+            ))),
+            None => Ok(()),
+        }
+    }
+}
+
 impl ObjectSpec {
     /// The entry `name` of the set `objects`.
     pub fn library(objects: &str, name: &str) -> Self {

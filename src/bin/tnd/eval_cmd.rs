@@ -243,7 +243,12 @@ pub fn run(a: EvalArgs) -> Result<()> {
         let report = match &mut log {
             Some(log) => {
                 let resumed = log.scored(split.as_str(), a.skip..a.skip + source.len());
-                if resumed > 0 {
+                if resumed == source.len() {
+                    eprintln!(
+                        "{}: all {resumed} pairs of {split} scored by an earlier run",
+                        log.path().display()
+                    );
+                } else if resumed > 0 {
                     eprintln!(
                         "{}: {resumed} of the {} pairs of {split} scored by an earlier run; scoring the others",
                         log.path().display(),

@@ -53,8 +53,9 @@ pub struct PoseArgs {
     #[arg(long)]
     pub no_imprint_proposals: bool,
     /// The true pose X,Y,THETA (metres, metres, radians; errors are measured against it, otherwise against the
-    /// estimate).
-    #[arg(long)]
+    /// first registration's best hypothesis, `best_hypothesis` in pose.json, where every sample's registration
+    /// starts: the signature check's estimate may differ from it).
+    #[arg(long, allow_hyphen_values = true)]
     pub truth: Option<String>,
     /// Press depth of the sensor apex below the object's top, to place the sensor over the object: "auto" (found
     /// from the samples and, with --signature, the press whose registered pose best explains the signature, as
@@ -104,9 +105,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let res = (sim.intrinsics().width, sim.intrinsics().height);
     let imprint = read(&a.imprint, res)?;
     let object = a.object.load()?;
-    for w in &object.warnings {
-        eprintln!("warning: {w}");
-    }
+    object.check_scale("a pose")?;
     let prepared = PreparedObject::new(object.mesh.clone())?;
     let truth = a
         .truth

@@ -135,7 +135,10 @@ fn info(a: InfoArgs) -> Result<()> {
     );
     progress::finish(&mut bar);
     let p = processed?;
-    let peak = (0..p.len()).max_by_key(|&i| p.contact_px[i]);
+    // The frame of most contact; none when no frame has any.
+    let peak = (0..p.len())
+        .max_by_key(|&i| p.contact_px[i])
+        .filter(|&i| p.contact_px[i] > 0);
     println!(
         "{}",
         json!({
@@ -158,9 +161,7 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     crate::args::check_press("--max-press", a.max_press, true)?;
     let config = a.sensor.sim_config()?;
     let loaded = a.object.load()?;
-    for w in &loaded.warnings {
-        eprintln!("warning: {w}");
-    }
+    loaded.check_scale("a recording")?;
     let object = PreparedObject::new(loaded.mesh)?;
     let mut seq = PressSequence::down_and_up(pose, a.max_press, a.rest, a.ramp);
     seq.encoding = a.encoding;

@@ -21,7 +21,7 @@ pub struct SimArgs {
     #[arg(long, default_value = "0,0,0", allow_hyphen_values = true)]
     pub pose: String,
     /// Press depth of the membrane apex below the object's top, metres.
-    #[arg(long, default_value_t = tactile_derender::sim::DEFAULT_PRESS_M)]
+    #[arg(long, default_value_t = tactile_derender::sim::DEFAULT_PRESS_M, allow_hyphen_values = true)]
     pub press: f64,
     /// Sensor yaw about the vertical, radians.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
@@ -67,9 +67,7 @@ pub fn run(a: SimArgs) -> Result<()> {
     let config = a.sensor.sim_config()?;
     let rrd = a.rerun.open("tnd sim")?;
     let loaded = a.object.load()?;
-    for w in &loaded.warnings {
-        eprintln!("warning: {w}");
-    }
+    loaded.check_scale("a simulation")?;
     let (name, mesh) = (loaded.name, loaded.mesh);
     let sim = Simulator::new(config)?;
     let object = PreparedObject::new(mesh)?;
@@ -78,10 +76,7 @@ pub fn run(a: SimArgs) -> Result<()> {
         sensor: sim.pressing_pose(&object, 0.0, 0.0, a.sensor_yaw, a.press),
     };
     let (out, elapsed_s) = sim.simulate_timed(&object, &scene, a.seed);
-    if out.contact_pixels == 0 && !loaded.warnings.is_empty() {
-        // A centring hint in metres for an object of the wrong size would mislead: the size comes first.
-        eprintln!("warning: no contact; fix the object's size first (warning above)");
-    } else if out.contact_pixels == 0 {
+    if out.contact_pixels == 0 {
         let hint = sim.contact_hint(&object, &scene);
         let c = hint.centred;
         eprintln!(

@@ -200,10 +200,8 @@ pub fn run(a: TrackArgs) -> Result<()> {
         }
     };
     let object = a.object.load()?;
-    if let Some(w) = object.warnings.first() {
-        // A mis-scaled object registers to nothing sensible; say so before hours of tracking.
-        bail!("{w}; a track of it would be meaningless");
-    }
+    // A mis-scaled object registers to nothing sensible; say so before hours of tracking.
+    object.check_scale("a track")?;
     let prepared = PreparedObject::new(object.mesh.clone())?;
     let device = tactile_derender::model::device::open_device(&a.derender.device)?;
     let model = DiffusionModel::load_on(Path::new(&a.model), &device)?;
