@@ -161,10 +161,21 @@ fn poses_the_signature_cannot_tell_apart_keep_the_registrations_pick_with_a_marg
         let picked = c.select(&[first, second]).unwrap().unwrap();
         assert_eq!(picked.from, 0, "{picked:?}");
         assert_eq!(picked.pose, first);
+        // The other pose is the pick's rival, and the check says it cannot tell the two apart.
+        let rival = picked.rival.expect("a rival");
+        assert_eq!(rival.pose, second);
+        assert!(rival.ambiguous() && rival.nats.abs() < 1.0, "{rival:?}");
     }
-    // A clearly better explanation still wins over the first hypothesis.
+    // A clearly better explanation still wins over the first hypothesis, and the loser is no match for it.
     let off = Se2::new(truth.x + 0.004, truth.y, truth.theta);
-    assert_eq!(c.select(&[off, truth]).unwrap().unwrap().from, 1);
+    let picked = c.select(&[off, truth]).unwrap().unwrap();
+    assert_eq!(picked.from, 1);
+    let rival = picked.rival.expect("a rival");
+    assert_eq!(rival.pose, off);
+    assert!(!rival.ambiguous(), "{rival:?}");
+    // A pose within 2 mm and 15° of the pick is the same pose, not a rival.
+    let near = Se2::new(truth.x + 0.001, truth.y, truth.theta + 0.1);
+    assert!(c.select(&[truth, near]).unwrap().unwrap().rival.is_none());
 }
 
 #[test]

@@ -6,7 +6,7 @@ use glam::DAffine3;
 
 use super::evaluate::{EvalContext, Evaluator, ObjectModel};
 use crate::image::Image;
-use crate::pose::signature_check::{measured_membrane, SignatureCheck};
+use crate::pose::signature_check::{measured_membrane, Checked, SignatureCheck};
 use crate::pose::{Hypothesis, InitStrategy, PoseError};
 use crate::sensor::Se2;
 
@@ -82,9 +82,25 @@ impl Evaluator {
         measured: Option<(&Image, &Image)>,
     ) -> Result<Option<(Se2, usize, Option<f64>)>, PoseError> {
         let best = hypotheses.first().map(|h| (h.pose, 0, None));
+        Ok(self
+            .check(object, hypotheses, ctx, t_world_camera, measured)?
+            .map(|c| (c.pose, c.from, Some(c.cost)))
+            .or(best))
+    }
+
+    /// The signature check's pick among `hypotheses` with its cost and its rival ([`Checked`]); `None` when the
+    /// check does not run (no signature, no signature model, the check off) or there are no hypotheses.
+    pub fn check(
+        &self,
+        object: &ObjectModel,
+        hypotheses: &[Hypothesis],
+        ctx: &EvalContext,
+        t_world_camera: &DAffine3,
+        measured: Option<(&Image, &Image)>,
+    ) -> Result<Option<Checked>, PoseError> {
         let measured = measured.filter(|_| self.config.check_signature);
         let (Some(model), Some((signature, imprint))) = (ctx.signature_model, measured) else {
-            return Ok(best);
+            return Ok(None);
         };
         let cfg = &self.config.signature_check;
         let membrane = if cfg.reference_radius_px > 0 {
@@ -102,9 +118,6 @@ impl Evaluator {
             config: &self.config.signature_check,
         };
         let poses: Vec<Se2> = hypotheses.iter().map(|h| h.pose).collect();
-        Ok(check
-            .select(&poses)?
-            .map(|c| (c.pose, c.from, Some(c.cost)))
-            .or(best))
+        check.select(&poses)
     }
 }

@@ -9,13 +9,14 @@ use super::{LoadedObject, PipelineError, Progress};
 use crate::image::Image;
 use crate::metrics::evaluate::{EvalConfig, EvalContext, EvalError, Evaluator};
 use crate::objects::ObjectSet;
+use crate::pose::signature_check::Rival;
 use crate::pose::{threshold_contact, Hypothesis};
 use crate::recon::is_valid_depth;
 use crate::sensor::Se2;
 use crate::sim::Simulator;
 use crate::uncertainty::analysis::{analyse_with_progress, first_registration, Signature};
-use crate::uncertainty::SampleError;
 use crate::uncertainty::UncertaintyReport;
+use crate::uncertainty::{SampleError, MODE_POSITION_MM, MODE_THETA_DEG};
 
 /// What the sensor saw: the camera's pose, the generated samples and the imprint (metres).
 #[derive(Clone, Copy, Debug)]
@@ -47,6 +48,10 @@ pub struct PoseEstimate {
     /// The signature check picked a hypothesis of the imprint's threshold contact over the sample's
     /// ([`EvalConfig::imprint_proposals`]).
     pub checked_from_imprint: bool,
+    /// The signature check's best hypothesis that is another pose than its pick, reduced by the object's symmetry
+    /// ([`crate::pose::signature_check::Rival`]); close to it the signature cannot tell the two apart
+    /// ([`Self::signature_ambiguous`]).
+    pub signature_rival: Option<Rival>,
     /// Indices of the samples with contact (the others cannot be registered).
     pub with_contact: Vec<usize>,
     /// Every sample's, the baseline's and the multi-sample estimate's pose and errors, with the KDEs.
@@ -57,6 +62,12 @@ pub struct PoseEstimate {
 }
 
 impl PoseEstimate {
+    /// The signature explains another pose (the rival) about as well as the estimate ([`Rival::ambiguous`]): a
+    /// contact the object fits more than one way.
+    pub fn signature_ambiguous(&self) -> bool {
+        self.signature_rival.is_some_and(|r| r.ambiguous())
+    }
+
     /// The single-sample estimate: the signature check's pick when it ran, else the best hypothesis of the K-start
     /// registration.
     pub fn best(&self) -> Option<Se2> {
@@ -132,13 +143,24 @@ pub fn estimate_pose(
                     &strategy,
                 )?);
             }
-            match evaluator.choose(&model, &pool, &ctx, &input.t_world_camera, Some(m))? {
-                Some((pose, from)) => (Some(pose), from >= hypotheses.len()),
+            match evaluator.check(&model, &pool, &ctx, &input.t_world_camera, Some(m))? {
+                Some(c) => (Some(c), c.from >= hypotheses.len()),
                 None => (None, false),
             }
         }
         None => (None, false),
     };
+    // A rival that is the pick turned by the object's symmetry is the same pose.
+    let signature_rival = checked.and_then(|c| c.rival).filter(|r| {
+        let e = SampleError::new(
+            r.pose,
+            0.0,
+            checked.map_or(r.pose, |c| c.pose),
+            &model.symmetry,
+        );
+        e.position_mm > MODE_POSITION_MM || e.theta_deg.is_some_and(|t| t.abs() > MODE_THETA_DEG)
+    });
+    let checked = checked.map(|c| c.pose);
     let n = input.samples.len();
     let total = pose_steps(n);
     if !progress(1, total) {
@@ -178,6 +200,7 @@ pub fn estimate_pose(
         registered_sample,
         checked,
         checked_from_imprint,
+        signature_rival,
         with_contact,
         report,
         anchor_shift_m,

@@ -22,6 +22,7 @@ use crate::mesh::RayCaster;
 use crate::sensor::{Intrinsics, Se2};
 use crate::sim::render::render_depth;
 use crate::sim::shadows::tactile_signature;
+use crate::uncertainty::{MODE_POSITION_MM, MODE_THETA_DEG};
 
 /// Settings of the signature check.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -165,6 +166,41 @@ pub struct Checked {
     pub from: usize,
     /// Cost evaluations used in all.
     pub evaluations: usize,
+    /// The best refined hypothesis that is another pose (more than [`MODE_POSITION_MM`] or [`MODE_THETA_DEG`] from
+    /// the pick, symmetry not reduced): how close the signature comes to explaining the contact another way.
+    pub rival: Option<Rival>,
+}
+
+/// Another pose than the pick, with how much worse it explains the signature.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Rival {
+    /// The pose `t_world_object`.
+    pub pose: Se2,
+    /// Its cost above the pick's as Gaussian log-likelihood, nats (n·ΔC/σ² over the n measured pixels): about 0
+    /// says the signature cannot tell the two apart, tens that it can.
+    pub nats: f64,
+}
+
+/// A rival explaining the signature within this many nats of the pick (a likelihood ratio under e⁴ ≈ 55) makes the
+/// estimate ambiguous: which of the two it is, the sensor's noise decides.
+pub const SIGNATURE_AMBIGUOUS_NATS: f64 = 4.0;
+
+impl Rival {
+    /// Within [`SIGNATURE_AMBIGUOUS_NATS`] of the pick.
+    pub fn ambiguous(&self) -> bool {
+        self.nats < SIGNATURE_AMBIGUOUS_NATS
+    }
+
+    /// "x 1.2 mm, y -3.4 mm, θ 172°, 1.3 nats worse" (millimetres and degrees, for people).
+    pub fn describe(&self) -> String {
+        format!(
+            "x {:.1} mm, y {:.1} mm, θ {:.0}°, {:.1} nats worse",
+            self.pose.x * 1e3,
+            self.pose.y * 1e3,
+            self.pose.theta.to_degrees(),
+            self.nats
+        )
+    }
 }
 
 impl SignatureCheck<'_> {
@@ -321,6 +357,7 @@ impl SignatureCheck<'_> {
                     cost,
                     from,
                     evaluations,
+                    rival: None,
                 }
             })
             .collect();
@@ -335,8 +372,24 @@ impl SignatureCheck<'_> {
             .min_by(|a, b| a.cost.total_cmp(&b.cost))
             .filter(|b| b.cost < registered.cost - margin)
             .unwrap_or(registered);
+        let nats_per_cost = n / (self.model.noise_std * self.model.noise_std).max(1e-30);
+        let rival = refined
+            .iter()
+            .filter(|c| {
+                let apart_mm = (c.pose.x - best.pose.x).hypot(c.pose.y - best.pose.y) * 1e3;
+                let apart_deg = wrap_angle(c.pose.theta - best.pose.theta)
+                    .abs()
+                    .to_degrees();
+                apart_mm > MODE_POSITION_MM || apart_deg > MODE_THETA_DEG
+            })
+            .min_by(|a, b| a.cost.total_cmp(&b.cost))
+            .map(|c| Rival {
+                pose: c.pose,
+                nats: (c.cost - best.cost) * nats_per_cost,
+            });
         Ok(Some(Checked {
             evaluations,
+            rival,
             ..best
         }))
     }

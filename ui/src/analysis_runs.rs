@@ -523,6 +523,7 @@ impl WorkbenchApp {
             registered_sample: r.registered_sample,
             checked: r.checked,
             checked_from_imprint: r.checked_from_imprint,
+            signature_rival: r.signature_rival,
             with_contact: r.sample_index.clone(),
             report: r.report.clone(),
             anchor_shift_m: r.anchor_shift_m.clone(),

@@ -103,6 +103,7 @@ pub fn run(
         registered_sample: estimate.registered_sample,
         checked: estimate.checked,
         checked_from_imprint: estimate.checked_from_imprint,
+        signature_rival: estimate.signature_rival,
         hypotheses: estimate.hypotheses,
         contacts,
         report: estimate.report,

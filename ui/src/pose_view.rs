@@ -25,6 +25,8 @@ pub struct PoseAnalysis {
     pub checked: Option<Se2>,
     /// The check's pick came from the imprint's threshold contact, not the sample.
     pub checked_from_imprint: bool,
+    /// The check's best other pose ([`tactile_derender::pipeline::PoseEstimate::signature_rival`]).
+    pub signature_rival: Option<tactile_derender::pose::signature_check::Rival>,
     /// Its contact points (back-projected X̂0), world frame, metres.
     pub contacts: Vec<[f64; 2]>,
     /// Per-sample errors (from the fixed start), baseline errors and KDE curves.

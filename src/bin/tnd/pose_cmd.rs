@@ -199,6 +199,13 @@ pub fn run(a: PoseArgs) -> Result<()> {
             modes.join("; ")
         );
     }
+    if let Some(r) = estimate.signature_rival.filter(|r| r.ambiguous()) {
+        eprintln!(
+            "warning: the signature explains another pose about as well as the estimate ({}); which of the two it \
+             is, the sensor's noise decides",
+            r.describe()
+        );
+    }
     report.write_with(&a.out, &a.figure_size)?;
     pipeline::write_fit_figure(&a.out, &object, &sim, &input, &estimate, &a.figure_size)?;
     if samples.len() > 1 {
@@ -281,7 +288,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
         "estimate_multi_sample": report.multi_sample.map(|m| m.pose),
         "truth": truth, "baseline": report.baseline, "multi_sample": report.multi_sample,
         "failed": report.failed, "geometry": geometry,
-        "ambiguous": report.ambiguous(), "modes": report.major_modes(), "anchor_shift_m": estimate.anchor_shift_m,
+        "ambiguous": report.ambiguous() || estimate.signature_ambiguous(), "modes": report.major_modes(),
+        "signature_rival": estimate.signature_rival, "anchor_shift_m": estimate.anchor_shift_m,
         "position_err_mm": report.samples.iter().map(|s| s.position_mm).collect::<Vec<_>>(),
         "out": a.out});
     let path = a.out.join("pose.json");

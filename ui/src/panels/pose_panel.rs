@@ -244,6 +244,17 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
              face, two similar ends). The estimate is one of them; the KDE below shows the split.",
         );
     }
+    if let Some(rival) = r.signature_rival.filter(|v| v.ambiguous()) {
+        ui.colored_label(
+            ui.visuals().warn_fg_color,
+            format!("ambiguous: the signature fits another pose about as well ({})", rival.describe()),
+        )
+        .on_hover_text(
+            "The signature check scored a second pose, more than 2 mm or 15° from the estimate (the object's symmetry \
+             aside), within 4 nats of log-likelihood of it: the measured signature cannot tell the two apart, and \
+             the sensor's noise decides which one is picked.",
+        );
+    }
     if let Some(p) = r.press_found_m {
         ui.label(format!("press {:.2} mm, found from the samples", p * 1e3))
             .on_hover_text(
