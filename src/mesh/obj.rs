@@ -117,11 +117,12 @@ fn sanitize(text: &str) -> Result<String, String> {
         .count();
     let mut defined = 0usize;
     let mut out = String::with_capacity(text.len());
+    // A file cut short ends inside its last line (no newline after it).
     let last = text
         .lines()
         .enumerate()
-        .filter(|(_, l)| !without_comment(l).trim().is_empty())
         .last()
+        .filter(|_| !text.ends_with('\n'))
         .map(|(i, _)| i + 1);
     for (number, raw) in text.lines().enumerate() {
         let number = number + 1;
@@ -139,7 +140,8 @@ fn sanitize(text: &str) -> Result<String, String> {
             Some("f") => {
                 let corners: Vec<&str> = words.collect();
                 if corners.len() < 3 && Some(number) == last {
-                    // The file ends inside a face: cut short, with the rest of its faces missing.
+                    // The file ends inside a face: cut short, with the rest of its faces missing (a complete
+                    // line with too few corners is a point or a segment, ignored below).
                     return Err(format!(
                         "line {number}: the last face has {} corner(s), a face needs 3: the file looks truncated",
                         corners.len()
