@@ -451,6 +451,12 @@ fn resuming_with_another_configuration_is_refused() {
         matches!(&err, DatasetError::ConfigMismatch { field, .. } if field == "generation"),
         "{err}"
     );
+    // The refusal names the setting and both values.
+    assert!(
+        err.to_string()
+            .contains("generation.press_range: [0.003,0.015] -> [0.004,0.015]"),
+        "{err}"
+    );
     let mut sim = sim_config();
     sim.signature.noise_std = 0.001;
     let err = generate(&out, &sim, &set, &gen_config(20), &|_| {}).unwrap_err();

@@ -54,8 +54,13 @@ pub enum DatasetError {
     Npz { path: PathBuf, message: String },
     #[error("{path}: {message}")]
     BadValue { path: PathBuf, message: String },
-    #[error("{path}: the existing dataset was made with a different configuration ({field} differs); use the same command to resume, or another --out directory")]
-    ConfigMismatch { path: PathBuf, field: String },
+    #[error("{path}: the existing dataset was made with a different configuration ({field} differs: {}); use the same command to resume, or another --out directory", differing.join("; "))]
+    ConfigMismatch {
+        path: PathBuf,
+        field: String,
+        /// What differs, `name: then -> now`.
+        differing: Vec<String>,
+    },
     #[error("split {split} has {len} pairs; index {index} is out of range")]
     IndexOutOfRange {
         split: super::SplitName,

@@ -215,6 +215,7 @@ fn check_finished(out: &Path, dataset: &DatasetManifest) -> Result<(), DatasetEr
     if let Some(field) = existing.identity_difference(dataset) {
         return Err(DatasetError::ConfigMismatch {
             path: manifest_path,
+            differing: existing.field_differences(dataset, &field),
             field,
         });
     }
@@ -236,6 +237,7 @@ fn start_or_resume(out: &Path, dataset: DatasetManifest) -> Result<Progress, Dat
         if let Some(field) = p.dataset.identity_difference(&dataset) {
             return Err(DatasetError::ConfigMismatch {
                 path: progress_path,
+                differing: p.dataset.field_differences(&dataset, &field),
                 field,
             });
         }

@@ -246,6 +246,37 @@ impl DatasetManifest {
             .find(|(a, b)| a.1 != b.1)
             .map(|(a, _)| a.0.to_string())
     }
+
+    /// What differs in `field` ([`Self::identity_difference`]) between this (earlier) manifest and `other` (the
+    /// new run), as `name: then -> now`, at most three, for the refusal to name.
+    pub fn field_differences(&self, other: &DatasetManifest, field: &str) -> Vec<String> {
+        let value = |m: &DatasetManifest| -> serde_json::Value {
+            let v = match field {
+                "kind" => serde_json::to_value(m.kind),
+                "resolution" => serde_json::to_value(m.resolution),
+                "sim" => serde_json::to_value(&m.sim),
+                "generation" => serde_json::to_value(&m.generation),
+                "object_set" => serde_json::to_value(&m.object_set.manifest),
+                "counts" => serde_json::to_value(m.counts),
+                _ => Ok(serde_json::Value::Null),
+            };
+            v.unwrap_or(serde_json::Value::Null)
+        };
+        let mut named: Vec<String> =
+            crate::io::settings::setting_differences(&value(other), &value(self))
+                .into_iter()
+                .map(|d| match d.strip_prefix(':') {
+                    Some(rest) => format!("{field}:{rest}"),
+                    None => format!("{field}.{d}"),
+                })
+                .collect();
+        if named.len() > 3 {
+            let more = named.len() - 3;
+            named.truncate(3);
+            named.push(format!("and {more} more"));
+        }
+        named
+    }
 }
 
 fn manifest_err(path: &Path, message: String) -> DatasetError {
