@@ -220,29 +220,31 @@ impl DatasetManifest {
         crate::io::write_atomic(path, json.as_bytes()).map_err(|e| DatasetError::io(path, e))
     }
 
+    /// The fields that define the pairs, as JSON (serialised then parsed, so both sides of a comparison went
+    /// through the same float formatting and parsing).
+    fn identity_fields(&self) -> Vec<(&'static str, Option<serde_json::Value>)> {
+        let norm = |v: Result<String, serde_json::Error>| {
+            v.ok()
+                .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
+        };
+        vec![
+            ("kind", norm(serde_json::to_string(&self.kind))),
+            ("resolution", norm(serde_json::to_string(&self.resolution))),
+            ("sim", norm(serde_json::to_string(&self.sim))),
+            ("generation", norm(serde_json::to_string(&self.generation))),
+            (
+                "object_set",
+                norm(serde_json::to_string(&self.object_set.manifest)),
+            ),
+            ("counts", norm(serde_json::to_string(&self.counts))),
+        ]
+    }
+
     /// The first field (of those that define the pairs) in which `self` and `other` differ, compared as JSON.
     pub fn identity_difference(&self, other: &DatasetManifest) -> Option<String> {
-        let as_json = |m: &DatasetManifest| -> Vec<(&'static str, Option<serde_json::Value>)> {
-            // Serialise then parse, so both sides went through the same float formatting and parsing.
-            let norm = |v: Result<String, serde_json::Error>| {
-                v.ok()
-                    .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
-            };
-            vec![
-                ("kind", norm(serde_json::to_string(&m.kind))),
-                ("resolution", norm(serde_json::to_string(&m.resolution))),
-                ("sim", norm(serde_json::to_string(&m.sim))),
-                ("generation", norm(serde_json::to_string(&m.generation))),
-                (
-                    "object_set",
-                    norm(serde_json::to_string(&m.object_set.manifest)),
-                ),
-                ("counts", norm(serde_json::to_string(&m.counts))),
-            ]
-        };
-        as_json(self)
+        self.identity_fields()
             .into_iter()
-            .zip(as_json(other))
+            .zip(other.identity_fields())
             .find(|(a, b)| a.1 != b.1)
             .map(|(a, _)| a.0.to_string())
     }
@@ -250,17 +252,12 @@ impl DatasetManifest {
     /// What differs in `field` ([`Self::identity_difference`]) between this (earlier) manifest and `other` (the
     /// new run), as `name: then -> now`, at most three, for the refusal to name.
     pub fn field_differences(&self, other: &DatasetManifest, field: &str) -> Vec<String> {
-        let value = |m: &DatasetManifest| -> serde_json::Value {
-            let v = match field {
-                "kind" => serde_json::to_value(m.kind),
-                "resolution" => serde_json::to_value(m.resolution),
-                "sim" => serde_json::to_value(&m.sim),
-                "generation" => serde_json::to_value(&m.generation),
-                "object_set" => serde_json::to_value(&m.object_set.manifest),
-                "counts" => serde_json::to_value(m.counts),
-                _ => Ok(serde_json::Value::Null),
-            };
-            v.unwrap_or(serde_json::Value::Null)
+        let value = |m: &DatasetManifest| {
+            m.identity_fields()
+                .into_iter()
+                .find(|(name, _)| *name == field)
+                .and_then(|(_, v)| v)
+                .unwrap_or(serde_json::Value::Null)
         };
         let mut named: Vec<String> =
             crate::io::settings::setting_differences(&value(other), &value(self))
