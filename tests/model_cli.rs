@@ -19,6 +19,15 @@ fn tnd(args: &[&str]) -> std::process::Output {
         .expect("run tnd")
 }
 
+/// `tnd` run in `dir`, as a user in that directory would.
+fn tnd_in(dir: &Path, args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_tnd"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run tnd")
+}
+
 #[test]
 fn verify_prints_max_abs_diff() {
     let out = tnd(&[
@@ -286,13 +295,7 @@ fn sample_uses_the_bundled_model_by_default_and_decodes_no_contact_to_zero() {
 #[test]
 fn train_starts_resumes_and_refuses_other_inputs() {
     let dir = tempfile::tempdir().unwrap();
-    let run = |args: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_tnd"))
-            .args(args)
-            .current_dir(dir.path())
-            .output()
-            .unwrap()
-    };
+    let run = |args: &[&str]| tnd_in(dir.path(), args);
     for (out, seed) in [("ds", "3"), ("ds2", "4")] {
         let o = run(&[
             "dataset", "gen", "-q", "--out", out, "--pairs", "24", "--seed", seed,
@@ -419,13 +422,7 @@ fn train_starts_resumes_and_refuses_other_inputs() {
 #[test]
 fn eval_records_resume_to_the_uninterrupted_result() {
     let dir = tempfile::tempdir().unwrap();
-    let run = |args: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_tnd"))
-            .args(args)
-            .current_dir(dir.path())
-            .output()
-            .unwrap()
-    };
+    let run = |args: &[&str]| tnd_in(dir.path(), args);
     let o = run(&[
         "dataset", "gen", "-q", "--out", "ds", "--pairs", "24", "--seed", "3",
     ]);
@@ -517,12 +514,8 @@ fn a_mis_scaled_mesh_is_refused_before_any_work() {
     }
     std::fs::write(dir.path().join("cube_mm.obj"), obj).unwrap();
     let sim = |extra: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_tnd"))
-            .args(["sim", "-q", "--object", "cube_mm.obj", "--out", "out"])
-            .args(extra)
-            .current_dir(dir.path())
-            .output()
-            .unwrap()
+        let base = ["sim", "-q", "--object", "cube_mm.obj", "--out", "out"];
+        tnd_in(dir.path(), &[&base[..], extra].concat())
     };
     let o = sim(&[]);
     let err = String::from_utf8_lossy(&o.stderr);

@@ -258,34 +258,26 @@ fn csv_poses_with_presses_and_bad_recordings_give_one_line_errors() {
     let mut seq = sequence(DepthEncoding::Mm16);
     seq.pose_topic = None;
     let path = record(dir.path(), &config, &seq);
+    let import = |ic: &RecordingImportConfig, out: &str| {
+        import_recording(
+            &path,
+            &dir.path().join(out),
+            &config,
+            &ObjectSet::builtin(),
+            ic,
+            &mut |_, _| true,
+        )
+    };
     // Without a pose topic the import says which topics there are.
     let ic = RecordingImportConfig::new(OBJECT, PoseSource::Topic(None));
-    let e = import_recording(
-        &path,
-        &dir.path().join("a"),
-        &config,
-        &ObjectSet::builtin(),
-        &ic,
-        &mut |_, _| true,
-    )
-    .unwrap_err()
-    .to_string();
+    let e = import(&ic, "a").unwrap_err().to_string();
     assert!(
         e.contains("press.mcap") && e.contains("no pose topic"),
         "{e}"
     );
     // A mesh file named as the object: a pair names an object of a set, and the error says how to make one.
     let ic = RecordingImportConfig::new("parts/screw.stl", PoseSource::Topic(None));
-    let e = import_recording(
-        &path,
-        &dir.path().join("a"),
-        &config,
-        &ObjectSet::builtin(),
-        &ic,
-        &mut |_, _| true,
-    )
-    .unwrap_err()
-    .to_string();
+    let e = import(&ic, "a").unwrap_err().to_string();
     assert!(
         e.contains("tnd objects import parts") && e.contains("--objects parts --object screw"),
         "{e}"
@@ -299,31 +291,14 @@ fn csv_poses_with_presses_and_bad_recordings_give_one_line_errors() {
     let csv_path = dir.path().join("poses.csv");
     std::fs::write(&csv_path, csv).unwrap();
     let ic = RecordingImportConfig::new(OBJECT, PoseSource::Csv(csv_path.clone()));
-    let r = import_recording(
-        &path,
-        &dir.path().join("b"),
-        &config,
-        &ObjectSet::builtin(),
-        &ic,
-        &mut |_, _| true,
-    )
-    .unwrap();
+    let r = import(&ic, "b").unwrap();
     assert_eq!(r.press_estimated, 0);
     assert_eq!(r.written.pairs, 5);
     assert!(r.skipped_no_pose > 0);
     // The same table in millimetres and degrees: refused, naming the row.
     std::fs::write(&csv_path, "frame,x,y,theta\n8,3,-2,23\n").unwrap();
     let ic = RecordingImportConfig::new(OBJECT, PoseSource::Csv(csv_path.clone()));
-    let e = import_recording(
-        &path,
-        &dir.path().join("c"),
-        &config,
-        &ObjectSet::builtin(),
-        &ic,
-        &mut |_, _| true,
-    )
-    .unwrap_err()
-    .to_string();
+    let e = import(&ic, "c").unwrap_err().to_string();
     assert!(
         e.contains("poses.csv") && e.contains("row 1") && e.contains("millimetres or degrees"),
         "{e}"

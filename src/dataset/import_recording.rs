@@ -267,6 +267,9 @@ pub fn frame_poses(
     }
 }
 
+/// Deepest press a pose table's `press` column may give, metres (10 cm: deeper is millimetres).
+const MAX_PRESS_COLUMN_M: f64 = 0.1;
+
 fn csv_poses(
     path: &Path,
     stamps_ns: &[u64],
@@ -318,22 +321,20 @@ fn csv_poses(
                 out.len()
             )));
         }
-        let (x, y, theta, press) = (need("x")?, need("y")?, need("theta")?, num("press")?);
+        let pose = Se2::new(need("x")?, need("y")?, need("theta")?);
+        let press = num("press")?;
         // Millimetres and degrees (the usual slips) give values no sensor could see.
-        if x.abs().max(y.abs()) > 0.5
-            || theta.abs() > std::f64::consts::TAU
-            || press.unwrap_or(0.0) > 0.1
-        {
+        let mut slips = pose.unit_slips();
+        if let Some(p) = press.filter(|&p| p > MAX_PRESS_COLUMN_M) {
+            slips.push(format!("press {p} is deeper than any sensor"));
+        }
+        if !slips.is_empty() {
             return Err(at(format!(
-                "x {x}, y {y}, theta {theta}{} is beyond any sensor's reach: the columns are metres and radians \
-                 (millimetres or degrees?)",
-                press.map(|p| format!(", press {p}")).unwrap_or_default()
+                "{}: the columns are metres and radians (millimetres or degrees?)",
+                slips.join("; ")
             )));
         }
-        out[frame] = Some(FramePose {
-            pose: Se2::new(x, y, theta),
-            press,
-        });
+        out[frame] = Some(FramePose { pose, press });
     }
     Ok(out)
 }

@@ -137,24 +137,29 @@ pub fn write_tensors(
     })
 }
 
+/// The weights file a model `path` names: the file itself, or a diffusers directory's
+/// `diffusion_pytorch_model.safetensors`.
+pub fn weights_file(path: &Path) -> std::path::PathBuf {
+    if path.is_dir() {
+        path.join("diffusion_pytorch_model.safetensors")
+    } else {
+        path.to_path_buf()
+    }
+}
+
 /// Locate weights and config for `path` (file or diffusers directory) and parse the config. The names `default` and
 /// `small` (when no such file exists) are the bundled models ([`BUNDLED_MODELS`]).
 pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
     if let Some((name, bytes)) = bundled_name(path) {
         return parse_bundled(name, bytes);
     }
-    let weights = if path.is_dir() {
-        let run_model = path.join("model.safetensors");
-        if run_model.is_file() && !path.join("diffusion_pytorch_model.safetensors").exists() {
-            // A `tnd train` run directory, not a diffusers folder.
-            return Err(ModelError::TrainingRun {
-                run: path.to_path_buf(),
-            });
-        }
-        path.join("diffusion_pytorch_model.safetensors")
-    } else {
-        path.to_path_buf()
-    };
+    let weights = weights_file(path);
+    if path.is_dir() && path.join("model.safetensors").is_file() && !weights.exists() {
+        // A `tnd train` run directory, not a diffusers folder.
+        return Err(ModelError::TrainingRun {
+            run: path.to_path_buf(),
+        });
+    }
     let file = read_tensors(&weights)?;
     if let Some(text) = file.metadata.get("config") {
         let cfg = UNet2DConfig::from_json(

@@ -16,7 +16,7 @@ use crate::sensor::Se2;
 use crate::sim::Simulator;
 use crate::uncertainty::analysis::{analyse_with_progress, first_registration, Signature};
 use crate::uncertainty::UncertaintyReport;
-use crate::uncertainty::{SampleError, MODE_POSITION_MM, MODE_THETA_DEG};
+use crate::uncertainty::{same_pose, SampleError};
 
 /// What the sensor saw: the camera's pose, the generated samples and the imprint (metres).
 #[derive(Clone, Copy, Debug)]
@@ -151,14 +151,9 @@ pub fn estimate_pose(
         None => (None, false),
     };
     // A rival that is the pick turned by the object's symmetry is the same pose.
-    let signature_rival = checked.and_then(|c| c.rival).filter(|r| {
-        let e = SampleError::new(
-            r.pose,
-            0.0,
-            checked.map_or(r.pose, |c| c.pose),
-            &model.symmetry,
-        );
-        e.position_mm > MODE_POSITION_MM || e.theta_deg.is_some_and(|t| t.abs() > MODE_THETA_DEG)
+    let signature_rival = checked.and_then(|c| {
+        c.rival
+            .filter(|r| !same_pose(r.pose, c.pose, &model.symmetry))
     });
     let checked = checked.map(|c| c.pose);
     let n = input.samples.len();

@@ -8,4 +8,4 @@ pub mod pose;
 
 pub use camera::{CameraConfig, Intrinsics};
 pub use elastomer::{ElastomerConfig, ElastomerError};
-pub use pose::{Scene, Se2, SensorPose};
+pub use pose::{Scene, Se2, SensorPose, MAX_REACH_M};

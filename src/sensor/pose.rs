@@ -4,6 +4,9 @@
 use glam::{DAffine3, DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
+/// Farthest an object can lie from the sensor axis, metres ([`Se2::unit_slips`]).
+pub const MAX_REACH_M: f64 = 0.5;
+
 /// A planar pose on the table: translation `(x, y)` in metres and rotation `theta` about the table normal (z), radians.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Se2 {
@@ -21,6 +24,25 @@ impl Se2 {
     pub fn to_affine(&self) -> DAffine3 {
         DAffine3::from_translation(DVec3::new(self.x, self.y, 0.0))
             * DAffine3::from_rotation_z(self.theta)
+    }
+
+    /// What makes this a pose no sensor could see, one phrase each: a position beyond [`MAX_REACH_M`] from the
+    /// sensor axis (given in millimetres?) or an angle beyond a full turn (given in degrees?); empty when none.
+    pub fn unit_slips(&self) -> Vec<String> {
+        let mut slips = Vec::new();
+        let far = self.x.abs().max(self.y.abs());
+        if far > MAX_REACH_M {
+            slips.push(format!(
+                "{far} m from the sensor axis is beyond any sensor's reach; positions are in metres"
+            ));
+        }
+        if self.theta.abs() > std::f64::consts::TAU {
+            slips.push(format!(
+                "θ {} is more than a full turn; θ is in radians",
+                self.theta
+            ));
+        }
+        slips
     }
 
     /// Parse `"X,Y,THETA"` (metres, metres, radians).

@@ -93,6 +93,13 @@ impl PoseMode {
     }
 }
 
+/// Whether `a` and `b` are one pose of an object with `symmetry`: within [`MODE_POSITION_MM`] and
+/// [`MODE_THETA_DEG`], both reduced by the symmetry.
+pub fn same_pose(a: Se2, b: Se2, symmetry: &Symmetry) -> bool {
+    let e = SampleError::new(a, 0.0, b, symmetry);
+    e.position_mm <= MODE_POSITION_MM && e.theta_deg.is_none_or(|t| t.abs() <= MODE_THETA_DEG)
+}
+
 /// The distinct poses among `samples` for an object with `symmetry`: each sample, lowest registration cost first,
 /// joins the first mode within [`MODE_POSITION_MM`] and [`MODE_THETA_DEG`] of its pose, or starts a new one; most
 /// samples first.
@@ -101,12 +108,10 @@ pub fn pose_modes(samples: &[SampleError], symmetry: &Symmetry) -> Vec<PoseMode>
     order.sort_by(|a, b| a.cost.total_cmp(&b.cost));
     let mut modes: Vec<PoseMode> = Vec::new();
     for s in order {
-        let near = |m: &PoseMode| {
-            let e = SampleError::new(s.pose, 0.0, m.pose, symmetry);
-            e.position_mm <= MODE_POSITION_MM
-                && e.theta_deg.is_none_or(|t| t.abs() <= MODE_THETA_DEG)
-        };
-        match modes.iter_mut().find(|m| near(m)) {
+        match modes
+            .iter_mut()
+            .find(|m| same_pose(s.pose, m.pose, symmetry))
+        {
             Some(m) => m.samples += 1,
             None => modes.push(PoseMode {
                 pose: s.pose,

@@ -39,36 +39,24 @@ pub fn check_press(flag: &str, press_m: f64, positive: bool) -> Result<()> {
 /// reach (then they were given in millimetres) and angles beyond a full turn (then they were given in degrees).
 pub fn parse_pose(flag: &str, text: &str) -> Result<tactile_derender::sensor::Se2> {
     let pose = tactile_derender::sensor::Se2::parse(text).map_err(|e| anyhow!("{flag}: {e}"))?;
-    let far = pose.x.abs().max(pose.y.abs());
-    let (x, y) = if far > 0.5 {
-        (pose.x / 1000.0, pose.y / 1000.0)
-    } else {
-        (pose.x, pose.y)
-    };
+    let slips = pose.unit_slips();
+    if slips.is_empty() {
+        return Ok(pose);
+    }
+    // The values meant: millimetres and degrees made metres and radians.
+    let far = pose.x.abs().max(pose.y.abs()) > tactile_derender::sensor::MAX_REACH_M;
+    let mm = if far { 1e-3 } else { 1.0 };
     let theta = if pose.theta.abs() > std::f64::consts::TAU {
         pose.theta.to_radians()
     } else {
         pose.theta
     };
-    let mut wrong = Vec::new();
-    if far > 0.5 {
-        wrong.push(format!(
-            "{far} m from the sensor axis is beyond any sensor's reach; positions are in metres"
-        ));
-    }
-    if theta != pose.theta {
-        wrong.push(format!(
-            "θ {} is more than a full turn; θ is in radians",
-            pose.theta
-        ));
-    }
-    if !wrong.is_empty() {
-        return Err(anyhow!(
-            "{flag} {text}: {} (did you mean {x},{y},{theta:.4}?)",
-            wrong.join("; ")
-        ));
-    }
-    Ok(pose)
+    Err(anyhow!(
+        "{flag} {text}: {} (did you mean {},{},{theta:.4}?)",
+        slips.join("; "),
+        pose.x * mm,
+        pose.y * mm
+    ))
 }
 
 /// Sensor, elastomer and signature options: overrides of the library's [`SimConfig`], whose defaults (the Soft

@@ -11,17 +11,16 @@ use kdam::BarExt;
 use serde_json::{json, Value};
 use tactile_derender::dataset::{Dataset, SplitName};
 use tactile_derender::image::Image;
-use tactile_derender::metrics::breakdown::GroupSummary;
 use tactile_derender::metrics::eval_log::EvalLog;
 use tactile_derender::metrics::evaluate::{
-    EvalConfig, EvalPair, EvalReport, Evaluator, Generator, GroundTruthGenerator, MethodSummary,
-    PairSource,
+    EvalConfig, EvalPair, Evaluator, Generator, GroundTruthGenerator, MethodSummary, PairSource,
 };
 use tactile_derender::metrics::model_generator::ModelGenerator;
 use tactile_derender::metrics::paper_table::{paper_tables, PaperEntry};
 use tactile_derender::metrics::saved_samples::save_samples;
 use tactile_derender::metrics::sources::DatasetSource;
-use tactile_derender::metrics::MeanStd;
+
+use crate::eval_tables::{breakdown_tables, markdown_table};
 use tactile_derender::model::{DiffusionModel, GuidanceConfig, SamplerConfig};
 use tactile_derender::pose::signature_check::SignatureCheckConfig;
 use tactile_derender::pose::threshold_contact;
@@ -139,22 +138,17 @@ pub fn generator(
 /// resumed into); `--limit` is not among them (a larger limit extends a run), `--skip` is (the pairs' seeds count
 /// from it).
 fn records_settings(a: &EvalArgs, dataset: &Dataset) -> Result<Value> {
-    use tactile_derender::dataset::shard::sha256_hex;
+    use tactile_derender::dataset::shard::{file_digest, sha256_hex};
+    use tactile_derender::model::checkpoint::{bundled_name, weights_file};
     let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
     let model = Path::new(&a.model);
     let model = if a.model == "ground-truth" {
         json!("ground-truth")
-    } else if let Some((name, bytes)) = tactile_derender::model::checkpoint::bundled_name(model) {
+    } else if let Some((name, bytes)) = bundled_name(model) {
         json!({"bundled": name, "sha256": sha256_hex(bytes)})
     } else {
-        let weights = if model.is_dir() {
-            model.join("diffusion_pytorch_model.safetensors")
-        } else {
-            model.to_path_buf()
-        };
-        let bytes = std::fs::read(&weights)
-            .map_err(|e| anyhow!("{}: cannot read: {e}", weights.display()))?;
-        json!({"path": canonical(model), "sha256": sha256_hex(&bytes)})
+        let (_, sha256) = file_digest(&weights_file(model))?;
+        json!({"path": canonical(model), "sha256": sha256})
     };
     let manifest = serde_json::to_vec(dataset.manifest())?;
     Ok(json!({
@@ -430,197 +424,6 @@ fn tables_from(files: &[String]) -> Result<Vec<PaperEntry>> {
         }
     }
     Ok(out)
-}
-
-fn cell(m: &MeanStd, scale: f64, digits: usize) -> String {
-    if m.n == 0 {
-        format!("– (excl. {})", m.excluded)
-    } else if m.excluded > 0 {
-        format!(
-            "{:.digits$} ± {:.digits$} (excl. {})",
-            m.mean * scale,
-            m.std * scale,
-            m.excluded
-        )
-    } else {
-        format!("{:.digits$} ± {:.digits$}", m.mean * scale, m.std * scale)
-    }
-}
-
-/// A mean ± std cell followed by the median (position errors: a few ambiguous pairs can dominate the mean).
-fn median_cell(m: &MeanStd) -> String {
-    if m.n == 0 {
-        cell(m, 1.0, 3)
-    } else {
-        format!("{} (median {:.3})", cell(m, 1.0, 3), m.median)
-    }
-}
-
-fn row(name: &str, s: &MethodSummary) -> String {
-    format!(
-        "| {name} | {} | {} | {} | {} | {} | {} | {} | {} / {} / {} |\n",
-        cell(&s.l1_mm, 1.0, 3),
-        cell(&s.l1_union_mm, 1.0, 3),
-        cell(&s.psnr_db, 1.0, 2),
-        cell(&s.ssim, 1.0, 4),
-        median_cell(&s.position_mm),
-        cell(&s.theta_rad, 180.0 / std::f64::consts::PI, 2),
-        cell(&s.chamfer_m2, 1e6, 3),
-        s.no_contact,
-        s.theta_excluded_symmetry,
-        s.position_axis_excluded,
-    )
-}
-
-/// Table I and II rows of one split as markdown.
-pub fn markdown_table(split: &str, r: &EvalReport) -> String {
-    let failed = if r.failed.is_empty() {
-        String::new()
-    } else {
-        format!(", {} failed", r.failed.len())
-    };
-    let mut s = format!("## {split} ({} pairs{failed})\n\n", r.pairs);
-    s.push_str("| method | L1 [mm] | L1 on masks [mm] | PSNR [dB] | SSIM | position [mm] | θ [deg] | Chamfer [mm²] | no contact / θ excl. / axis excl. |\n");
-    s.push_str("| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
-    s.push_str(&row(&r.generator, &r.model));
-    if let Some(m) = &r.model_multi {
-        s.push_str(&row(&format!("{} (multi-sample)", r.generator), m));
-    }
-    if let Some(m) = &r.model_combined {
-        s.push_str(&row(
-            &format!("{} + imprint proposals (checked)", r.generator),
-            m,
-        ));
-    }
-    s.push_str(&row("threshold baseline", &r.baseline));
-    if let Some(b) = &r.baseline_checked {
-        s.push_str(&row("threshold baseline + signature check", b));
-    }
-    s.push('\n');
-    let ratio = |m: &MethodSummary| m.position_mm.mean / r.baseline.position_mm.mean;
-    for (what, m, ci) in [
-        ("model", Some(&r.model), r.position_ratio_ci95),
-        (
-            "multi-sample",
-            r.model_multi.as_ref(),
-            r.position_ratio_multi_ci95,
-        ),
-        (
-            "model + imprint proposals",
-            r.model_combined.as_ref(),
-            r.position_ratio_combined_ci95,
-        ),
-    ] {
-        if let (Some(m), Some(ci)) = (m, ci) {
-            let _ = writeln!(
-                s,
-                "Mean position error, {what} / threshold baseline: {:.2} (95 % paired bootstrap interval {}, {} \
-                 resamples of these pairs).\n",
-                ratio(m),
-                interval_text(ci),
-                tactile_derender::metrics::breakdown::BOOTSTRAP_RESAMPLES,
-            );
-        }
-    }
-    // The ratios above credit the model with the signature check it runs; the baseline with the same check shows
-    // what the model's samples add (a model of noise scores near 1 here however good the line above looks).
-    if let Some(b) = r
-        .baseline_checked
-        .as_ref()
-        .filter(|b| b.position_mm.mean > 0.0)
-    {
-        let _ = writeln!(
-            s,
-            "Against the threshold baseline with the same signature check: model / (baseline + check) {:.2} (below 1: \
-             the model's samples help beyond the check).\n",
-            r.model.position_mm.mean / b.position_mm.mean
-        );
-    }
-    s
-}
-
-/// `[lo, hi]` as `lo–hi`.
-fn interval_text([lo, hi]: [f64; 2]) -> String {
-    format!("{lo:.2}–{hi:.2}")
-}
-
-/// A ratio with its interval, when there is one.
-fn ratio_cell(ratio: f64, ci: Option<[f64; 2]>) -> String {
-    match ci {
-        Some(ci) => format!("{ratio:.2} [{}]", interval_text(ci)),
-        None => format!("{ratio:.2}"),
-    }
-}
-
-/// Position error per contact-size bin and per object, model against baseline, as markdown.
-fn breakdown_tables(r: &EvalReport) -> String {
-    type Cell = fn(&GroupSummary) -> Option<String>;
-    // (header, cell): a column is shown when the report has its method.
-    let columns: [(&str, bool, Cell); 8] = [
-        ("model position [mm]", true, |g| {
-            Some(median_cell(&g.model.position_mm))
-        }),
-        ("multi-sample position [mm]", r.model_multi.is_some(), |g| {
-            g.model_multi.as_ref().map(|m| median_cell(&m.position_mm))
-        }),
-        (
-            "model + imprint proposals [mm]",
-            r.model_combined.is_some(),
-            |g| {
-                g.model_combined
-                    .as_ref()
-                    .map(|m| median_cell(&m.position_mm))
-            },
-        ),
-        ("baseline position [mm]", true, |g| {
-            Some(median_cell(&g.baseline.position_mm))
-        }),
-        ("baseline + check [mm]", r.baseline_checked.is_some(), |g| {
-            g.baseline_checked
-                .as_ref()
-                .map(|b| median_cell(&b.position_mm))
-        }),
-        ("model / baseline [95 % interval]", true, |g| {
-            Some(ratio_cell(g.position_ratio, g.position_ratio_ci95))
-        }),
-        (
-            "multi-sample / baseline [95 % interval]",
-            r.model_multi.is_some(),
-            |g| {
-                g.position_ratio_multi
-                    .map(|x| ratio_cell(x, g.position_ratio_multi_ci95))
-            },
-        ),
-        (
-            "model + imprint proposals / baseline [95 % interval]",
-            r.model_combined.is_some(),
-            |g| {
-                g.position_ratio_combined
-                    .map(|x| ratio_cell(x, g.position_ratio_combined_ci95))
-            },
-        ),
-    ];
-    let shown: Vec<_> = columns.iter().filter(|(_, on, _)| *on).collect();
-    let mut s = String::new();
-    for (title, groups) in [
-        ("contact size", &r.breakdown.contact_size),
-        ("object", &r.breakdown.object),
-    ] {
-        let _ = write!(s, "| {title} | pairs |");
-        for (header, _, _) in &shown {
-            let _ = write!(s, " {header} |");
-        }
-        let _ = writeln!(s, "\n|{}", " --- |".repeat(2 + shown.len()));
-        for g in groups {
-            let _ = write!(s, "| {} | {} |", g.label, g.pairs);
-            for (_, _, cell) in &shown {
-                let _ = write!(s, " {} |", cell(g).unwrap_or_else(|| "–".into()));
-            }
-            s.push('\n');
-        }
-        s.push('\n');
-    }
-    s
 }
 
 fn uncertainty_plots(

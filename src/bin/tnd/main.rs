@@ -4,6 +4,7 @@ mod args;
 mod bench;
 mod dataset_cmd;
 mod eval_cmd;
+mod eval_tables;
 mod model_cmd;
 mod objects_cmd;
 mod pose_cmd;
