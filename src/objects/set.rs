@@ -55,12 +55,48 @@ impl ObjectSet {
         config: &super::procedural::ProceduralConfig,
         builtin_share: f64,
     ) -> Result<Self, ObjectError> {
-        use rayon::prelude::*;
+        Self::procedural_with(config, builtin_share, &[])
+    }
+
+    /// [`ObjectSet::procedural`] with more sets mixed in: each `(set, share)` adds every object of `set` (its split,
+    /// symmetry and relative weights kept; meshes in their resting pose) weighted so that its objects make up
+    /// `share` of the pairs, e.g. real scanned and CAD parts beside the procedural shapes. The shares, the built-in
+    /// one included, must leave some of the pairs to the procedural objects; names must not repeat across sets.
+    pub fn procedural_with(
+        config: &super::procedural::ProceduralConfig,
+        builtin_share: f64,
+        included: &[(&ObjectSet, f64)],
+    ) -> Result<Self, ObjectError> {
+        let bad = |message: String| ObjectError::BadShape {
+            shape: "procedural",
+            message,
+        };
         if !(builtin_share.is_finite() && (0.0..1.0).contains(&builtin_share)) {
-            return Err(ObjectError::BadShape {
-                shape: "procedural",
-                message: format!("the built-in share {builtin_share} must be in [0, 1)"),
-            });
+            return Err(bad(format!(
+                "the built-in share {builtin_share} must be in [0, 1)"
+            )));
+        }
+        for (set, share) in included {
+            if !(share.is_finite() && *share > 0.0 && *share < 1.0) {
+                return Err(bad(format!(
+                    "the share {share} of {} must be in (0, 1)",
+                    set.spec()
+                )));
+            }
+        }
+        let builtin = Self::builtin();
+        let mut parts: Vec<(&ObjectSet, f64)> = Vec::new();
+        if builtin_share > 0.0 {
+            parts.push((&builtin, builtin_share));
+        }
+        parts.extend(included.iter().copied());
+        let procedural_share = 1.0 - parts.iter().map(|(_, s)| s).sum::<f64>();
+        if procedural_share <= 0.0 {
+            return Err(bad(format!(
+                "the shares of the built-in and included sets add up to {} and leave no pairs to the procedural \
+                 objects; lower them",
+                1.0 - procedural_share
+            )));
         }
         let generated = (0..config.count)
             .into_par_iter()
@@ -68,27 +104,49 @@ impl ObjectSet {
             .collect::<Result<Vec<_>, _>>()?;
         let (mut entries, mut meshes): (Vec<ObjectEntry>, Vec<Mesh>) =
             generated.into_iter().map(|o| (o.entry, o.mesh)).unzip();
-        if builtin_share > 0.0 {
-            let builtin = Self::builtin();
-            let n_builtin = builtin.entries.len() as f64;
-            let weight =
-                builtin_share / (1.0 - builtin_share) * config.count.max(1) as f64 / n_builtin;
-            for entry in builtin.entries() {
-                meshes.push(builtin.mesh(&entry.name)?);
+        // Procedural objects weigh 1 each, so a set's objects together weigh share / procedural_share of their
+        // count (written in the order that keeps the built-in weights of earlier sets bit for bit).
+        let count = config.count.max(1) as f64;
+        let mut names: HashSet<String> = entries.iter().map(|e| e.name.clone()).collect();
+        for (set, share) in &parts {
+            let set_weight: f64 = set.entries.iter().map(|e| e.weight).sum();
+            if set_weight <= 0.0 {
+                return Err(bad(format!(
+                    "{} has no object with a positive weight",
+                    set.spec()
+                )));
+            }
+            let scale = share / procedural_share * count / set_weight;
+            let part_meshes = set
+                .entries
+                .par_iter()
+                .map(|entry| set.mesh(&entry.name))
+                .collect::<Result<Vec<_>, _>>()?;
+            for (entry, mesh) in set.entries.iter().zip(part_meshes) {
+                if !names.insert(entry.name.clone()) {
+                    return Err(bad(format!(
+                        "object '{}' of {} has the name of an object already in the set; rename it in its \
+                         objects.json",
+                        entry.name,
+                        set.spec()
+                    )));
+                }
+                meshes.push(mesh);
                 entries.push(ObjectEntry {
-                    weight,
+                    weight: entry.weight * scale,
                     ..entry.clone()
                 });
             }
         }
+        let mut spec = format!(
+            "procedural(count={}, seed={}, builtin_share={builtin_share})",
+            config.count, config.seed
+        );
+        for (set, share) in included {
+            spec += &format!(" + {}={share}", set.spec());
+        }
         Ok(Self {
-            source: Source::Memory {
-                spec: format!(
-                    "procedural(count={}, seed={}, builtin_share={builtin_share})",
-                    config.count, config.seed
-                ),
-                meshes,
-            },
+            source: Source::Memory { spec, meshes },
             entries,
         })
     }

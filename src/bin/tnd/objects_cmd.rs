@@ -81,6 +81,12 @@ pub enum ObjectsCommand {
         /// limbs, object for object).
         #[arg(long, default_value = "all", value_parser = parse_kinds)]
         kinds: KindList,
+        /// Mix in another object set as DIR=SHARE (repeatable): every object of DIR's objects.json (e.g. real
+        /// meshes made into a set with `tnd objects import`), weighted so that they make up SHARE of a generated
+        /// dataset's pairs. Their splits are kept: import training meshes with `--split seen`, since unseen ones
+        /// land in the unseen_objects split and are never trained on.
+        #[arg(long, value_name = "DIR=SHARE", value_parser = parse_include)]
+        include: Vec<(PathBuf, f64)>,
     },
 }
 
@@ -210,6 +216,7 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
             extent,
             builtin_share,
             kinds,
+            include,
         } => {
             let config = ProceduralConfig {
                 count,
@@ -217,15 +224,53 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
                 extent_m: [extent[0], extent[1]],
                 kinds: kinds.0,
             };
-            let set = ObjectSet::procedural(&config, builtin_share)?;
+            let sets = include
+                .iter()
+                .map(|(path, share)| Ok((ObjectSet::load_dir(path)?, *share)))
+                .collect::<Result<Vec<_>>>()?;
+            let parts: Vec<(&ObjectSet, f64)> = sets.iter().map(|(set, s)| (set, *s)).collect();
+            let set = ObjectSet::procedural_with(&config, builtin_share, &parts)?;
             set.export(&dir)?;
+            let mut included = Vec::new();
+            for (set, share) in &sets {
+                let unseen = set.entries_in(Split::Unseen).count();
+                if unseen > 0 {
+                    eprintln!(
+                        "{}: {unseen} of its {} objects are unseen: they go to the unseen_objects split, never \
+                         trained on (re-import with --split seen to train on them)",
+                        set.spec(),
+                        set.entries().len()
+                    );
+                }
+                included.push(serde_json::json!({
+                    "dir": set.spec(), "objects": set.entries().len(), "unseen": unseen, "share": share
+                }));
+            }
             println!(
                 "{}",
-                serde_json::json!({"generated": count, "objects": set.entries().len(), "dir": dir})
+                serde_json::json!({
+                    "generated": count, "objects": set.entries().len(), "dir": dir, "included": included
+                })
             );
         }
     }
     Ok(())
+}
+
+/// One `--include DIR=SHARE` of `tnd objects generate` (split at the last `=`).
+fn parse_include(text: &str) -> Result<(PathBuf, f64), String> {
+    let (dir, share) = text.rsplit_once('=').ok_or_else(|| {
+        format!("'{text}': give the set and its share as DIR=SHARE, e.g. data/train_meshes=0.3")
+    })?;
+    let share: f64 = share.trim().parse().map_err(|_| {
+        format!("'{text}': the share '{share}' is not a number (a fraction of the pairs, e.g. 0.3)")
+    })?;
+    if share.is_nan() || share <= 0.0 || share >= 1.0 {
+        return Err(format!(
+            "'{text}': the share {share} must be a fraction of the pairs in (0, 1)"
+        ));
+    }
+    Ok((PathBuf::from(dir), share))
 }
 
 /// The `--kinds` list of `tnd objects generate`.
