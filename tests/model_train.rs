@@ -1,5 +1,6 @@
 //! Training: the loss falls on a learnable synthetic task, a run killed after a checkpoint resumes to exactly the
-//! weights of an uninterrupted run, and `init` fine-tunes from a saved model.
+//! weights of an uninterrupted run, `init` fine-tunes from a saved model, and the contact-boundary loss weight acts
+//! on contact edges only.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -286,4 +287,70 @@ fn v_prediction_trains_and_is_saved_with_the_model() {
         .err()
         .unwrap();
     assert!(matches!(e, ModelError::Config { .. }), "{e}");
+}
+
+/// `TrainingData` of `Synthetic` with every target emptied (no contact anywhere).
+struct NoContact(Synthetic);
+
+impl TrainingData for NoContact {
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+    fn batch(&mut self, e: u64, i: usize, n: usize, seed: u64) -> Result<TrainBatch, ModelError> {
+        let mut b = self.0.batch(e, i, n, seed)?;
+        b.target.iter_mut().for_each(|v| *v = 0.0);
+        Ok(b)
+    }
+    fn validation(&mut self, batch: usize) -> Result<Option<TrainBatch>, ModelError> {
+        self.0.validation(batch)
+    }
+}
+
+#[test]
+fn boundary_weight_acts_on_contact_edges_only_and_still_trains() {
+    let first_loss = |w: f64, data: &mut dyn TrainingData| {
+        let tc = TrainConfig {
+            steps: Some(1),
+            batch: 4,
+            seed: 2,
+            boundary_weight: w,
+            ..TrainConfig::default()
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let mut loss = f32::NAN;
+        train(dir.path(), &tc, &tiny(), None, data, &mut |p| {
+            loss = p.loss;
+            true
+        })
+        .unwrap();
+        loss
+    };
+    // Without contact there is no edge: every weight is 1 and the loss is the plain one, bit for bit.
+    let mut empty = NoContact(Synthetic { pairs: 6, size: 8 });
+    assert_eq!(first_loss(0.0, &mut empty), first_loss(4.0, &mut empty));
+    // With the discs' edges the same draw gives another loss.
+    let mut discs = Synthetic { pairs: 6, size: 8 };
+    assert_ne!(first_loss(0.0, &mut discs), first_loss(4.0, &mut discs));
+    // And the weighted objective is still learnable; a resume with another weight is refused, naming it.
+    let tc = TrainConfig {
+        steps: Some(60),
+        batch: 4,
+        lr: 3e-3,
+        seed: 1,
+        log_every: 10,
+        boundary_weight: 4.0,
+        ..TrainConfig::default()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    assert_loss_falls(dir.path(), &tc, &mut Synthetic { pairs: 12, size: 8 });
+    let other = TrainConfig {
+        steps: Some(61),
+        boundary_weight: 2.0,
+        ..tc
+    };
+    let err = train(dir.path(), &other, &tiny(), None, &mut discs, &mut |_| true).unwrap_err();
+    assert!(
+        err.to_string().contains("--boundary-weight 4 (now 2)"),
+        "{err}"
+    );
 }

@@ -27,6 +27,7 @@ pub mod resnet;
 pub mod sampler;
 pub mod schedule;
 pub mod train;
+pub mod train_config;
 pub mod train_data;
 pub mod unet;
 pub mod unet_blocks;

@@ -26,6 +26,7 @@ use super::checkpoint::{
 use super::config::{PredictionType, UNet2DConfig};
 use super::init::init_params;
 use super::schedule::NoiseSchedule;
+pub use super::train_config::{Loss, TrainConfig};
 use super::ModelError;
 
 /// One batch of training pairs, row-major `[n, height, width]`, metres.
@@ -56,117 +57,6 @@ pub trait TrainingData {
     ) -> Result<TrainBatch, ModelError>;
     /// A fixed held-out batch for the validation loss, if there is one.
     fn validation(&mut self, batch: usize) -> Result<Option<TrainBatch>, ModelError>;
-}
-
-/// The per-pixel training loss between predicted and true noise.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Loss {
-    /// Mean squared error (Ho et al.'s simplified objective).
-    L2,
-    /// Mean absolute error.
-    L1,
-}
-
-/// Settings of one training run; everything but `steps`/`epochs`, `checkpoint_every_s` and `log_every` must stay the
-/// same across resumes. The one definition behind `tnd train`'s flags (flattened) and its defaults.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
-#[serde(default)]
-pub struct TrainConfig {
-    /// Total optimiser steps (takes precedence over epochs).
-    #[arg(long, conflicts_with = "epochs")]
-    pub steps: Option<u64>,
-    /// Total epochs over the train split (len / batch steps each; 1 when --steps is not given).
-    #[arg(long)]
-    pub epochs: Option<u64>,
-    /// Pairs per optimiser step.
-    #[arg(long, default_value_t = TrainConfig::default().batch)]
-    pub batch: usize,
-    /// Adam learning rate (the paper: 1e-4).
-    #[arg(long, default_value_t = TrainConfig::default().lr)]
-    pub lr: f64,
-    /// Loss on the network's prediction: l2 (the paper's) or l1.
-    #[arg(long, value_enum, default_value_t = TrainConfig::default().loss)]
-    pub loss: Loss,
-    /// Seed of initialisation, batch order, timesteps and noise (a run is reproducible from it and the data).
-    #[arg(long, default_value_t = TrainConfig::default().seed)]
-    pub seed: u64,
-    /// EMA decay of the weights (e.g. 0.999; the saved model then holds the EMA weights); none by default.
-    #[arg(long)]
-    pub ema: Option<f64>,
-    /// Wall-clock seconds between checkpoints (a kill loses at most this much work; a checkpoint of the default
-    /// model takes well under a second).
-    #[arg(long = "checkpoint-every", default_value_t = TrainConfig::default().checkpoint_every_s)]
-    pub checkpoint_every_s: f64,
-    /// Also checkpoint every this many steps (0: only by time).
-    #[arg(long, default_value_t = TrainConfig::default().checkpoint_every_steps)]
-    pub checkpoint_every_steps: u64,
-    /// Steps between log lines (and validation losses).
-    #[arg(long, default_value_t = TrainConfig::default().log_every)]
-    pub log_every: u64,
-    /// What the network predicts for a new run (from scratch or --init): eps (the noise, the paper's objective) or
-    /// v (the velocity √ᾱ·ε − √(1−ᾱ)·x0). Default: the model config's (--config, --init), eps for the built-in one;
-    /// a fine-tune of an eps model with v re-targets its output layer.
-    #[arg(long, value_enum)]
-    pub prediction: Option<PredictionType>,
-    /// Device that trains: cpu (our fast kernels), cuda, cuda:N or metal (GPU builds: `--features cuda` or `metal`).
-    /// Not part of a run's identity: a run may resume on another device.
-    #[arg(long, default_value_t = TrainConfig::default().device)]
-    pub device: String,
-}
-
-impl Default for TrainConfig {
-    fn default() -> Self {
-        Self {
-            steps: None,
-            epochs: None,
-            batch: 16,
-            lr: 1e-4,
-            loss: Loss::L2,
-            seed: 0,
-            ema: None,
-            checkpoint_every_s: 60.0,
-            checkpoint_every_steps: 0,
-            log_every: 50,
-            prediction: None,
-            device: "cpu".into(),
-        }
-    }
-}
-
-impl TrainConfig {
-    /// The settings of a run's identity in which `other` (a resume) differs from `self` (the run as started), as
-    /// `--flag started (now given)`.
-    fn differences(&self, other: &Self) -> Vec<String> {
-        let mut out = Vec::new();
-        let mut check = |flag: &str, a: String, b: String| {
-            if a != b {
-                out.push(format!("{flag} {a} (now {b})"));
-            }
-        };
-        check("--batch", self.batch.to_string(), other.batch.to_string());
-        check("--lr", self.lr.to_string(), other.lr.to_string());
-        // The flags' own spelling (eps, v, l2).
-        fn name(v: impl clap::ValueEnum) -> String {
-            v.to_possible_value()
-                .map(|p| p.get_name().to_string())
-                .unwrap_or_default()
-        }
-        check("--loss", name(self.loss), name(other.loss));
-        check("--seed", self.seed.to_string(), other.seed.to_string());
-        let opt = |v: Option<String>| v.unwrap_or_else(|| "none".into());
-        check(
-            "--ema",
-            opt(self.ema.map(|e| e.to_string())),
-            opt(other.ema.map(|e| e.to_string())),
-        );
-        check(
-            "--prediction",
-            opt(self.prediction.map(name)),
-            opt(other.prediction.map(name)),
-        );
-        out
-    }
 }
 
 /// What the progress callback sees after each step.
@@ -252,8 +142,21 @@ pub fn train(
             tc.seed,
         )?;
         let (input, tf, target) = prepare(&run, &schedule, &b, tc, s)?;
+        let weights = (tc.boundary_weight > 0.0)
+            .then(|| {
+                let w = super::train_data::contact_boundary_weights(
+                    &b.target,
+                    b.n,
+                    b.height,
+                    b.width,
+                    tc.boundary_px,
+                    tc.boundary_weight as f32,
+                );
+                Tensor::from_vec(w, target.shape(), target.device())
+            })
+            .transpose()?;
         let (value, grads) = super::kernels::parallel_batch::loss_and_grads(b.n, |r| {
-            mean_loss(&run, tc, (&input, &tf, &target), r, true)
+            mean_loss(&run, tc, (&input, &tf, &target), weights.as_ref(), r, true)
         })?;
         if !value.is_finite() {
             return Err(ModelError::NonFinite {
@@ -273,7 +176,8 @@ pub fn train(
         if run.step % tc.log_every.max(1) == 0 || run.step == total {
             if let Some(vb) = &val {
                 let (input, tf, target) = prepare(&run, &schedule, vb, tc, u64::MAX)?;
-                let loss = mean_loss(&run, tc, (&input, &tf, &target), 0..vb.n, false)?;
+                // Unweighted, so that validation losses compare across --boundary-weight.
+                let loss = mean_loss(&run, tc, (&input, &tf, &target), None, 0..vb.n, false)?;
                 val_loss = Some(loss.to_scalar::<f32>()?);
             }
             append_log(run_dir, run.step, value, val_loss, samples_per_s)?;
@@ -363,11 +267,13 @@ fn prepare(
     Ok((Tensor::cat(&[&xt, &cond], 1)?, tf, target))
 }
 
-/// The mean loss (`tc.loss`) of the samples `r` of a prepared batch.
+/// The mean loss (`tc.loss`) of the samples `r` of a prepared batch, each pixel's term scaled by its weight when
+/// there are weights (the batch's shape; see [`super::train_data::contact_boundary_weights`]).
 fn mean_loss(
     run: &Run,
     tc: &TrainConfig,
     (input, tf, target): (&Tensor, &[f32], &Tensor),
+    weights: Option<&Tensor>,
     r: std::ops::Range<usize>,
     train: bool,
 ) -> candle_core::Result<Tensor> {
@@ -377,9 +283,13 @@ fn mean_loss(
         .unet
         .forward_t(&input.narrow(0, start, len)?, &tf[r], train)?;
     let diff = (pred - target.narrow(0, start, len)?)?;
-    match tc.loss {
-        Loss::L2 => diff.sqr()?.mean_all(),
-        Loss::L1 => diff.abs()?.mean_all(),
+    let per_pixel = match tc.loss {
+        Loss::L2 => diff.sqr()?,
+        Loss::L1 => diff.abs()?,
+    };
+    match weights {
+        Some(w) => (per_pixel * w.narrow(0, start, len)?)?.mean_all(),
+        None => per_pixel.mean_all(),
     }
 }
 
@@ -624,37 +534,6 @@ fn truncate_log(run_dir: &Path, step: u64) -> Result<(), ModelError> {
 mod tests {
     use super::*;
     use candle_core::{Device, Var};
-
-    #[test]
-    fn a_resume_names_each_setting_that_differs_in_the_flags_spelling() {
-        let started = TrainConfig {
-            ema: Some(0.999),
-            prediction: Some(PredictionType::VPrediction),
-            ..TrainConfig::default()
-        };
-        // Steps, checkpoints and the device are not part of a run's identity.
-        let same = TrainConfig {
-            steps: Some(10),
-            checkpoint_every_s: 1.0,
-            device: "cuda".into(),
-            ..started.clone()
-        };
-        assert!(started.differences(&same).is_empty());
-        let resumed = TrainConfig {
-            batch: 8,
-            ema: None,
-            prediction: Some(PredictionType::Epsilon),
-            ..started.clone()
-        };
-        assert_eq!(
-            started.differences(&resumed),
-            [
-                "--batch 16 (now 8)",
-                "--ema 0.999 (now none)",
-                "--prediction v (now eps)"
-            ]
-        );
-    }
 
     #[test]
     fn ema_update_is_the_weighted_mean_and_holds_no_graph() {

@@ -2,7 +2,8 @@
 //! shuffled batches to the trainer's [`TrainingData`]. The train split is used for training. The logged validation
 //! loss comes from a fixed batch of a separate validation dataset when one is given ([`DatasetTraining::with_validation`]:
 //! pairs that no test split holds, so that stopping and tuning decisions never look at test pairs); otherwise from
-//! the `unseen_poses` split (or `train` when that is empty), which only monitors.
+//! the `unseen_poses` split (or `train` when that is empty), which only monitors. Also the per-pixel loss weights
+//! that stress the contact boundary ([`contact_boundary_weights`]).
 
 use crate::dataset::{Batches, Dataset, SplitName};
 
@@ -104,5 +105,92 @@ impl TrainingData for DatasetTraining<'_> {
             .transpose()
             .map(|b| b.map(convert))
             .map_err(ModelError::Dataset)
+    }
+}
+
+/// Per-pixel loss weights that stress the contact boundary, for `n` in-contact depth targets of `height × width`
+/// (metres, 0 = no contact; row-major, image after image). A pixel is on the boundary when its
+/// `(2·radius_px + 1)²` window (clipped at the image edge) holds both a contact and a no-contact pixel; it weighs
+/// `1 + boundary_weight`, every other pixel 1, and each image's weights are then scaled to a mean of 1, so the loss
+/// keeps its scale and an image without contact (or all contact) weighs every pixel 1. The same definition as
+/// `train_torch.py --boundary-weight` (max pooling over the mask and its complement).
+pub fn contact_boundary_weights(
+    target_m: &[f32],
+    n: usize,
+    height: usize,
+    width: usize,
+    radius_px: usize,
+    boundary_weight: f32,
+) -> Vec<f32> {
+    let mut out = vec![1.0f32; target_m.len()];
+    let r = radius_px as isize;
+    let (h, w) = (height as isize, width as isize);
+    for (image, weights) in target_m
+        .chunks_exact(height * width)
+        .zip(out.chunks_exact_mut(height * width))
+        .take(n)
+    {
+        let contact = |y: isize, x: isize| image[(y * w + x) as usize] > 0.0;
+        let mut sum = 0.0f64;
+        for y in 0..h {
+            for x in 0..w {
+                let (mut some_contact, mut some_free) = (false, false);
+                for yy in (y - r).max(0)..=(y + r).min(h - 1) {
+                    for xx in (x - r).max(0)..=(x + r).min(w - 1) {
+                        if contact(yy, xx) {
+                            some_contact = true;
+                        } else {
+                            some_free = true;
+                        }
+                    }
+                }
+                let weight = if some_contact && some_free {
+                    1.0 + boundary_weight
+                } else {
+                    1.0
+                };
+                weights[(y * w + x) as usize] = weight;
+                sum += f64::from(weight);
+            }
+        }
+        let mean = (sum / (height * width) as f64) as f32;
+        weights.iter_mut().for_each(|v| *v /= mean);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::contact_boundary_weights;
+
+    #[test]
+    fn the_boundary_is_the_ring_either_side_of_the_contact_edge() {
+        // 8 x 8 image, contact in the 4 x 4 square rows/cols 2..=5; radius 1: the boundary is every pixel within one
+        // (Chebyshev) step of an edge between contact and no contact, i.e. the 6 x 6 square 1..=6 minus the 2 x 2
+        // core 3..=4: 32 pixels. Weight 3 there, 1 elsewhere; mean = (32·3 + 32·1) / 64 = 2.
+        let mut t = vec![0.0f32; 64];
+        for y in 2..=5 {
+            for x in 2..=5 {
+                t[y * 8 + x] = 0.04;
+            }
+        }
+        // Second image: no contact at all; third: all contact.
+        t.extend(std::iter::repeat_n(0.0, 64));
+        t.extend(std::iter::repeat_n(0.05, 64));
+        let w = contact_boundary_weights(&t, 3, 8, 8, 1, 2.0);
+        for y in 0..8 {
+            for x in 0..8 {
+                let ring = (1..=6).contains(&y)
+                    && (1..=6).contains(&x)
+                    && !((3..=4).contains(&y) && (3..=4).contains(&x));
+                let want = if ring { 1.5 } else { 0.5 };
+                assert_eq!(w[y * 8 + x], want, "({y}, {x})");
+            }
+        }
+        assert!(w[64..].iter().all(|&v| v == 1.0));
+        // Weight 0: every pixel 1, whatever the mask.
+        assert!(contact_boundary_weights(&t, 3, 8, 8, 2, 0.0)
+            .iter()
+            .all(|&v| v == 1.0));
     }
 }

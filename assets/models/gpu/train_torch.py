@@ -11,7 +11,8 @@ Same as `tnd train` (src/model/train.rs):
     metadata (`--init`, whose weights are loaded too, or `--config`, a JSON file, for a fresh model); its input is
     `cat([x_t, imprint])`, both normalised by the config's `tactile_derender` offsets and scales;
   * the forward process is the cosine schedule (`squaredcos_cap_v2`, T = 250, computed as schedule.rs does), t is
-    drawn uniformly in 0..T-1, and the regression target is the config's prediction type (v or epsilon), MSE loss;
+    drawn uniformly in 0..T-1, and the regression target is the config's prediction type (v or epsilon), MSE loss
+    (optionally weighted towards the contact boundary: --boundary-weight, --boundary-px, as in `tnd train`);
   * Adam (beta 0.9 / 0.999, eps 1e-8) with an EMA of the weights; the EMA weights are what is saved.
 Different, because minutes of GPU are spent best that way: batches are large (256) and drawn with replacement from
 every train-split pair loaded so far (shards are read while `tnd dataset gen` is still writing more); the forward
@@ -55,6 +56,21 @@ def normalised(z, norm):
     y = (z["imprint"] - norm["imprint"]["offset_m"]) / norm["imprint"]["scale_m"]
     x0 = (z["target"] - norm["target"]["offset_m"]) / norm["target"]["scale_m"]
     return y, x0
+
+
+def boundary_weights(target_m, radius_px, weight):
+    """Per-pixel loss weights stressing the contact boundary, as `tnd train --boundary-weight` computes them
+    (src/model/train_data.rs, contact_boundary_weights): for targets (N, 1, H, W) in metres (0 = no contact) a pixel
+    whose (2r+1)^2 window, clipped at the image edge, holds both contact and no contact weighs 1 + weight, every other
+    pixel 1; each image's weights are scaled to a mean of 1. Contact is a depth over 5 mm (no camera inside a sensor
+    sees contact nearer; the margin absorbs the f16 rounding of the stored no-contact value)."""
+    contact = (target_m > 0.005).float()
+    k = 2 * radius_px + 1
+    pool = torch.nn.functional.max_pool2d
+    some_contact = pool(contact, k, stride=1, padding=radius_px)
+    some_free = pool(1.0 - contact, k, stride=1, padding=radius_px)
+    w = 1.0 + weight * some_contact * some_free
+    return w / w.mean(dim=(2, 3), keepdim=True)
 
 
 def cosine_alphas_cumprod(steps):
@@ -157,6 +173,9 @@ def main():
     ap.add_argument("--lr", type=float, default=2e-4)
     ap.add_argument("--ema", type=float, default=0.999)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--boundary-weight", type=float, default=0.0,
+                    help="extra loss weight on the contact boundary (tnd train --boundary-weight; 0: plain MSE)")
+    ap.add_argument("--boundary-px", type=int, default=2, help="reach of that boundary either side of the edge, px")
     ap.add_argument("--min-pairs", type=int, default=4000, help="pairs to wait for before the first step")
     ap.add_argument("--capacity", type=int, default=600_000, help="most pairs held on the device")
     ap.add_argument("--save-every-s", type=float, default=120)
@@ -250,7 +269,8 @@ def main():
 
     def record(step, final=False):
         return {"trainer": "assets/models/gpu/train_torch.py", "step": step, "batch": args.batch, "lr": args.lr,
-                "ema": args.ema, "seed": args.seed, "init": os.path.basename(args.init) if args.init else None,
+                "ema": args.ema, "seed": args.seed,
+                "boundary_weight": args.boundary_weight, "boundary_px": args.boundary_px, "init": os.path.basename(args.init) if args.init else None,
                 "prediction": td.get("prediction_type"), "pairs_loaded": loaded, "samples": step * args.batch,
                 "wall_s": round(time.time() - t_start, 1), "final": final, "parameters": n_params,
                 "device": torch.cuda.get_device_name(0) if dev.type == "cuda" else "cpu", "torch": torch.__version__}
@@ -280,7 +300,11 @@ def main():
         tgt = sa * eps - sb * x0 if v_pred else eps
         with torch.autocast(dev.type, dtype=torch.bfloat16, enabled=dev.type == "cuda"):
             pred = unet(torch.cat([xt, y], 1), t).sample
-        loss = ((pred.float() - tgt) ** 2).mean()
+        sq = (pred.float() - tgt) ** 2
+        if args.boundary_weight > 0:
+            raw = x0 * norm["target"]["scale_m"] + norm["target"]["offset_m"]
+            sq = sq * boundary_weights(raw, args.boundary_px, args.boundary_weight)
+        loss = sq.mean()
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(params, 1.0)
