@@ -528,3 +528,80 @@ fn a_mis_scaled_mesh_is_refused_before_any_work() {
     let o = sim(&["--units", "mm"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// A sensor whose contact lies nearer the camera than the default's (inflation 15 mm, camera 25 mm behind the base):
+/// `tnd train` from scratch fits the model's target mapping to it and says so (the default's 50 mm contact cut would
+/// make every sample of such a model "no contact"); a fine-tune of the default, whose mapping cannot hold it, is
+/// refused before anything is written; `tnd eval` with the default warns that it does not fit.
+#[test]
+fn train_fits_the_mapping_to_a_shallow_sensor_and_eval_warns_of_a_model_that_does_not() {
+    use tactile_derender::dataset::{stats, Dataset, SplitName};
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| tnd_in(dir.path(), args);
+    let o = run(&[
+        "dataset",
+        "gen",
+        "-q",
+        "--out",
+        "ds",
+        "--pairs",
+        "24",
+        "--seed",
+        "1",
+        "--inflation",
+        "0.015",
+        "--camera-offset",
+        "0.025",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let ds = Dataset::open(&dir.path().join("ds")).unwrap();
+    let [lo, hi] = stats::target_range_sample(&ds, SplitName::Train, 1000)
+        .unwrap()
+        .unwrap();
+    assert!(
+        hi < 0.05,
+        "the sensor's contact lies nearer than the default's cut: {lo}–{hi}"
+    );
+
+    let o = run(&[
+        "train", "-q", "--data", "ds", "--out", "run", "--steps", "1", "--batch", "2",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("fitted to this sensor"), "{err}");
+    let model = DiffusionModel::load(&dir.path().join("run/model.safetensors")).unwrap();
+    let td = &model.config().tactile_derender;
+    assert!(
+        td.contact_min_depth_m < lo,
+        "cut {} vs contact from {lo}",
+        td.contact_min_depth_m
+    );
+    assert!(td.target.inverse(1.0) > hi && td.target.inverse(-1.0) <= 0.0);
+
+    let o = run(&[
+        "train", "-q", "--data", "ds", "--out", "ft", "--steps", "1", "--init", "default",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success()
+            && err.contains("does not fit this sensor")
+            && err.contains("from scratch"),
+        "{err}"
+    );
+    assert!(!dir.path().join("ft").exists());
+
+    let o = run(&[
+        "eval",
+        "-q",
+        "--data",
+        "ds",
+        "--split",
+        "unseen_objects",
+        "--limit",
+        "1",
+        "--steps",
+        "2",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("does not fit this dataset's sensor"), "{err}");
+}

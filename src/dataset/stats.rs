@@ -136,3 +136,22 @@ pub fn compute(ds: &Dataset, progress: &(dyn Fn(usize) + Sync)) -> Result<Stats,
         area_hist: hist,
     })
 }
+
+/// `[min, max]` of the in-contact depth (target X0 over contact pixels, metres) over at most `limit` pairs of
+/// `split`, spread evenly over it; `None` when they hold no contact. Cheap enough to run before a training run.
+pub fn target_range_sample(
+    ds: &Dataset,
+    split: SplitName,
+    limit: usize,
+) -> Result<Option<[f32; 2]>, DatasetError> {
+    let n = ds.len(split);
+    let take = n.min(limit.max(1));
+    let mut range = None;
+    for k in 0..take {
+        let pair = ds.pair(split, k * n / take)?;
+        if let Some((lo, hi)) = pair.target.range_where(|x| x != 0.0) {
+            range = widen(range, lo, hi);
+        }
+    }
+    Ok(range)
+}

@@ -133,6 +133,35 @@ pub fn generator(
     }))
 }
 
+/// A warning when the dataset's in-contact depths (sampled from the first evaluated split with pairs) lie outside
+/// what the model represents, e.g. a model trained for another sensor: its samples would decode wrongly.
+fn warn_if_the_model_does_not_fit(
+    model: &str,
+    data: &Path,
+    dataset: &Dataset,
+    splits: &[SplitName],
+) -> Result<()> {
+    if model == "ground-truth" {
+        return Ok(());
+    }
+    let cfg = tactile_derender::model::checkpoint::locate(Path::new(model))?.1;
+    let Some(&split) = splits.iter().find(|&&s| dataset.len(s) > 0) else {
+        return Ok(());
+    };
+    let range = tactile_derender::dataset::stats::target_range_sample(dataset, split, 64)?;
+    if let Some(problem) =
+        range.and_then(|[lo, hi]| cfg.tactile_derender.contact_range_problem(lo, hi))
+    {
+        eprintln!(
+            "warning: {}: the model {model} does not fit this dataset's sensor: {problem}; its depths and poses will \
+             be wrong (a model trained on this sensor's data, `tnd train --data {}`, fits it)",
+            data.display(),
+            data.display()
+        );
+    }
+    Ok(())
+}
+
 /// The settings every pair's scores depend on: `--records` resumes only under the same. The model and the dataset
 /// are named by path and by content (a retrained checkpoint or a regenerated dataset under the same name is not
 /// resumed into); `--limit` is not among them (a larger limit extends a run), `--skip` is (the pairs' seeds count
@@ -179,6 +208,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         .ok_or_else(|| anyhow!("--data DIR is needed (or --tables-from FILE)"))?;
     let gen = generator(&a.model, &a.sampler, &a.guidance)?;
     let dataset = Dataset::open(data)?;
+    warn_if_the_model_does_not_fit(&a.model, data, &dataset, &splits(&a.split)?)?;
     let mut paper = Vec::new();
     let evaluator = Evaluator::new(EvalConfig {
         pose_samples: a.pose_samples.max(1),

@@ -9,7 +9,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use kdam::BarExt;
 use serde_json::json;
-use tactile_derender::dataset::Dataset;
+use tactile_derender::dataset::stats::target_range_sample;
+use tactile_derender::dataset::{Dataset, SplitName};
 use tactile_derender::model::train::{train, TrainConfig};
 use tactile_derender::model::train_data::DatasetTraining;
 use tactile_derender::model::UNet2DConfig;
@@ -138,9 +139,63 @@ fn model_config(a: &TrainArgs, resolution: (usize, usize)) -> Result<UNet2DConfi
     Ok(cfg)
 }
 
+/// A new run's model config checked against the data's in-contact depths (sampled from the train split): a
+/// fine-tune (`--init`) or a `--config` that sets its own `tactile_derender` mapping must already hold them (else the
+/// run is refused, saying why); otherwise the mapping is fitted to them, as the default's is to the default sensor,
+/// so that a sensor with shallower or deeper contact does not train a model whose every sample decodes as no contact.
+fn fit_to_data(a: &TrainArgs, ds: &Dataset, cfg: UNet2DConfig) -> Result<UNet2DConfig> {
+    let Some([lo, hi]) = target_range_sample(ds, SplitName::Train, 256)? else {
+        return Ok(cfg);
+    };
+    if let Some(init) = &a.init {
+        let (_, init_cfg) = tactile_derender::model::checkpoint::locate(init)?;
+        if let Some(problem) = init_cfg.tactile_derender.contact_range_problem(lo, hi) {
+            bail!(
+                "{}: the model of --init {} does not fit this sensor: {problem}; a fine-tune keeps its model's \
+                 mapping, so train for this sensor from scratch (without --init, tnd train fits the mapping to the data)",
+                a.data.display(),
+                init.display()
+            );
+        }
+        return Ok(cfg);
+    }
+    let Some(problem) = cfg.tactile_derender.contact_range_problem(lo, hi) else {
+        return Ok(cfg);
+    };
+    if a.config
+        .as_deref()
+        .is_some_and(|c| c.contains("tactile_derender"))
+    {
+        bail!(
+            "{}: the --config does not fit this sensor: {problem}; fit its tactile_derender.target and \
+             contact_min_depth_m to the sensor, or leave tactile_derender out and tnd train fits them",
+            a.data.display()
+        );
+    }
+    let fitted = cfg.tactile_derender.fitted_to_contact_range(lo, hi);
+    eprintln!(
+        "{}: in-contact depths {:.1}–{:.1} mm do not fit the default mapping (contact cut {:.1} mm, deepest {:.1} mm); \
+         fitted to this sensor: no contact at −1, {:.1} mm at +1, contact cut {:.1} mm",
+        a.data.display(),
+        lo * 1e3,
+        hi * 1e3,
+        cfg.tactile_derender.contact_min_depth_m * 1e3,
+        cfg.tactile_derender.target.inverse(1.0) * 1e3,
+        fitted.target.inverse(1.0) * 1e3,
+        fitted.contact_min_depth_m * 1e3
+    );
+    Ok(UNet2DConfig {
+        tactile_derender: fitted,
+        ..cfg
+    })
+}
+
 pub fn run(a: TrainArgs) -> Result<()> {
     let dataset = Dataset::open(&a.data)?;
-    let cfg = model_config(&a, dataset.resolution())?;
+    let mut cfg = model_config(&a, dataset.resolution())?;
+    if !a.out.join("train_state.safetensors").is_file() {
+        cfg = fit_to_data(&a, &dataset, cfg)?;
+    }
     let tc = a.train.clone();
     if let Some(d) = tc.ema {
         if !(0.0..1.0).contains(&d) {
