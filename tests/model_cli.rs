@@ -554,7 +554,7 @@ fn train_fits_the_mapping_to_a_shallow_sensor_and_eval_warns_of_a_model_that_doe
         "0.025",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let ds = Dataset::open(&dir.path().join("ds")).unwrap();
+    let ds = Dataset::open(dir.path().join("ds")).unwrap();
     let [lo, hi] = stats::target_range_sample(&ds, SplitName::Train, 1000)
         .unwrap()
         .unwrap();
