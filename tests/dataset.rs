@@ -111,6 +111,23 @@ fn interrupted_run_resumes_to_the_uninterrupted_result() {
     let again = generate(&part, &sim_config(), &set, &cfg, &|_| {}).unwrap();
     assert!(again.already_complete && again.generated == 0);
     assert_same_tree(&full, &part);
+    // A finished dataset with one shard flipped by a byte and another deleted: the same command simulates those
+    // two chunks again, and only them, and the dataset is the uninterrupted one again.
+    let flipped = part.join("shards/train-00001.npz");
+    let mut bytes = std::fs::read(&flipped).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x40;
+    std::fs::write(&flipped, bytes).unwrap();
+    std::fs::remove_file(part.join("shards/train-00002.npz")).unwrap();
+    assert!(Dataset::open(&part).and_then(|d| d.verify()).is_err());
+    let repaired = generate(&part, &sim_config(), &set, &cfg, &|_| {}).unwrap();
+    assert!(!repaired.already_complete);
+    assert_eq!(repaired.kept_chunks, cfg.chunks() - 2, "{repaired:?}");
+    assert!(
+        repaired.generated > 0 && repaired.generated <= 2 * cfg.shard_pairs,
+        "{repaired:?}"
+    );
+    assert_same_tree(&full, &part);
 }
 
 #[test]

@@ -146,12 +146,16 @@ pub fn generate(
         elapsed_s: 0.0,
     };
     if out.join(MANIFEST_FILE).exists() {
-        check_finished(out, &dataset)?;
-        progress(config.pairs);
-        report.already_complete = true;
-        report.kept_chunks = config.chunks();
-        report.elapsed_s = t0.elapsed().as_secs_f64();
-        return Ok(report);
+        if check_finished(out, &dataset)? {
+            progress(config.pairs);
+            report.already_complete = true;
+            report.kept_chunks = config.chunks();
+            report.elapsed_s = t0.elapsed().as_secs_f64();
+            return Ok(report);
+        }
+        // A damaged or missing shard: back to an unfinished run whose intact chunks are kept, so that only the
+        // damaged chunks are simulated again (bit for bit what they were: every pair depends only on its seed).
+        reopen_finished(out, &dataset)?;
     }
     let mut state = start_or_resume(out, dataset)?;
     set.export(&out.join(OBJECTS_DIR))?;
@@ -207,9 +211,10 @@ fn planned_manifest(
     })
 }
 
-/// `out` holds a finished dataset: it must be this one, intact; leftovers of a run killed after writing
-/// `manifest.json` (`progress.json`, temporary files) are removed.
-fn check_finished(out: &Path, dataset: &DatasetManifest) -> Result<(), DatasetError> {
+/// `out` holds a finished dataset, which must be this one: `true` when it is intact (leftovers of a run killed after
+/// writing `manifest.json`, `progress.json` and temporary files, are removed), `false` when a shard is damaged or
+/// missing.
+fn check_finished(out: &Path, dataset: &DatasetManifest) -> Result<bool, DatasetError> {
     let manifest_path = out.join(MANIFEST_FILE);
     let existing = DatasetManifest::load(&manifest_path)?;
     if let Some(field) = existing.identity_difference(dataset) {
@@ -219,14 +224,39 @@ fn check_finished(out: &Path, dataset: &DatasetManifest) -> Result<(), DatasetEr
             field,
         });
     }
-    for s in &existing.shards {
-        shard::verify_file(out, s)?;
+    if existing
+        .shards
+        .iter()
+        .any(|s| shard::verify_file(out, s).is_err())
+    {
+        return Ok(false);
     }
     let progress_path = out.join(PROGRESS_FILE);
     if progress_path.exists() {
         std::fs::remove_file(&progress_path).map_err(|e| DatasetError::io(&progress_path, e))?;
     }
-    remove_all_stale_temp_files(out)
+    remove_all_stale_temp_files(out)?;
+    Ok(true)
+}
+
+/// Turn the finished dataset in `out` (this configuration's, checked by [`check_finished`]) back into an unfinished
+/// run that holds all its shards, intact or not: `progress.json` is written before `manifest.json` is removed, so a
+/// kill in between leaves a finished dataset that is reopened again.
+fn reopen_finished(out: &Path, dataset: &DatasetManifest) -> Result<(), DatasetError> {
+    let manifest_path = out.join(MANIFEST_FILE);
+    let existing = DatasetManifest::load(&manifest_path)?;
+    let mut done: BTreeMap<usize, Vec<ShardEntry>> = BTreeMap::new();
+    for s in existing.shards {
+        done.entry(s.chunk).or_default().push(s);
+    }
+    let state = Progress {
+        format: FORMAT_NAME.into(),
+        version: FORMAT_VERSION,
+        dataset: dataset.clone(),
+        done,
+    };
+    state.save(&out.join(PROGRESS_FILE))?;
+    std::fs::remove_file(&manifest_path).map_err(|e| DatasetError::io(&manifest_path, e))
 }
 
 /// The progress of an unfinished run of the same configuration, or a fresh start in a missing or empty directory.
