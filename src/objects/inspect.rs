@@ -162,7 +162,7 @@ pub fn likely_units(largest_m: f64, units: Units) -> Option<Units> {
 }
 
 /// A length for a message: millimetres below a metre (three significant decimals), else metres.
-fn length(m: f64) -> String {
+pub(crate) fn length(m: f64) -> String {
     if m.abs() < 1.0 {
         format!("{:.3} mm", m * 1e3)
     } else {

@@ -225,8 +225,10 @@ pub struct Symmetry {
     pub translation_axis: Option<[f64; 2]>,
 }
 
-/// One record of an `objects.json` manifest: an object's mesh file, units, resting pose and metadata.
+/// One record of an `objects.json` manifest: an object's mesh file, units, resting pose and metadata. Unknown keys
+/// are refused: a misspelt `scale_to_mm` would otherwise be ignored and the mesh read in metres.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ObjectEntry {
     /// Unique name of the object within its set, e.g. `cylinder_r15`.
     pub name: String,

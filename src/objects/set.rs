@@ -256,6 +256,25 @@ impl ObjectSet {
                         source,
                     }
                 })?;
+                let (lo, hi) = mesh.aabb();
+                let largest = f64::from((hi - lo).max_element());
+                if !(super::inspect::PLAUSIBLE_EXTENT_M[0]..=super::inspect::PLAUSIBLE_EXTENT_M[1])
+                    .contains(&largest)
+                {
+                    // As `tnd objects import` refuses such a file, and `tnd sim` such a mesh given by path.
+                    return Err(ObjectError::BadEntry {
+                        path: dir.join(super::MANIFEST_FILE),
+                        name: entry.name.clone(),
+                        message: format!(
+                            "scale_to_m = {} makes it {} across (largest extent), implausible for a pressed \
+                             object ({:.0} mm to {} m); scale_to_m is metres per file unit (1 for m, 0.001 for mm)",
+                            entry.scale_to_m,
+                            super::inspect::length(largest),
+                            super::inspect::PLAUSIBLE_EXTENT_M[0] * 1e3,
+                            super::inspect::PLAUSIBLE_EXTENT_M[1]
+                        ),
+                    });
+                }
                 let mesh = match entry.rotation {
                     Some([x, y, z, w]) => {
                         let q = DQuat::from_xyzw(x, y, z, w).normalize().as_quat();

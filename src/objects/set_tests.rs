@@ -174,4 +174,32 @@ fn load_dir_rejects_bad_manifests() {
     assert!(err.contains("unit quaternion"), "{err}");
     let err = load_error(r#"{"version": 7, "objects": []}"#);
     assert!(err.contains("version 7"), "{err}");
+    // A misspelt key is named, not ignored (the mesh would have been read in metres).
+    let err = load_error(
+        r#"{"version": 1, "objects": [{"name": "a", "mesh": "cube.obj", "scale_to_mm": 1}]}"#,
+    );
+    assert!(err.contains("unknown field `scale_to_mm`"), "{err}");
+}
+
+#[test]
+fn a_scale_that_makes_the_object_implausible_is_named_when_its_mesh_is_read() {
+    // The box of 10 x 20 x 30 file units read as metres: 30 m across; at 1e-6 m per unit: 0.03 mm.
+    for (scale, across) in [(1.0, "30.00 m"), (1e-6, "0.030 mm")] {
+        let tmp = user_set(&format!(
+            r#"{{"version": 1, "objects": [{{"name": "box", "mesh": "cube.obj", "scale_to_m": {scale}}}]}}"#
+        ));
+        let set = ObjectSet::load_dir(tmp.path()).unwrap();
+        let err = set.mesh("box").unwrap_err().to_string();
+        assert!(
+            err.contains(MANIFEST_FILE)
+                && err.contains("'box'")
+                && err.contains(across)
+                && err.contains("implausible"),
+            "{err}"
+        );
+    }
+    let tmp = user_set(
+        r#"{"version": 1, "objects": [{"name": "box", "mesh": "cube.obj", "scale_to_m": 0.001}]}"#,
+    );
+    assert!(ObjectSet::load_dir(tmp.path()).unwrap().mesh("box").is_ok());
 }

@@ -310,6 +310,11 @@ fn stats(dir: PathBuf, as_json: bool, verify: bool) -> Result<()> {
     let ds = Dataset::open(&dir)?;
     if verify {
         ds.verify()?;
+        eprintln!(
+            "{}: all {} shards verified (sha256, dtype, shape)",
+            dir.display(),
+            ds.manifest().shards.len()
+        );
     }
     let total = ds.manifest().counts.total();
     let pb = bar(total, "stats")?;
