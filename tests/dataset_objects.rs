@@ -1,6 +1,6 @@
 //! Object sets in dataset generation: objects that cannot make a large enough contact are left out (or, when none
 //! can, the run fails saying what to change), `tnd objects generate --kinds` picks procedural kinds and `--include`
-//! mixes in a user's own set at its share.
+//! mixes in a user's own set at its share; a membrane mesh file travels with the dataset.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod dataset_common;
@@ -28,7 +28,8 @@ fn impossible_rejection_rule_fails_saying_what_to_change() {
 
 #[test]
 fn objects_that_cannot_make_a_contact_are_left_out_and_named() {
-    // A 2 mm copy of a sphere covers a few pixels at most: below the 1 % (41 px) rule whatever the press.
+    // A 3.2 mm copy of a sphere (just above the smallest plausible object) covers a few pixels at most: below the
+    // 1 % (41 px) rule whatever the press.
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("set");
     small_set(&dir);
@@ -42,7 +43,7 @@ fn objects_that_cannot_make_a_contact_are_left_out_and_named() {
         .unwrap()
         .clone();
     speck["name"] = "speck".into();
-    speck["scale_to_m"] = (speck["scale_to_m"].as_f64().unwrap() * 0.05).into();
+    speck["scale_to_m"] = (speck["scale_to_m"].as_f64().unwrap() * 0.08).into();
     objects.push(speck);
     std::fs::write(&path, serde_json::to_string_pretty(&m).unwrap()).unwrap();
     let set = ObjectSet::load_dir(&dir).unwrap();
@@ -240,4 +241,33 @@ fn cli_objects_generate_mixes_in_an_imported_set_at_its_share() {
         assert!(!o.status.success() && err.contains(says), "{args:?}: {err}");
         assert!(!tmp.path().join("out3").join("objects.json").exists());
     }
+}
+
+/// `--elastomer-mesh`: the membrane mesh is stored in the dataset (named by its content), so the dataset opens and
+/// simulates from any directory after the original file is gone; a resume with another mesh at the same path is
+/// refused, naming the membrane.
+#[test]
+fn a_membrane_mesh_file_travels_with_the_dataset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let set = small_set(&tmp.path().join("set"));
+    let mut sim = sim_config();
+    let bubble = tmp.path().join("bubble.obj");
+    let text = sim.elastomer.build().unwrap().to_obj_string();
+    std::fs::write(&bubble, &text).unwrap();
+    sim.elastomer.mesh_file = Some(bubble.clone());
+    let cfg = gen_config(24);
+    let out = tmp.path().join("ds");
+    generate(&out, &sim, &set, &cfg, &|_| {}).unwrap();
+    std::fs::remove_file(&bubble).unwrap();
+    let ds = Dataset::open(&out).unwrap();
+    let stored = ds.sim_config().elastomer.mesh_file.clone().unwrap();
+    assert!(stored.starts_with(&out), "{}", stored.display());
+    assert_eq!(std::fs::read_to_string(&stored).unwrap(), text);
+    tactile_derender::sim::Simulator::new(ds.sim_config().clone()).unwrap();
+    // Another membrane under the same name: refused, as a changed configuration.
+    std::fs::write(&bubble, text + "# edited\n").unwrap();
+    let err = generate(&out, &sim, &set, &cfg, &|_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("elastomer"), "{err}");
 }

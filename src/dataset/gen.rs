@@ -134,7 +134,18 @@ pub fn generate(
         &draw,
         config.holdout_every,
     );
-    let dataset = planned_manifest(sim_config, set, config, &plan)?;
+    // A membrane mesh file travels with the dataset, named by its content, so that the dataset opens anywhere and
+    // a resume with another mesh under the same path is refused.
+    let membrane = membrane_copy(sim_config)?;
+    let stored_sim = match &membrane {
+        Some((name, _)) => {
+            let mut c = sim_config.clone();
+            c.elastomer.mesh_file = Some(PathBuf::from(name));
+            c
+        }
+        None => sim_config.clone(),
+    };
+    let dataset = planned_manifest(&stored_sim, set, config, &plan)?;
     let mut report = GenReport {
         pairs: config.pairs,
         generated: 0,
@@ -159,6 +170,10 @@ pub fn generate(
     }
     let mut state = start_or_resume(out, dataset)?;
     set.export(&out.join(OBJECTS_DIR))?;
+    if let Some((name, bytes)) = &membrane {
+        crate::io::write_atomic(&out.join(name), bytes)
+            .map_err(|e| DatasetError::io(&out.join(name), e))?;
+    }
     state.save(&out.join(PROGRESS_FILE))?;
     remove_all_stale_temp_files(out)?;
     let todo = keep_intact_chunks(out, config, &mut state, progress);
@@ -176,6 +191,22 @@ pub fn generate(
     std::fs::remove_file(&progress_path).map_err(|e| DatasetError::io(&progress_path, e))?;
     report.elapsed_s = t0.elapsed().as_secs_f64();
     Ok(report)
+}
+
+/// The membrane mesh file of `sim_config`, if any: the name of its copy in the dataset (`elastomer-<sha256 prefix>.<ext>`,
+/// relative to the dataset directory; [`crate::dataset::Dataset::open`] resolves it there) and its bytes.
+fn membrane_copy(sim_config: &SimConfig) -> Result<Option<(String, Vec<u8>)>, DatasetError> {
+    let Some(path) = &sim_config.elastomer.mesh_file else {
+        return Ok(None);
+    };
+    let bytes = std::fs::read(path).map_err(|e| DatasetError::io(path, e))?;
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("obj")
+        .to_ascii_lowercase();
+    let digest = shard::sha256_hex(&bytes);
+    Ok(Some((format!("elastomer-{}.{ext}", &digest[..12]), bytes)))
 }
 
 /// The manifest the finished dataset will have, without its shard list.

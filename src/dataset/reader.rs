@@ -77,7 +77,13 @@ impl Dataset {
             };
             return Err(DatasetError::NotADataset { path: dir, message });
         }
-        let manifest = DatasetManifest::load(&path)?;
+        let mut manifest = DatasetManifest::load(&path)?;
+        // A membrane mesh stored with the dataset (`tnd dataset gen --elastomer-mesh`) is named relative to it.
+        if let Some(mesh) = &manifest.sim.elastomer.mesh_file {
+            if mesh.is_relative() && dir.join(mesh).is_file() {
+                manifest.sim.elastomer.mesh_file = Some(dir.join(mesh));
+            }
+        }
         let mut splits: [Vec<(usize, usize)>; 3] = Default::default();
         for (i, s) in manifest.shards.iter().enumerate() {
             let list = &mut splits[s.split.code()];
