@@ -166,7 +166,9 @@ pub fn estimate_pose(
         samples: &samples,
         baseline: baseline.as_ref(),
         truth: input.truth,
-        init: hypotheses.first().map(|h| h.pose),
+        // The samples are registered from the pose reported (the signature check's pick where there is one), so
+        // their spread and modes describe the uncertainty around it, not around a hypothesis the check rejected.
+        init: checked.or_else(|| hypotheses.first().map(|h| h.pose)),
         measured: input.signature.map(|s| (s, input.imprint)),
     };
     // The baseline's step is counted whether or not there is one (no signature), so that the steps keep the
@@ -290,8 +292,18 @@ pub fn write_pose_geometry(
         )?;
     }
     if input.samples.len() > 1 {
+        // Of the samples anchored onto the signature, as the multi-sample estimate registers them.
+        let anchored: Vec<crate::image::Image> = input
+            .samples
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let shift = estimate.anchor_shift_m.get(i).copied().unwrap_or(0.0);
+                crate::pose::from_depth::shift_contact(s, shift)
+            })
+            .collect();
         let consensus =
-            crate::pose::from_depth::consensus_depth(input.samples, config.consensus_probability)?;
+            crate::pose::from_depth::consensus_depth(&anchored, config.consensus_probability)?;
         let points = back_project(&consensus, intrinsics, t_world_camera).p_world;
         let name = "consensus_points.ply";
         let comment = format!("the samples' consensus contact, {frame}");

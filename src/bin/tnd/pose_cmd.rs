@@ -193,10 +193,21 @@ pub fn run(a: PoseArgs) -> Result<()> {
     progress::finish(&mut bar);
     let report = &estimate.report;
     if report.ambiguous() {
-        let modes: Vec<String> = report.major_modes().iter().map(|m| m.describe()).collect();
+        let modes = report.major_modes();
+        let among = estimate.best().is_some_and(|p| {
+            modes
+                .iter()
+                .any(|m| tactile_derender::uncertainty::same_pose(m.pose, p, &object.symmetry))
+        });
+        let described: Vec<String> = modes.iter().map(|m| m.describe()).collect();
         eprintln!(
-            "warning: the samples split between poses the contact cannot tell apart ({}); the estimate is one of them",
-            modes.join("; ")
+            "warning: the samples split between poses the contact cannot tell apart ({}); {}",
+            described.join("; "),
+            if among {
+                "the estimate is one of them"
+            } else {
+                "the estimate, the signature check's pick, is none of them"
+            }
         );
     }
     if let Some(r) = estimate.signature_rival.filter(|r| r.ambiguous()) {
