@@ -605,3 +605,27 @@ fn train_fits_the_mapping_to_a_shallow_sensor_and_eval_warns_of_a_model_that_doe
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("does not fit this dataset's sensor"), "{err}");
 }
+
+/// `tnd model export` into a folder that already holds a model is refused (it may be another model's only copy);
+/// `--force` replaces it.
+#[test]
+fn export_refuses_to_replace_a_model_without_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| tnd_in(dir.path(), args);
+    let o = run(&["model", "export", "--model", "small", "--diffusers", "out"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let first = std::fs::read(dir.path().join("out/diffusion_pytorch_model.safetensors")).unwrap();
+    let o = run(&["model", "export", "--diffusers", "out"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("already holds a model") && err.contains("--force"),
+        "{err}"
+    );
+    let kept = std::fs::read(dir.path().join("out/diffusion_pytorch_model.safetensors")).unwrap();
+    assert_eq!(first, kept);
+    let o = run(&["model", "export", "--diffusers", "out", "--force"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let replaced =
+        std::fs::read(dir.path().join("out/diffusion_pytorch_model.safetensors")).unwrap();
+    assert_ne!(first, replaced);
+}

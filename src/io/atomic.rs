@@ -21,7 +21,17 @@ pub fn write_atomic_with(
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => std::path::PathBuf::from("."),
     };
-    std::fs::create_dir_all(&dir).map_err(named)?;
+    std::fs::create_dir_all(&dir).map_err(|e| match dir.ancestors().find(|a| a.is_file()) {
+        // `--out results.txt` where results.txt is a file: say so, not "File exists".
+        Some(file) => std::io::Error::new(
+            e.kind(),
+            format!(
+                "{} is a file, not a directory; give another output directory",
+                file.display()
+            ),
+        ),
+        None => named(e),
+    })?;
     let file_name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -54,6 +64,18 @@ mod tests {
         assert_eq!(std::fs::read(&p).unwrap(), b"two");
         let names: Vec<_> = std::fs::read_dir(p.parent().unwrap()).unwrap().collect();
         assert_eq!(names.len(), 1, "temporary file left behind");
+    }
+
+    #[test]
+    fn an_output_directory_that_is_a_file_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("results.txt");
+        std::fs::write(&file, b"keep").unwrap();
+        let e = write_atomic(&file.join("depth.npy"), b"x")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("results.txt is a file, not a directory"), "{e}");
+        assert_eq!(std::fs::read(&file).unwrap(), b"keep");
     }
 
     #[test]

@@ -103,7 +103,7 @@ fn readme(model: &DiffusionModel) -> String {
          depth and the imprint Y, both normalised as in `config.json` → `tactile_derender`: a value v in metres maps \
          to `(v - offset_m) / scale_m`, imprint offset {io} m and scale {is} m, target (0 m = no contact) offset \
          {to} m and scale {ts} m. \
-         Resolution {s} x {s} pixels. Prediction type: {pred:?}; {steps} training steps, cosine schedule. \
+         Resolution {s} x {s} pixels. Prediction type: {pred}; {steps} training steps, cosine schedule. \
          Decoded depths below {cut} m are \"no contact\" (0).\n",
         source = model.source().display(),
         cin = cfg.in_channels,
@@ -112,7 +112,10 @@ fn readme(model: &DiffusionModel) -> String {
         to = t.target.offset_m,
         ts = t.target.scale_m,
         s = cfg.sample_size,
-        pred = t.prediction_type,
+        pred = match t.prediction_type {
+            super::PredictionType::Epsilon => "epsilon",
+            super::PredictionType::VPrediction => "v_prediction",
+        },
         steps = t.num_train_timesteps,
         cut = t.contact_min_depth_m,
     )

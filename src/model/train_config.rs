@@ -60,8 +60,8 @@ pub struct TrainConfig {
     #[arg(long, default_value_t = TrainConfig::default().log_every)]
     pub log_every: u64,
     /// What the network predicts for a new run (from scratch or --init): eps (the noise, the paper's objective) or
-    /// v (the velocity √ᾱ·ε − √(1−ᾱ)·x0). Default: the model config's (--config, --init), eps for the built-in one;
-    /// a fine-tune of an eps model with v re-targets its output layer.
+    /// v (the velocity √ᾱ·ε − √(1−ᾱ)·x0). Default: the model config's (--config, --init; v for the bundled
+    /// default architecture, eps for a config that names none); a fine-tune of an eps model with v re-targets its output layer.
     #[arg(long, value_enum)]
     pub prediction: Option<PredictionType>,
     /// Device that trains: cpu (our fast kernels), cuda, cuda:N or metal (GPU builds: `--features cuda` or `metal`).

@@ -106,8 +106,8 @@ pub fn markdown_table(split: &str, r: &EvalReport) -> String {
     {
         let _ = writeln!(
             s,
-            "Against the threshold baseline with the same signature check: model / (baseline + check) {:.2} (below 1: \
-             the model's samples help beyond the check).\n",
+            "Against the threshold baseline with the same signature check: model / (baseline + check) {:.2} (under 1, \
+             the model's samples add to what the check finds; over 1, the check alone does better).\n",
             r.model.position_mm.mean / b.position_mm.mean
         );
     }

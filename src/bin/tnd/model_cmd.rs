@@ -45,6 +45,9 @@ pub struct ExportArgs {
     /// The diffusers folder to write (created if missing).
     #[arg(long)]
     pub diffusers: PathBuf,
+    /// Replace the model a folder already holds (otherwise refused: it may be another model's only copy).
+    #[arg(long)]
+    pub force: bool,
 }
 
 #[derive(Args, Debug)]
@@ -101,6 +104,13 @@ pub fn run(a: ModelArgs) -> Result<()> {
         ModelCommand::Verify(v) => verify(&v),
         ModelCommand::Diagnose(d) => diagnose(&d),
         ModelCommand::Export(e) => {
+            let held = e.diffusers.join("diffusion_pytorch_model.safetensors");
+            if held.exists() && !e.force {
+                bail!(
+                    "{}: already holds a model; export into a new folder, or --force to replace it",
+                    e.diffusers.display()
+                );
+            }
             let model = DiffusionModel::load(&e.model)?;
             let files = diffusers_folder::export(&model, &e.diffusers)?;
             println!(

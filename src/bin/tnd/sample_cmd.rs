@@ -118,10 +118,9 @@ pub fn run(a: SampleArgs) -> Result<()> {
         }
     }
     let rerun = crate::rerun_out::finish(rrd)?;
-    let kind = a.derender.sampler.sampler_kind();
     println!(
         "{}",
-        json!({"samples": samples.len(), "sampler": kind, "seed": a.derender.seed, "out": a.out,
+        json!({"samples": samples.len(), "sampler": a.derender.sampler, "seed": a.derender.seed, "out": a.out,
             "imprint_guided": guided,
             "seconds": out.seconds, "rerun": rerun,
             "mean_std_m": out.std.data.iter().map(|&v| f64::from(v)).sum::<f64>() / out.std.data.len() as f64})

@@ -86,11 +86,15 @@ fn check_run_inputs(a: &TrainArgs) -> Result<()> {
                 .map_err(|e| anyhow!("{}: not JSON: {e}", path.display()))?;
             for key in ["data", "init"] {
                 if saved[key] != now[key] {
+                    let shown = |v: &serde_json::Value| match v {
+                        serde_json::Value::Null => format!("no --{key}"),
+                        v => format!("--{key} {v}"),
+                    };
                     bail!(
-                        "{}: this run was started with --{key} {}, not {}; resume with it or use a new --out",
+                        "{}: this run was started with {}, not {}; resume with it or use a new --out",
                         a.out.display(),
-                        saved[key],
-                        now[key]
+                        shown(&saved[key]),
+                        shown(&now[key])
                     );
                 }
             }
