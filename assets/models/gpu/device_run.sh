@@ -7,7 +7,8 @@
 # Everything ends by BUDGET_S seconds after the start; the EMA checkpoints and logs go to OUT.
 #
 #     [PAIRS=300000] [INFLATION=0.027,0.033] [MODELS="a b"|a|b] [B_INIT=b.safetensors] [LR_B=3e-4] [SAVE_EVERY_S=120] \
-#         [OBJECT_SEED=2] [PAIR_SEED=41] \
+#         [OBJECT_SEED=2] [PAIR_SEED=41] [TRAIN_MESHES=.dev/train_meshes.tar.xz] [MESH_SHARE=0.3] \
+#         [BOUNDARY_WEIGHT=0] \
 #         assets/models/gpu/device_run.sh TND OUT BUDGET_S
 set -u
 tnd=$1 out=$2 budget=$3
@@ -28,7 +29,13 @@ objs="--press 0.001,0.015 --min-contact 0.004"
 # 2026-11-26, session 9) + the built-in set (a quarter of the draws); inflation drawn
 # per pair in 27-33 mm.
 # OBJECT_SEED / PAIR_SEED draw fresh training objects and pairs for a continued run (session 15: 3 / 43).
-"$tnd" objects generate "$w/objects" --count 6000 --seed "${OBJECT_SEED:-2}" >> "$out/gen.log" 2>&1
+# TRAIN_MESHES: the real-mesh training set (fetch_real_meshes.py --set train, imported with --fit 0.05 --split seen,
+# packed with `tar -cJf .dev/train_meshes.tar.xz -C data train_meshes`), mixed in at MESH_SHARE of the pairs.
+include=()
+if [ -n "${TRAIN_MESHES:-}" ]; then
+    tar -xJf "$TRAIN_MESHES" -C "$w" && include=(--include "$w/train_meshes=${MESH_SHARE:-0.3}")
+fi
+"$tnd" objects generate "$w/objects" --count 6000 --seed "${OBJECT_SEED:-2}" "${include[@]}" >> "$out/gen.log" 2>&1
 echo "data ready to stream after $(( $(date +%s) - t0 )) s" >> "$out/gen.log"
 # INFLATION= (empty) keeps every pair at the sensor's nominal inflation.
 inflation=${INFLATION-0.027,0.033}
@@ -42,7 +49,7 @@ pa= pb=
 if [ "$models" != b ]; then
     python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" --init "$here/../default.safetensors" \
         --out "$out/a" --deadline-s "$left" --lr 2e-4 --seed 1 --batch "${BATCH:-256}" --capacity 300000 \
-        --save-every-s "$save" > "$out/a.out" 2>&1 &
+        --save-every-s "$save" --boundary-weight "${BOUNDARY_WEIGHT:-0}" > "$out/a.out" 2>&1 &
     pa=$!
 fi
 if [ "$models" != a ]; then
@@ -50,7 +57,7 @@ if [ "$models" != a ]; then
     if [ -n "${B_INIT:-}" ]; then start=(--init "$B_INIT"); else start=(--config "$here/wide_config.json"); fi
     python3 "$here/train_torch.py" --data "$w/train" --val-data "$w/val" "${start[@]}" \
         --out "$out/b" --deadline-s "$left" --lr "${LR_B:-3e-4}" --seed 2 --batch "${BATCH:-256}" --capacity 300000 \
-        --save-every-s "$save" > "$out/b.out" 2>&1 &
+        --save-every-s "$save" --boundary-weight "${BOUNDARY_WEIGHT:-0}" > "$out/b.out" 2>&1 &
     pb=$!
 fi
 wait $pa $pb
