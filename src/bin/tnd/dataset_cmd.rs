@@ -169,6 +169,30 @@ fn finish(b: &Mutex<kdam::Bar>) {
     }
 }
 
+/// Ctrl-C or `kill` (SIGINT, SIGTERM) during generation: say that the same command resumes, then exit as the signal
+/// would (status 130 / 143). Every file is written atomically and each finished chunk is recorded, so stopping at
+/// any instant is as safe as `kill -9`.
+fn say_how_to_resume_when_interrupted() {
+    #[cfg(unix)]
+    {
+        extern "C" fn on_signal(signal: libc::c_int) {
+            const MESSAGE: &[u8] =
+                b"\ninterrupted: finished chunks are kept; run the same command again to resume\n";
+            // SAFETY: write(2) and _exit(2) are async-signal-safe; MESSAGE is a static buffer.
+            unsafe {
+                libc::write(2, MESSAGE.as_ptr().cast(), MESSAGE.len());
+                libc::_exit(128 + signal);
+            }
+        }
+        for signal in [libc::SIGINT, libc::SIGTERM] {
+            // SAFETY: installs a handler that only calls async-signal-safe functions.
+            unsafe {
+                libc::signal(signal, on_signal as *const () as libc::sighandler_t);
+            }
+        }
+    }
+}
+
 fn gen(a: GenArgs) -> Result<()> {
     let pair = |flag: &str, s: &str, example: &str| {
         s.split_once(',')
@@ -208,6 +232,7 @@ fn gen(a: GenArgs) -> Result<()> {
         .num_threads(a.threads.unwrap_or(0))
         .build()?;
     let pb = bar(config.pairs, "gen")?;
+    say_how_to_resume_when_interrupted();
     let report = pool.install(|| dataset::generate(&a.out, &sim, &set, &config, &|n| tick(&pb, n)));
     finish(&pb);
     let report = report?;
