@@ -491,6 +491,13 @@ impl WorkbenchApp {
             && !dataset_loading
             && self.sim.is_some()
             && self.frames > 4;
+        // A load or simulation that failed is as ready as the window gets: save at once, naming the error shown.
+        let failed = (!self.busy()
+            && !dataset_loading
+            && (self.sim.is_none() || self.sim_failed_for_latest())
+            && self.frames > 4)
+            .then(|| self.errors.last().cloned())
+            .flatten();
         let Some(job) = &mut self.screenshot else {
             return;
         };
@@ -506,8 +513,8 @@ impl WorkbenchApp {
         } else {
             SCREENSHOT_LIMIT_S
         };
-        let timed_out = !ready && job.started.elapsed().as_secs() > limit_s;
-        if !job.requested && (ready || timed_out) {
+        let timed_out = !ready && failed.is_none() && job.started.elapsed().as_secs() > limit_s;
+        if !job.requested && (ready || failed.is_some() || timed_out) {
             job.requested = true;
             let out = job.out.clone();
             let slot = job.result.clone();
@@ -515,7 +522,9 @@ impl WorkbenchApp {
             ctx.request_screenshot(move |image| {
                 // Saved either way; a window that never got ready is an error (exit status 1) naming the wait.
                 let saved = save_color_image(&out, &image).and_then(|()| {
-                    if timed_out {
+                    if let Some(error) = &failed {
+                        Err(format!("saved; the workbench shows an error: {error}"))
+                    } else if timed_out {
                         Err(format!(
                             "saved after waiting {limit_s} s, before the workbench was ready (a run or a load \
                              still going); the image shows it unfinished"
