@@ -172,7 +172,7 @@ pub fn generate(
     set.export(&out.join(OBJECTS_DIR))?;
     if let Some((name, bytes)) = &membrane {
         crate::io::write_atomic(&out.join(name), bytes)
-            .map_err(|e| DatasetError::io(&out.join(name), e))?;
+            .map_err(|e| DatasetError::io(out.join(name), e))?;
     }
     state.save(&out.join(PROGRESS_FILE))?;
     remove_all_stale_temp_files(out)?;
