@@ -33,9 +33,10 @@ pub struct SampleArgs {
     pub sensor: super::args::SensorArgs,
     #[command(flatten)]
     pub derender: DerenderConfig,
-    /// Size of the grid figure (grid.svg, grid.png), pixels WxH.
-    #[arg(long, default_value = "2400x3000", value_parser = super::args::parse_figure_size)]
-    pub figure_size: FigureConfig,
+    /// Size of the grid figure (grid.svg, grid.png), pixels WxH (default: 2400 wide, as tall as its rows of four
+    /// panels need).
+    #[arg(long, value_parser = super::args::parse_figure_size)]
+    pub figure_size: Option<FigureConfig>,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
@@ -96,7 +97,12 @@ pub fn run(a: SampleArgs) -> Result<()> {
         &out.contact_probability,
     )?;
     let figure = grid(&imprint, &out, a.derender.seed);
-    write_figure(&a.out, "grid", &a.figure_size, &figure)?;
+    // Square images of ~350 px in cells 600 px wide (the colour bar beside them) with their titles: 460 px a row.
+    let size = a.figure_size.unwrap_or(FigureConfig {
+        width_px: 2400,
+        height_px: (90 + 460 * figure.panels.len().div_ceil(figure.columns)) as u32,
+    });
+    write_figure(&a.out, "grid", &size, &figure)?;
     if let Some(log) = &rrd {
         use crate::rerun_out::camera_views;
         let k = tactile_derender::sim::SimConfig::default()
@@ -140,11 +146,17 @@ fn grid<'a>(imprint: &'a Image, out: &'a pipeline::Derendered, seed: u64) -> Ima
         zero_is_missing: zero_missing,
         ..PanelStyle::default()
     };
-    // The in-contact depths of the samples (pixels deeper than the model's no-contact cut).
-    let range = out
+    // The in-contact depths of the samples (decoded no contact is 0), 2nd to 98th percentile: a few stray edge
+    // pixels would otherwise stretch the colour bar until the contact is one flat colour.
+    let mut depths: Vec<f32> = out
         .samples
-        .first()
-        .and_then(|s| s.range_where(|v| v > 0.05))
+        .iter()
+        .flat_map(|s| s.data.iter().copied().filter(|&v| v > 0.0))
+        .collect();
+    depths.sort_by(f32::total_cmp);
+    let at = |q: f64| depths[((depths.len() - 1) as f64 * q).round() as usize];
+    let range = (!depths.is_empty())
+        .then(|| (at(0.02), at(0.98)))
         .filter(|(lo, hi)| hi > lo);
     let mut panels = vec![
         (imprint, style("imprint Y".into(), false)),
