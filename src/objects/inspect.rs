@@ -20,7 +20,7 @@ use crate::mesh::{self, LoadOptions, Mesh, Units};
 pub const PLAUSIBLE_EXTENT_M: [f64; 2] = [0.003, 0.5];
 
 /// Whether a largest extent of `m` metres is plausible for a pressed object ([`PLAUSIBLE_EXTENT_M`]).
-fn plausible_extent(m: f64) -> bool {
+pub(crate) fn plausible_extent(m: f64) -> bool {
     (PLAUSIBLE_EXTENT_M[0]..=PLAUSIBLE_EXTENT_M[1]).contains(&m)
 }
 

@@ -258,9 +258,7 @@ impl ObjectSet {
                 })?;
                 let (lo, hi) = mesh.aabb();
                 let largest = f64::from((hi - lo).max_element());
-                if !(super::inspect::PLAUSIBLE_EXTENT_M[0]..=super::inspect::PLAUSIBLE_EXTENT_M[1])
-                    .contains(&largest)
-                {
+                if !super::inspect::plausible_extent(largest) {
                     // As `tnd objects import` refuses such a file, and `tnd sim` such a mesh given by path.
                     return Err(ObjectError::BadEntry {
                         path: dir.join(super::MANIFEST_FILE),

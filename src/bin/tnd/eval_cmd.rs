@@ -21,7 +21,7 @@ use tactile_derender::metrics::saved_samples::save_samples;
 use tactile_derender::metrics::sources::DatasetSource;
 
 use crate::eval_tables::{breakdown_tables, markdown_table};
-use tactile_derender::model::{DiffusionModel, GuidanceConfig, SamplerConfig};
+use tactile_derender::model::{DiffusionModel, GuidanceConfig, SamplerConfig, TactileConfig};
 use tactile_derender::pose::signature_check::SignatureCheckConfig;
 use tactile_derender::pose::threshold_contact;
 use tactile_derender::uncertainty::analysis::{analyse, Signature};
@@ -114,44 +114,44 @@ pub struct EvalArgs {
     pub rerun: crate::rerun_out::RerunArgs,
 }
 
-/// The generator named by `--model`.
+/// The generator named by `--model`, with the model's own depth mapping (none for the ground truth).
 pub fn generator(
     model: &str,
     sampler: &SamplerConfig,
     guidance: &GuidanceConfig,
-) -> Result<Box<dyn Generator>> {
+) -> Result<(Box<dyn Generator>, Option<TactileConfig>)> {
     if model == "ground-truth" {
-        return Ok(Box::new(GroundTruthGenerator));
+        return Ok((Box::new(GroundTruthGenerator), None));
     }
     sampler.validate(None).map_err(anyhow::Error::msg)?;
     guidance.validate().map_err(anyhow::Error::msg)?;
     let model = DiffusionModel::load(Path::new(model))?;
-    Ok(Box::new(ModelGenerator {
+    let mapping = model.config().tactile_derender.clone();
+    let gen = ModelGenerator {
         model,
         sampler: sampler.sampler_kind(),
         guidance: *guidance,
-    }))
+    };
+    Ok((Box::new(gen), Some(mapping)))
 }
 
 /// A warning when the dataset's in-contact depths (sampled from the first evaluated split with pairs) lie outside
 /// what the model represents, e.g. a model trained for another sensor: its samples would decode wrongly.
 fn warn_if_the_model_does_not_fit(
     model: &str,
+    mapping: Option<&TactileConfig>,
     data: &Path,
     dataset: &Dataset,
     splits: &[SplitName],
 ) -> Result<()> {
-    if model == "ground-truth" {
+    let Some(mapping) = mapping else {
         return Ok(());
-    }
-    let cfg = tactile_derender::model::checkpoint::locate(Path::new(model))?.1;
+    };
     let Some(&split) = splits.iter().find(|&&s| dataset.len(s) > 0) else {
         return Ok(());
     };
     let range = tactile_derender::dataset::stats::target_range_sample(dataset, split, 64)?;
-    if let Some(problem) =
-        range.and_then(|[lo, hi]| cfg.tactile_derender.contact_range_problem(lo, hi))
-    {
+    if let Some(problem) = range.and_then(|[lo, hi]| mapping.contact_range_problem(lo, hi)) {
         eprintln!(
             "warning: {}: the model {model} does not fit this dataset's sensor: {problem}; its depths and poses will \
              be wrong (a model trained on this sensor's data, `tnd train --data {}`, fits it)",
@@ -206,9 +206,15 @@ pub fn run(a: EvalArgs) -> Result<()> {
         .data
         .as_deref()
         .ok_or_else(|| anyhow!("--data DIR is needed (or --tables-from FILE)"))?;
-    let gen = generator(&a.model, &a.sampler, &a.guidance)?;
+    let (gen, mapping) = generator(&a.model, &a.sampler, &a.guidance)?;
     let dataset = Dataset::open(data)?;
-    warn_if_the_model_does_not_fit(&a.model, data, &dataset, &splits(&a.split)?)?;
+    warn_if_the_model_does_not_fit(
+        &a.model,
+        mapping.as_ref(),
+        data,
+        &dataset,
+        &splits(&a.split)?,
+    )?;
     let mut paper = Vec::new();
     let evaluator = Evaluator::new(EvalConfig {
         pose_samples: a.pose_samples.max(1),
