@@ -3,6 +3,11 @@
 //! simulated with the calibrated sensor model, so a real press sequence becomes pairs for fine-tuning and
 //! evaluation (`tnd dataset import --from REC.mcap`).
 //!
+//! First, unless told not to, the sensor is calibrated from the recording's no-contact frames
+//! ([`crate::recording::calibrate`]: membrane inflation and footprint, camera position, noise), and the calibrated
+//! sensor makes X0 and the press estimate and is stored with the dataset, so that evaluation (guidance, anchoring,
+//! the signature check, free space) uses the sensor that made the recording, not its nominal model.
+//!
 //! Per frame: the imprint Y = R − S from [`crate::recording::process`]; frames with less contact than
 //! `min_contact_px` (the no-contact part of a press) are skipped; the pose is the pose message nearest in time (within
 //! `max_pose_gap_s`) or the CSV row of the frame. The press depth comes from the CSV's `press` column, or, when no
@@ -24,6 +29,7 @@ use super::shard::Record;
 use super::{DatasetError, SplitName};
 use crate::image::Image;
 use crate::objects::ObjectSet;
+use crate::recording::calibrate::{calibrate, CalibrateConfig, SensorCalibration};
 use crate::recording::source::{nearest_stamp, DEFAULT_MAX_POSE_GAP_S};
 use crate::recording::{self, FolderOptions, ProcessConfig, Recording};
 use crate::sensor::{Scene, Se2};
@@ -64,6 +70,15 @@ pub struct RecordingImportConfig {
     pub split: Option<SplitName>,
     /// Seed of the automatic 9:1 split.
     pub seed: u64,
+    /// Calibrate the sensor from the recording's no-contact frames first ([`crate::recording::calibrate`]) and use
+    /// the calibrated sensor for X0, the press estimate and the dataset (default true); when the frames do not allow
+    /// it (no frame without contact), the given sensor is used and the report says why.
+    #[serde(default = "yes")]
+    pub calibrate: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 impl RecordingImportConfig {
@@ -81,6 +96,7 @@ impl RecordingImportConfig {
             max_press_m: DEFAULT_MAX_PRESS_M,
             split: None,
             seed: 0,
+            calibrate: true,
         }
     }
 }
@@ -98,6 +114,10 @@ pub struct RecordingImportReport {
     pub press_estimated: usize,
     /// Mean absolute imprint difference at the estimated presses, metres.
     pub press_fit_residual_m: f64,
+    /// The sensor calibration the pairs were made with (`None`: not asked for, or not possible).
+    pub calibration: Option<SensorCalibration>,
+    /// Why a calibration that was asked for could not be made (the given sensor was used).
+    pub calibration_failed: Option<String>,
 }
 
 /// One frame's known pose.
@@ -154,6 +174,12 @@ pub fn import_recording(
     refuse_unless_interrupted_import(out)?;
     let rec = Recording::open(from, &config.folder)?;
     let stream = rec.depth_stream(config.topic.as_deref())?.clone();
+    let (calibration, calibration_failed) = if config.calibrate {
+        calibrate_or_explain(&rec, &stream, sim_config, &config.process, progress)?
+    } else {
+        (None, None)
+    };
+    let sim_config = calibration.as_ref().map_or(sim_config, |c| &c.sensor);
     let processed =
         recording::process(&rec, &stream, &sim_config.camera, &config.process, progress)?;
     let poses = frame_poses(
@@ -243,7 +269,30 @@ pub fn import_recording(
         } else {
             residuals.iter().sum::<f64>() / residuals.len() as f64
         },
+        calibration,
+        calibration_failed,
     })
+}
+
+/// The sensor calibrated from the recording's no-contact frames, or why it could not be (then the given sensor is
+/// used); a cancel is passed on.
+#[allow(clippy::type_complexity)]
+pub fn calibrate_or_explain(
+    rec: &Recording,
+    stream: &recording::StreamInfo,
+    given: &SimConfig,
+    process: &ProcessConfig,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+) -> Result<(Option<SensorCalibration>, Option<String>), recording::RecordingError> {
+    let config = CalibrateConfig {
+        reference: process.reference,
+        ..CalibrateConfig::default()
+    };
+    match calibrate(rec, stream, given, &config, progress) {
+        Ok((cal, _)) => Ok((Some(cal), None)),
+        Err(recording::RecordingError::Cancelled) => Err(recording::RecordingError::Cancelled),
+        Err(e) => Ok((None, Some(e.to_string()))),
+    }
 }
 
 /// The known pose of every frame of `rec` stamped `stamps_ns` (`None` where none is known): the pose message or

@@ -9,11 +9,13 @@
 //! | [`decode`] | depth images from those messages (16UC1 mm, 32FC1 m, projected clouds) |
 //! | [`source`] | opening an MCAP file or a frame folder, listing streams, reading a frame |
 //! | [`process`] | reference detection, imprint and contact area per frame |
+//! | [`calibrate`] | the sensor (membrane, camera position, noise) fitted to the no-contact frames |
 //! | [`synth`] | writing a simulated press sequence as an MCAP recording (demos and tests) |
 //!
 //! Turning a recording into scored pairs (X0 simulated from a known object pose) is
 //! [`crate::dataset::import_recording`].
 
+pub mod calibrate;
 pub mod decode;
 pub mod process;
 pub mod ros;

@@ -5,7 +5,9 @@
 //! Reference detection (`ReferenceChoice::Auto`): the frame whose mean depth is largest (nothing pushes the membrane
 //! towards the camera) is a first reference; the frames whose imprint against it, averaged over 5 x 5 pixel windows
 //! (which divides per-pixel noise by 5), stays under `quiet_threshold_m` everywhere are the quiet frames, and R is the
-//! per-pixel median of up to `quiet_frames` of them, spread over the recording, which lowers R's noise.
+//! per-pixel median of up to `quiet_frames` of them, spread over the recording, which lowers R's noise. For a noisy
+//! sensor the threshold rises to five times the noise of such a window mean, measured on the recording itself
+//! ([`window_noise`]).
 
 use serde::{Deserialize, Serialize};
 
@@ -212,8 +214,9 @@ pub fn process(
     })
 }
 
-/// Largest mean of `y` over the (2·radius+1)² windows around each pixel (pixels that are 0 in `y` count as 0).
-fn box_max(y: &Image, radius: usize) -> f64 {
+/// Mean of `y` over the (2·radius+1)² window around each pixel, clipped to the image (pixels that are 0 in `y`
+/// count as 0), row-major.
+pub(crate) fn box_means(y: &Image, radius: usize) -> Vec<f64> {
     let (w, h) = (y.width, y.height);
     // Summed-area table.
     let mut sat = vec![0.0f64; (w + 1) * (h + 1)];
@@ -224,30 +227,85 @@ fn box_max(y: &Image, radius: usize) -> f64 {
             sat[(v + 1) * (w + 1) + u + 1] = sat[v * (w + 1) + u + 1] + row;
         }
     }
-    let mut best = f64::NEG_INFINITY;
+    let mut out = Vec::with_capacity(w * h);
     for v in 0..h {
         let (v0, v1) = (v.saturating_sub(radius), (v + radius + 1).min(h));
         for u in 0..w {
             let (u0, u1) = (u.saturating_sub(radius), (u + radius + 1).min(w));
             let sum = sat[v1 * (w + 1) + u1] - sat[v0 * (w + 1) + u1] - sat[v1 * (w + 1) + u0]
                 + sat[v0 * (w + 1) + u0];
-            best = best.max(sum / ((v1 - v0) * (u1 - u0)) as f64);
+            out.push(sum / ((v1 - v0) * (u1 - u0)) as f64);
         }
     }
-    best
+    out
 }
 
-/// The frames an automatic reference is made of (see the module docs).
-fn quiet_frames(signatures: &[Image], config: &ProcessConfig) -> Vec<usize> {
+/// Largest mean of `y` over the (2·radius+1)² windows around each pixel.
+#[cfg(test)]
+fn box_max(y: &Image, radius: usize) -> f64 {
+    box_means(y, radius)
+        .into_iter()
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Median of `x` (reordered); 0 for an empty slice.
+fn median_of(x: &mut [f64]) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    let m = x.len() / 2;
+    let (_, &mut v, _) = x.select_nth_unstable_by(m, f64::total_cmp);
+    v
+}
+
+/// The noise of a 5 x 5-window mean of the difference of two frames, metres: for each window, the robust spread
+/// (1.4826 × median absolute value) of that window's mean over the differences of successive frames, and the median
+/// of those over the windows. A window is still or only noisy in most frame pairs (contact moves in a few), so
+/// neither a large contact nor a recording that is mostly contact inflates it. `None` with fewer than two frames.
+pub fn window_noise(signatures: &[Image]) -> Option<f64> {
+    if signatures.len() < 2 {
+        return None;
+    }
+    let diffs: Vec<Vec<f64>> = signatures
+        .windows(2)
+        .map(|p| box_means(&imprint(&p[0], &p[1]), 2))
+        .collect();
+    let windows = diffs[0].len();
+    let mut per_window = Vec::with_capacity(windows);
+    let mut column = Vec::with_capacity(diffs.len());
+    for w in 0..windows {
+        column.clear();
+        column.extend(diffs.iter().map(|d| d[w].abs()));
+        per_window.push(1.4826 * median_of(&mut column));
+    }
+    Some(median_of(&mut per_window))
+}
+
+/// Whether the imprint `y` of a frame against a no-contact frame shows no contact: its largest 5 x 5-window mean
+/// stays under `threshold`, or under five times `window_noise` (what the noise of two frames gives such a mean,
+/// [`window_noise`]), so that a noisy sensor's frames without contact are still found.
+fn is_quiet(y: &Image, threshold: f64, window_noise: f64) -> bool {
+    let max = box_means(y, 2)
+        .into_iter()
+        .fold(f64::NEG_INFINITY, f64::max);
+    max <= threshold.max(5.0 * window_noise)
+}
+
+/// The frames an automatic reference is made of (see the module docs; a frame is quiet as [`is_quiet`] says).
+pub fn quiet_frames(signatures: &[Image], config: &ProcessConfig) -> Vec<usize> {
+    if signatures.is_empty() {
+        return Vec::new();
+    }
     let means: Vec<f64> = signatures.iter().map(mean_valid).collect();
     let first = (0..signatures.len())
         .max_by(|&a, &b| means[a].total_cmp(&means[b]))
         .unwrap_or(0);
     let r = &signatures[first];
+    let noise = window_noise(signatures).unwrap_or(0.0);
     let quiet: Vec<usize> = signatures
         .iter()
         .enumerate()
-        .filter(|(_, s)| box_max(&imprint(r, s), 2) <= config.quiet_threshold_m)
+        .filter(|(_, s)| is_quiet(&imprint(r, s), config.quiet_threshold_m, noise))
         .map(|(i, _)| i)
         .collect();
     let k = config.quiet_frames.max(1);

@@ -86,8 +86,8 @@ pub fn write_press_recording(
         .map_err(mcap_err)?;
     let no_meta = BTreeMap::new();
     let (schema_name, schema_text) = match seq.encoding {
-        DepthEncoding::Cloud => ("sensor_msgs/msg/PointCloud2", POINT_CLOUD_SCHEMA),
-        _ => ("sensor_msgs/msg/Image", IMAGE_SCHEMA),
+        DepthEncoding::Cloud => ("sensor_msgs/msg/PointCloud2", point_cloud_schema()),
+        _ => ("sensor_msgs/msg/Image", image_schema()),
     };
     let depth_schema = w
         .add_schema(schema_name, "ros2msg", schema_text.as_bytes())
@@ -101,7 +101,7 @@ pub fn write_press_recording(
                 .add_schema(
                     "geometry_msgs/msg/PoseStamped",
                     "ros2msg",
-                    POSE_SCHEMA.as_bytes(),
+                    pose_stamped_schema().as_bytes(),
                 )
                 .map_err(mcap_err)?;
             Some(w.add_channel(s, topic, "cdr", &no_meta).map_err(mcap_err)?)
@@ -214,6 +214,54 @@ fn millimetres(d: f32) -> u16 {
     }
 }
 
-const IMAGE_SCHEMA: &str = "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n";
-const POINT_CLOUD_SCHEMA: &str = "std_msgs/Header header\nuint32 height\nuint32 width\nsensor_msgs/PointField[] fields\nbool is_bigendian\nuint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense\n";
-const POSE_SCHEMA: &str = "std_msgs/Header header\ngeometry_msgs/Pose pose\n";
+/// The `ros2msg` definitions of the messages we write, each followed by every message type it uses (separated as
+/// `ros2 bag` and the MCAP ROS 2 tools write them), so that a decoder that knows no ROS types can read them
+/// (mcap-ros2-support refuses a definition that leaves out `std_msgs/Header` and the like).
+const SEPARATOR: &str =
+    "================================================================================\n";
+const HEADER_DEPS: &str = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n";
+const TIME_DEPS: &str = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n";
+
+fn with_deps(fields: &str, deps: &[&str]) -> String {
+    let mut s = fields.to_string();
+    for d in deps {
+        s.push_str(SEPARATOR);
+        s.push_str(d);
+    }
+    s
+}
+
+/// `sensor_msgs/msg/Image`.
+pub fn image_schema() -> String {
+    with_deps(
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n",
+        &[HEADER_DEPS, TIME_DEPS],
+    )
+}
+
+/// `sensor_msgs/msg/PointCloud2`.
+pub fn point_cloud_schema() -> String {
+    with_deps(
+        "std_msgs/Header header\nuint32 height\nuint32 width\nsensor_msgs/PointField[] fields\nbool is_bigendian\n\
+         uint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense\n",
+        &[
+            HEADER_DEPS,
+            TIME_DEPS,
+            "MSG: sensor_msgs/PointField\nstring name\nuint32 offset\nuint8 datatype\nuint32 count\n",
+        ],
+    )
+}
+
+/// `geometry_msgs/msg/PoseStamped`.
+pub fn pose_stamped_schema() -> String {
+    with_deps(
+        "std_msgs/Header header\ngeometry_msgs/Pose pose\n",
+        &[
+            HEADER_DEPS,
+            TIME_DEPS,
+            "MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n",
+            "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n",
+            "MSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n",
+        ],
+    )
+}

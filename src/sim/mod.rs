@@ -3,12 +3,13 @@
 //! Stages, one module each: [`render`] (1. object depth rendering, and the elastomer's nominal depth E),
 //! [`contact`] (2. depth projection to 3D, 3. signed distance to the elastomer, 4. contact mask and in-contact depth),
 //! [`shadows`] (tactile-shadow cloak) and [`signature`] (noise, reference, imprint); [`calibration`] sweeps the
-//! membrane's inflation against a measurement. [`Simulator`] runs them in order
+//! membrane's inflation against a measurement; [`sensor_file`] reads and writes a whole sensor as JSON. [`Simulator`] runs them in order
 //! for one scene; everything that depends only on the sensor (membrane BVH and SDF, E) is built once.
 
 pub mod calibration;
 pub mod contact;
 pub mod render;
+pub mod sensor_file;
 pub mod shadows;
 pub mod signature;
 

@@ -355,10 +355,16 @@ impl WorkbenchApp {
                     JobKind::Track if self.recording.track.running => {
                         self.recording.track.progress = Some((done, total))
                     }
+                    JobKind::SensorCalibration if self.recording.sensor_calibration.running => {
+                        self.recording.sensor_calibration.progress = Some((done, total))
+                    }
                     _ => {}
                 },
                 WorkerMsg::Dataset(msg) => self.dataset_message(ctx, msg),
                 WorkerMsg::Recording(msg) => self.recording_message(msg),
+                WorkerMsg::SensorCalibrated { generation, result } => {
+                    self.sensor_calibrated(generation, result)
+                }
                 WorkerMsg::Track(msg) => self.track_message(msg),
                 WorkerMsg::Derendered(result) => self.derendered(ctx, result),
                 WorkerMsg::Posed {
@@ -395,6 +401,15 @@ impl WorkbenchApp {
                         JobKind::Track => {
                             self.recording.track.running = false;
                             self.recording.track.cancel = None;
+                        }
+                        JobKind::SensorCalibration
+                            if generation != self.recording.sensor_calibration.generation =>
+                        {
+                            continue
+                        }
+                        JobKind::SensorCalibration => {
+                            self.recording.sensor_calibration.running = false;
+                            self.recording.sensor_calibration.cancel = None;
                         }
                         JobKind::Pose if generation != self.analysis.pose.generation => continue,
                         JobKind::Pose => {

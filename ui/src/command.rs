@@ -100,6 +100,10 @@ pub enum Command {
     TrackRecording,
     /// Stop the track.
     CancelTrack,
+    /// Fit the sensor (membrane, camera position, noise) to the recording's no-contact frames and use it.
+    CalibrateSensor,
+    /// Stop the sensor calibration.
+    CancelSensorCalibration,
     /// Write the track as a CSV file beside the recording.
     SaveTrack,
     /// Show an analysis image enlarged in its own window (`None`: close it).
@@ -283,6 +287,11 @@ impl WorkbenchApp {
                 self.report("track", r);
             }
             Command::CancelTrack => self.cancel_track(),
+            Command::CalibrateSensor => {
+                let r = self.calibrate_sensor();
+                self.report("sensor calibration", r);
+            }
+            Command::CancelSensorCalibration => self.cancel_sensor_calibration(),
             Command::SaveTrack => match self.save_track() {
                 Ok(path) => self.notice = Some(format!("track saved as {}", path.display())),
                 Err(e) => self.error(format!("track: {e}")),

@@ -19,6 +19,7 @@ pub mod panels;
 pub mod pose_job;
 pub mod pose_view;
 pub mod recording_view;
+pub mod sensor_calibration;
 pub mod session;
 pub mod shortcuts;
 pub mod state;

@@ -77,6 +77,8 @@ pub struct RecordingView {
     pub textures: Option<FrameTextures>,
     /// The pose on every contact frame.
     pub track: crate::track_view::TrackView,
+    /// The sensor fitted to the recording's no-contact frames.
+    pub sensor_calibration: crate::sensor_calibration::SensorCalibrationView,
 }
 
 /// Colour range of imprints, metres.
@@ -175,8 +177,9 @@ impl crate::app::WorkbenchApp {
             self.inputs.recording_path = p.display().to_string();
         }
         self.cancel_recording();
-        // A track belongs to the frames it was made of.
+        // A track belongs to the frames it was made of; so does a calibration being made.
         self.cancel_track();
+        self.cancel_sensor_calibration();
         let view = &mut self.recording;
         view.generation += 1;
         view.loading = true;

@@ -30,6 +30,8 @@ pub enum JobKind {
     Recording,
     /// Tracking a recording's frames.
     Track,
+    /// Fitting the sensor to a recording's no-contact frames.
+    SensorCalibration,
 }
 
 /// What a file dialog was opened for; its answer comes back with it.
@@ -69,6 +71,11 @@ pub enum WorkerMsg {
     Dataset(crate::dataset_view::DatasetMsg),
     /// A loaded recording.
     Recording(crate::recording_view::RecordingMsg),
+    /// A finished sensor calibration.
+    SensorCalibrated {
+        generation: u64,
+        result: Box<crate::sensor_calibration::CalibrationResult>,
+    },
     /// A tracked frame of a recording, or the end of the track.
     Track(crate::track_view::TrackMsg),
     /// A finished de-rendering run.
@@ -399,6 +406,11 @@ impl JobKind {
             JobKind::Pose => ("pose", "tnd-pose", "registration panicked"),
             JobKind::Recording => ("recording", "tnd-recording", "reading panicked"),
             JobKind::Track => ("track", "tnd-track", "tracking panicked"),
+            JobKind::SensorCalibration => (
+                "sensor calibration",
+                "tnd-sensor-calibration",
+                "the calibration panicked",
+            ),
         }
     }
 }

@@ -231,3 +231,45 @@ fn a_frame_without_a_recorded_pose_is_registered_at_the_press_its_samples_say() 
         .query_by_label_contains("found from the samples")
         .is_some());
 }
+
+#[test]
+fn one_button_calibrates_the_sensor_from_the_recording_and_every_tab_uses_it() {
+    // Independent truth: the sensor the recording was simulated with (inflated 2.5 mm over the nominal membrane,
+    // noisier); the session starts from the nominal sensor and is never told.
+    let dir = tempfile::tempdir().unwrap();
+    let mut truth = State::default().sim;
+    truth.elastomer.inflation = 0.0325;
+    truth.signature.noise_std = 0.002;
+    let rec = dir.path().join("drift.mcap");
+    let object = PreparedObject::new(ObjectSet::builtin().mesh(OBJECT).unwrap()).unwrap();
+    write_press_recording(&rec, &truth, &object, &sequence()).unwrap();
+    let mut state = State::default();
+    state.recording.path = Some(rec);
+    state.view.tab = Tab::Recording;
+    let mut h = harness(WorkbenchApp::with_state(state));
+    h.run_ok();
+    wait_for(&mut h, "the recording", |a| a.recording.loaded.is_some());
+    h.get_by_label("Calibrate sensor from this recording")
+        .click();
+    h.run_ok();
+    wait_for(&mut h, "the calibration", |a| {
+        !a.recording.sensor_calibration.running
+    });
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    // The session's sensor is the calibrated one: the simulation, de-rendering, pose and track use it.
+    let sim = &h.state().state.sim;
+    assert!((sim.elastomer.inflation - 0.0325).abs() < 3e-4, "{sim:?}");
+    assert!((sim.signature.noise_std - 0.002).abs() < 2e-4, "{sim:?}");
+    // The fit is shown: what changed and the residual, beside the three images.
+    assert!(h
+        .query_by_label_contains("elastomer.inflation: 32.")
+        .is_some());
+    assert!(h
+        .query_by_label_contains("membrane residual: RMS")
+        .is_some());
+    assert!(h.query_by_label("measured - calibrated").is_some());
+    // Undo restores the sensor it replaced.
+    h.state_mut().apply(tnd_workbench::command::Command::Undo);
+    h.run_ok();
+    assert_eq!(h.state().state.sim, State::default().sim);
+}

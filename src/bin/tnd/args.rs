@@ -59,10 +59,14 @@ pub fn parse_pose(flag: &str, text: &str) -> Result<tactile_derender::sensor::Se
     ))
 }
 
-/// Sensor, elastomer and signature options: overrides of the library's [`SimConfig`], whose defaults (the Soft
-/// Bubble of the paper) apply to every option left out.
+/// Sensor, elastomer and signature options: overrides of a sensor file (`--sensor`) or of the library's
+/// [`SimConfig`], whose defaults (the Soft Bubble of the paper) apply to every option left out.
 #[derive(Args, Clone, Debug)]
 pub struct SensorArgs {
+    /// A sensor file (JSON, e.g. written by `tnd calibrate --out`): the sensor the options below start from, instead
+    /// of the nominal Soft Bubble.
+    #[arg(long, value_name = "FILE")]
+    pub sensor: Option<PathBuf>,
     /// Rendered (model) resolution WxH, multiples of 8 (default 64x64).
     #[arg(long)]
     pub resolution: Option<String>,
@@ -92,7 +96,10 @@ pub struct SensorArgs {
 impl SensorArgs {
     /// The simulator configuration these options describe.
     pub fn sim_config(&self) -> Result<SimConfig> {
-        let mut cfg = SimConfig::default();
+        let mut cfg = match &self.sensor {
+            Some(path) => tactile_derender::sim::sensor_file::load(path)?,
+            None => SimConfig::default(),
+        };
         if let Some(r) = &self.resolution {
             cfg.camera.resolution = parse_resolution(r).map_err(|e| anyhow!(e))?;
         }

@@ -137,6 +137,10 @@ pub struct ImportArgs {
     /// Recordings: frames with fewer contact pixels (imprint over --contact-threshold) are skipped.
     #[arg(long, default_value_t = 10)]
     pub min_contact_px: usize,
+    /// Recordings: use the given sensor as it is, instead of calibrating it from the recording's no-contact frames
+    /// (membrane inflation and footprint, camera position, noise; see tnd calibrate).
+    #[arg(long)]
+    pub no_calibrate: bool,
 }
 
 pub fn run(a: DatasetArgs) -> Result<()> {
@@ -317,6 +321,7 @@ fn run_import(a: ImportArgs) -> Result<()> {
     config.min_contact_px = a.min_contact_px;
     config.split = split;
     config.seed = a.seed;
+    config.calibrate = !a.no_calibrate;
     let mut bar = crate::progress::bar("frames", "frame", 0);
     let report = import_recording::import_recording(
         &a.from,
@@ -327,7 +332,13 @@ fn run_import(a: ImportArgs) -> Result<()> {
         &mut crate::progress::callback(&mut bar),
     );
     crate::progress::finish(&mut bar);
-    println!("{}", serde_json::to_string(&report?)?);
+    let report = report?;
+    crate::calibrate_cmd::tell_calibration(
+        &a.from,
+        report.calibration.as_ref(),
+        report.calibration_failed.as_deref(),
+    );
+    println!("{}", serde_json::to_string(&report)?);
     Ok(())
 }
 

@@ -2,6 +2,7 @@
 
 mod args;
 mod bench;
+mod calibrate_cmd;
 mod dataset_cmd;
 mod eval_cmd;
 mod eval_tables;
@@ -51,6 +52,9 @@ enum Command {
     Sample(Box<sample_cmd::SampleArgs>),
     /// Train (or resume, or fine-tune) the conditional DDPM on a dataset.
     Train(Box<train_cmd::TrainArgs>),
+    /// Calibrate the sensor from a recording's no-contact frames: membrane inflation and footprint, camera
+    /// position, depth noise; writes a sensor file for --sensor.
+    Calibrate(Box<calibrate_cmd::CalibrateArgs>),
     /// Real sensor recordings (MCAP, depth-frame folders): topics, reference, contact per frame; simulated ones.
     Recording(recording_cmd::RecordingArgs),
 }
@@ -78,6 +82,7 @@ fn main() -> std::process::ExitCode {
         Command::Objects(a) => objects_cmd::run(a),
         Command::Dataset(a) => dataset_cmd::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Calibrate(a) => calibrate_cmd::run(*a),
         Command::Eval(a) => eval_cmd::run(*a),
         Command::Pose(a) => pose_cmd::run(*a),
         Command::Model(a) => model_cmd::run(a),

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use serde_json::{json, Value};
-use tactile_derender::dataset::import_recording::{frame_poses, PoseSource};
+use tactile_derender::dataset::import_recording::{calibrate_or_explain, frame_poses, PoseSource};
 use tactile_derender::io::write_atomic;
 use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::DiffusionModel;
@@ -57,6 +57,10 @@ pub struct TrackArgs {
     /// Frames with fewer contact pixels (imprint over --contact-threshold) are not tracked.
     #[arg(long, default_value_t = 10)]
     pub min_contact_px: usize,
+    /// Use the given sensor as it is, instead of calibrating it from the recording's no-contact frames (membrane
+    /// inflation and footprint, camera position, noise; see tnd calibrate).
+    #[arg(long)]
+    pub no_calibrate: bool,
     /// Output directory: track.csv (one row per frame) and track.json; a run killed part-way resumes into it.
     #[arg(long)]
     pub out: PathBuf,
@@ -84,7 +88,7 @@ fn settings(a: &TrackArgs, sim: &tactile_derender::sim::SimConfig) -> Value {
         "contact_threshold_m": a.read.contact_threshold, "npy_scale": a.read.npy_scale,
         "png_scale": a.read.png_scale, "fps": a.read.fps,
         "object": object, "model": model, "derender": a.derender, "press": a.press.to_string(),
-        "every": a.every, "min_contact_px": a.min_contact_px, "sim": sim,
+        "every": a.every, "min_contact_px": a.min_contact_px, "sim": sim, "calibrate": !a.no_calibrate,
     })
 }
 
@@ -184,9 +188,29 @@ pub fn run(a: TrackArgs) -> Result<()> {
     if let Some(e) = &earlier {
         check_same(&a.out, e, "settings", &settings, "other settings")?;
     }
-    let sim = Simulator::new(sim_config.clone())?;
     let rec = Recording::open(&a.recording, &a.read.folder())?;
     let stream = rec.depth_stream(a.read.topic.as_deref())?.clone();
+    // The sensor that made the recording, from its no-contact frames, unless told to keep the given one.
+    let calibration = if a.no_calibrate {
+        None
+    } else {
+        let mut bar = progress::bar("calibrating", " frames", 0);
+        let c = calibrate_or_explain(
+            &rec,
+            &stream,
+            &sim_config,
+            &a.read.process(),
+            &mut progress::callback(&mut bar),
+        );
+        progress::finish(&mut bar);
+        let (cal, failed) = c?;
+        crate::calibrate_cmd::tell_calibration(&a.recording, cal.as_ref(), failed.as_deref());
+        cal
+    };
+    let sim_config = calibration
+        .as_ref()
+        .map_or(sim_config, |c| c.sensor.clone());
+    let sim = Simulator::new(sim_config.clone())?;
     let poses = match (&a.poses, &a.pose_topic) {
         (Some(csv), _) => Some(PoseSource::Csv(csv.clone())),
         (None, Some(t)) => Some(PoseSource::Topic(Some(t.clone()))),
@@ -311,6 +335,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
         "press_m": column(|r| r.press_m),
         "press_err_mm": column(|r| r.press_m.zip(r.recorded_press_m).map(|(p, q)| (p - q).abs() * 1e3)),
         "out": a.out.join("track.csv"),
+        "calibration": calibration,
     });
     write_json(
         &a.out,

@@ -154,6 +154,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             cmds.push(Command::DerenderFrame { pose: true });
         }
     });
+    calibration_section(app, ui, cmds);
     if let Some(frame) = track_section(app, ui, cmds, &times) {
         s.frame = frame;
     }
@@ -257,6 +258,98 @@ fn open_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             cmds.push(Command::Browse(DialogPurpose::OpenRecordingFolder));
         }
     });
+}
+
+/// The sensor calibration: one button, its progress, and the fit (what changed, the residual, three images).
+fn calibration_section(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    let view = &app.recording.sensor_calibration;
+    ui.horizontal(|ui| {
+        if view.running {
+            let (done, total) = view.progress.unwrap_or((0, 0));
+            ui.label(format!("calibrating… {done}/{total} frames"));
+            ui.add(
+                egui::ProgressBar::new(if total > 0 {
+                    done as f32 / total as f32
+                } else {
+                    0.0
+                })
+                .desired_width(200.0),
+            );
+            if ui.button("Cancel calibration").clicked() {
+                cmds.push(Command::CancelSensorCalibration);
+            }
+        } else if ui
+            .button("Calibrate sensor from this recording")
+            .on_hover_text(
+                "fit the membrane (inflation, footprint), the camera position and the depth noise to the frames                  without contact, and use the calibrated sensor in every tab (Undo restores the previous one);                  `tnd calibrate --from` does the same",
+            )
+            .clicked()
+        {
+            cmds.push(Command::CalibrateSensor);
+        }
+    });
+    let ctx = ui.ctx().clone();
+    let view = &mut app.recording.sensor_calibration;
+    let Some(result) = &view.result else {
+        return;
+    };
+    let lines = result.calibration.summary_lines();
+    let (measured, fitted, residual) = (
+        result.images.measured.clone(),
+        result.images.fitted.clone(),
+        result.images.residual.clone(),
+    );
+    egui::CollapsingHeader::new("sensor calibration")
+        .default_open(true)
+        .show(ui, |ui| {
+            for line in &lines {
+                if line.starts_with("warning:") {
+                    ui.colored_label(ui.visuals().warn_fg_color, line);
+                } else {
+                    ui.label(line);
+                }
+            }
+            let Some(tex) = view.textures(&ctx) else {
+                return;
+            };
+            let side = ((ui.available_width() - 3.0 * 90.0) / 3.0).clamp(96.0, 320.0);
+            let depth = Scale {
+                range: tex.depth_range,
+                millimetres: true,
+                zero_is_missing: true,
+            };
+            let res = Scale {
+                range: tex.residual_range,
+                millimetres: true,
+                zero_is_missing: false,
+            };
+            ui.horizontal(|ui| {
+                image_card::card(
+                    ui,
+                    "measured reference",
+                    tex.measured.id(),
+                    &measured,
+                    &depth,
+                    side,
+                );
+                image_card::card(
+                    ui,
+                    "calibrated membrane",
+                    tex.fitted.id(),
+                    &fitted,
+                    &depth,
+                    side,
+                );
+                image_card::card(
+                    ui,
+                    "measured - calibrated",
+                    tex.residual.id(),
+                    &residual,
+                    &res,
+                    side,
+                );
+            });
+        });
 }
 
 /// "0-7, 21-26, 28" for a sorted list of frames.

@@ -1,0 +1,746 @@
+//! **Sensor calibration from a recording**: a Soft Bubble is never exactly its nominal model (inflation drifts with
+//! pressure and temperature, the camera sits a little off), and a recording already measures it. Its no-contact
+//! frames (found as [`super::process`] finds them, with the noise-aware threshold) are measurements of the membrane:
+//! their per-pixel mean is the reference R the membrane and camera position are fitted to
+//! ([`crate::sensor::membrane_fit`]), and their spread about that mean is the depth noise σ. Nothing about the
+//! pressed object is needed.
+//!
+//! The result is the given sensor with the fitted inflation, footprint, camera position and noise: a
+//! [`SimConfig`] that every command takes as `--sensor FILE`, plus what changed, the residual of the fit and
+//! warnings where the parametric membrane does not explain the frames.
+
+use serde::{Deserialize, Serialize};
+
+use super::process::{quiet_frames, ProcessConfig, ReferenceChoice};
+use super::source::{Recording, StreamInfo};
+use super::RecordingError;
+use crate::dataset::resample::{self, InputSize};
+use crate::image::Image;
+use crate::sensor::membrane_fit::{self, MembraneFitConfig, MembraneParams};
+use crate::sensor::Intrinsics;
+use crate::sim::{SimConfig, Simulator};
+
+/// Model error (RMS of the residual beyond the noise) above which the calibration warns that the membrane model
+/// does not explain the no-contact frames, metres.
+pub const MODEL_ERROR_WARNING_M: f64 = 3e-4;
+
+/// Settings of a calibration.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CalibrateConfig {
+    /// The no-contact frames: detected (`auto`), or one given frame (then the noise cannot be measured).
+    pub reference: ReferenceChoice,
+    /// Frames read at most, evenly spread over the recording (default 400).
+    pub max_frames: usize,
+    /// 5 x 5-window imprint under which a frame is surely without contact, metres (default 1 mm; frames of a
+    /// noisy sensor are judged against their own noise as well, [`super::process`]).
+    pub quiet_threshold_m: f64,
+    /// What the membrane fit may change.
+    pub fit: MembraneFitConfig,
+}
+
+impl Default for CalibrateConfig {
+    fn default() -> Self {
+        Self {
+            reference: ReferenceChoice::Auto,
+            max_frames: 400,
+            quiet_threshold_m: ProcessConfig::default().quiet_threshold_m,
+            fit: MembraneFitConfig::default(),
+        }
+    }
+}
+
+/// One calibrated setting beside the value it replaced.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Change {
+    /// The setting, as `--sensor` files and the CLI name it (e.g. `elastomer.inflation`).
+    pub setting: String,
+    pub given: f64,
+    pub calibrated: f64,
+    /// One standard error of the calibrated value (0 where not known).
+    pub std_error: f64,
+}
+
+/// What a calibration found. Lengths in metres.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SensorCalibration {
+    /// Inflation height of the membrane's apex above its base.
+    pub inflation_m: f64,
+    /// Footprint length (x) and width (y).
+    pub footprint_m: [f64; 2],
+    /// The camera's optical centre in the sensor frame (z negative: behind the membrane base).
+    pub camera_position_m: [f64; 3],
+    /// Depth noise per pixel of the recorded frames (the sensor's own resolution), with the depth encoding's
+    /// rounding taken out; `None` when fewer than two no-contact frames were found.
+    pub noise_std_m: Option<f64>,
+    /// The same noise at the model's resolution (after the crop and area resampling every imprint goes through).
+    pub noise_std_model_m: Option<f64>,
+    /// Step of the recorded depths when they are rounded (16-bit millimetres: 0.001), else `None`.
+    pub depth_step_m: Option<f64>,
+    /// RMS of the measured reference minus the calibrated membrane's depth, over the pixels the camera measured.
+    pub residual_rms_m: f64,
+    /// Largest absolute residual.
+    pub residual_max_m: f64,
+    /// The RMS residual the noise alone would leave (noise / sqrt(no-contact frames)).
+    pub noise_floor_rms_m: f64,
+    /// The residual's RMS beyond the noise floor (in quadrature): how far the membrane model is from the frames.
+    /// Over [`MODEL_ERROR_WARNING_M`] a warning says so.
+    pub model_error_rms_m: f64,
+    /// Whether the parametric membrane was fitted (false: the sensor's membrane is a mesh file, only checked).
+    pub membrane_fitted: bool,
+    /// Frames in the recording, and how many were read.
+    pub frames: usize,
+    pub frames_read: usize,
+    /// The no-contact frames the calibration used (0-based).
+    pub no_contact_frames: Vec<usize>,
+    /// Size of the recorded frames `[width, height]`.
+    pub frame_size: [usize; 2],
+    /// Every setting the calibration set, beside the given value.
+    pub changes: Vec<Change>,
+    /// Things the user should know (the fit does not explain the frames, too few no-contact frames, ...).
+    pub warnings: Vec<String>,
+    /// The calibrated sensor: the given one with the settings above.
+    pub sensor: SimConfig,
+}
+
+/// The images behind a calibration (for its figure), at the recorded frames' resolution, metres.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CalibrationImages {
+    /// The measured reference: mean of the no-contact frames.
+    pub measured: Image,
+    /// The calibrated membrane's depth.
+    pub fitted: Image,
+    /// Measured minus fitted (0 where either is missing).
+    pub residual: Image,
+}
+
+impl SensorCalibration {
+    /// One line per change and warning, for people: millimetres.
+    pub fn summary_lines(&self) -> Vec<String> {
+        let mut lines: Vec<String> = self
+            .changes
+            .iter()
+            .map(|c| {
+                let sd = if c.std_error > 0.0 {
+                    format!(" +/- {:.2}", c.std_error * 1e3)
+                } else {
+                    String::new()
+                };
+                format!(
+                    "{}: {:.2} mm{sd} (given {:.2} mm, {:+.2} mm)",
+                    c.setting,
+                    c.calibrated * 1e3,
+                    c.given * 1e3,
+                    (c.calibrated - c.given) * 1e3
+                )
+            })
+            .collect();
+        lines.push(format!(
+            "membrane residual: RMS {:.2} mm (noise alone {:.2} mm, model error {:.2} mm), largest {:.2} mm, over {} \
+             no-contact frames",
+            self.residual_rms_m * 1e3,
+            self.noise_floor_rms_m * 1e3,
+            self.model_error_rms_m * 1e3,
+            self.residual_max_m * 1e3,
+            self.no_contact_frames.len()
+        ));
+        lines.extend(self.warnings.iter().map(|w| format!("warning: {w}")));
+        lines
+    }
+
+    /// The largest change of a length setting, metres (how far the given sensor was from the recorded one).
+    pub fn largest_change_m(&self) -> f64 {
+        self.changes
+            .iter()
+            .filter(|c| c.setting != "signature.noise_std")
+            .map(|c| (c.calibrated - c.given).abs())
+            .fold(0.0, f64::max)
+    }
+}
+
+/// The intrinsics of frames of `width x height` under `camera` (native, cropped or model-sized).
+fn frame_intrinsics(
+    sim: &SimConfig,
+    width: usize,
+    height: usize,
+) -> Result<(Intrinsics, InputSize), String> {
+    let size = resample::classify(&sim.camera, width, height)?;
+    let k = match size {
+        InputSize::Native => sim.camera.native,
+        InputSize::Cropped => sim.camera.crop(),
+        InputSize::Model => sim.camera.intrinsics(),
+    };
+    Ok((k, size))
+}
+
+/// Per-pixel mean over `frames` of the pixels measured in all of them (0 elsewhere).
+fn mean_image(frames: &[&Image]) -> Image {
+    let first = frames[0];
+    let mut out = Image::filled(first.width, first.height, 0.0);
+    for (i, o) in out.data.iter_mut().enumerate() {
+        let vals = frames.iter().map(|f| f.data[i]);
+        if vals.clone().all(|d| d > 0.0 && d.is_finite()) {
+            *o = (vals.map(f64::from).sum::<f64>() / frames.len() as f64) as f32;
+        }
+    }
+    out
+}
+
+/// Standard deviation of the frames about their per-pixel mean `mean` (unbiased: n − 1 degrees of freedom per
+/// pixel), ignoring deviations over five standard deviations (a contact that slipped into a no-contact frame);
+/// `None` with fewer than two frames.
+fn spread_about(frames: &[&Image], mean: &Image) -> Option<f64> {
+    let n = frames.len();
+    if n < 2 {
+        return None;
+    }
+    let pass = |limit: f64| {
+        let (mut s, mut count) = (0.0f64, 0usize);
+        for f in frames {
+            for (&d, &m) in f.data.iter().zip(&mean.data) {
+                if m > 0.0 {
+                    let r = f64::from(d) - f64::from(m);
+                    if r.abs() <= limit {
+                        s += r * r;
+                        count += 1;
+                    }
+                }
+            }
+        }
+        (count > 0).then(|| (s / count as f64 * n as f64 / (n - 1) as f64).sqrt())
+    };
+    let all = pass(f64::INFINITY)?;
+    let clipped = pass(5.0 * all)?;
+    pass(5.0 * clipped)
+}
+
+/// The step of the frames' depths when every measured value is a whole number of millimetres (16UC1 recordings).
+fn depth_step(frame: &Image) -> Option<f64> {
+    let mut any = false;
+    for &d in frame.data.iter().filter(|&&d| d > 0.0) {
+        let mm = f64::from(d) * 1e3;
+        if (mm - mm.round()).abs() > 1e-3 {
+            return None;
+        }
+        any = true;
+    }
+    any.then_some(1e-3)
+}
+
+/// Whether `frame` is pushed in somewhere against the membrane's depth `fitted`: an 11 x 11-window mean of
+/// frame minus membrane more than 0.5 mm, and six times what the noise `sigma` leaves such a mean, towards the camera.
+fn pushed_in(frame: &Image, fitted: &Image, sigma: f64) -> bool {
+    let diff = fitted.zip_map(frame, |f, d| if f > 0.0 && d > 0.0 { f - d } else { 0.0 });
+    let limit = 5e-4f64.max(6.0 * sigma / 11.0);
+    super::process::box_means(&diff, 5)
+        .into_iter()
+        .any(|m| m > limit)
+}
+
+/// The given sensor's membrane as fit parameters.
+fn given_params(sim: &SimConfig) -> MembraneParams {
+    MembraneParams {
+        footprint_m: [sim.elastomer.footprint_x, sim.elastomer.footprint_y],
+        inflation_m: sim.elastomer.inflation,
+        camera_position_m: sim.mount.position,
+    }
+}
+
+/// Calibrate the sensor `given` from the no-contact frames of `stream` in `rec` (module docs).
+/// `progress(done, total)` is called per frame read; returning false cancels.
+pub fn calibrate(
+    rec: &Recording,
+    stream: &StreamInfo,
+    given: &SimConfig,
+    config: &CalibrateConfig,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+) -> Result<(SensorCalibration, CalibrationImages), RecordingError> {
+    let frames_err = |message: String| RecordingError::Frames {
+        path: rec.path().to_path_buf(),
+        message,
+    };
+    let n = stream.messages;
+    if n == 0 {
+        return Err(frames_err(format!("{} has no frames", stream.name)));
+    }
+    let picks: Vec<usize> = match config.reference {
+        ReferenceChoice::Frame(k) if k < n => vec![k],
+        ReferenceChoice::Frame(k) => {
+            return Err(frames_err(format!(
+                "reference frame {k} is beyond the last frame {}",
+                n - 1
+            )))
+        }
+        ReferenceChoice::Auto => {
+            let m = config.max_frames.max(2).min(n);
+            (0..m)
+                .map(|j| j * (n - 1) / (m - 1).max(1))
+                .collect::<std::collections::BTreeSet<_>>()
+                .into_iter()
+                .collect()
+        }
+    };
+    let mut native = Vec::with_capacity(picks.len());
+    let mut model = Vec::with_capacity(picks.len());
+    for (j, &i) in picks.iter().enumerate() {
+        let f = rec.depth_frame(stream, i, &given.camera.native)?;
+        if let Some(first) = native.first() {
+            let first: &Image = first;
+            if (first.width, first.height) != (f.depth.width, f.depth.height) {
+                return Err(frames_err(format!(
+                    "frame {i} is {}x{} but frame {} is {}x{}",
+                    f.depth.width, f.depth.height, picks[0], first.width, first.height
+                )));
+            }
+        }
+        model.push(
+            resample::to_model(&given.camera, &f.depth)
+                .map_err(|m| frames_err(format!("frame {i}: {m}")))?,
+        );
+        native.push(f.depth);
+        if !progress(j + 1, picks.len()) {
+            return Err(RecordingError::Cancelled);
+        }
+    }
+    let (width, height) = (native[0].width, native[0].height);
+    let (intrinsics, _) = frame_intrinsics(given, width, height).map_err(frames_err)?;
+    let quiet: Vec<usize> = match config.reference {
+        ReferenceChoice::Frame(_) => vec![0],
+        ReferenceChoice::Auto => {
+            let process = ProcessConfig {
+                quiet_threshold_m: config.quiet_threshold_m,
+                quiet_frames: usize::MAX,
+                ..ProcessConfig::default()
+            };
+            quiet_frames(&model, &process)
+        }
+    };
+    let mut warnings = Vec::new();
+    if quiet.len() < 3 {
+        warnings.push(format!(
+            "only {} frame(s) without contact: the membrane fit is less certain{}; record a second of the sensor \
+             touching nothing",
+            quiet.len(),
+            if quiet.len() < 2 {
+                " and the noise cannot be measured"
+            } else {
+                ""
+            }
+        ));
+    }
+    let quiet_model: Vec<&Image> = quiet.iter().map(|&q| &model[q]).collect();
+    let noise_std_model_m = spread_about(&quiet_model, &mean_image(&quiet_model));
+    let step = depth_step(&native[quiet[0]]);
+    let t_sensor_camera = given.mount.t_sensor_camera();
+    let start = given_params(given);
+    let membrane_fitted = given.elastomer.mesh_file.is_none();
+    if !membrane_fitted {
+        warnings.push(format!(
+            "the membrane is the mesh file {}: checked against the frames, not fitted",
+            given
+                .elastomer
+                .mesh_file
+                .as_deref()
+                .map_or_else(String::new, |p| p.display().to_string())
+        ));
+    }
+    // Two passes: a light touch can hide among the frames without contact (it stands out of the noise only once
+    // the membrane is known), so frames the first fit finds pushed in are left out of the second.
+    let mut used = quiet.clone();
+    let mut pass = 0;
+    let (measured, noise_std_m, params, std_error, fitted) = loop {
+        pass += 1;
+        let frames: Vec<&Image> = used.iter().map(|&q| &native[q]).collect();
+        let measured = mean_image(&frames);
+        let noise_std_m = spread_about(&frames, &measured).map(|s| {
+            let rounding = step.map_or(0.0, |q| q * q / 12.0);
+            (s * s - rounding).max(0.25 * s * s).sqrt()
+        });
+        let (params, std_error, fitted) = if membrane_fitted {
+            let fit = membrane_fit::fit(
+                &measured,
+                &intrinsics,
+                &t_sensor_camera,
+                &start,
+                &config.fit,
+            )
+            .map_err(|e| frames_err(format!("membrane fit: {e}")))?;
+            let fitted = membrane_fit::render(&fit.params, &intrinsics, &t_sensor_camera);
+            (fit.params, Some(fit.std_error), fitted)
+        } else {
+            // A mesh membrane is checked, not fitted: its rendering at the frames' resolution.
+            let sim = match frame_intrinsics(given, width, height).map(|(_, s)| s) {
+                Ok(InputSize::Native) => Some(Simulator::native(given.clone())?),
+                Ok(InputSize::Model) => Some(Simulator::new(given.clone())?),
+                _ => None,
+            };
+            let fitted = sim.map_or_else(
+                || Image::filled(width, height, 0.0),
+                |s| s.nominal_depth().clone(),
+            );
+            (start, None, fitted)
+        };
+        let sigma = noise_std_m.unwrap_or(given.signature.noise_std);
+        let keep: Vec<usize> = used
+            .iter()
+            .copied()
+            .filter(|&q| !pushed_in(&native[q], &fitted, sigma))
+            .collect();
+        if pass == 2 || keep.len() == used.len() || keep.is_empty() {
+            break (measured, noise_std_m, params, std_error, fitted);
+        }
+        used = keep;
+    };
+    let residual = measured.zip_map(&fitted, |m, f| if m > 0.0 && f > 0.0 { m - f } else { 0.0 });
+    let residuals: Vec<f64> = residual
+        .data
+        .iter()
+        .zip(&measured.data)
+        .zip(&fitted.data)
+        .filter(|((_, &m), &f)| m > 0.0 && f > 0.0)
+        .map(|((&r, _), _)| f64::from(r))
+        .collect();
+    let residual_rms_m = if residuals.is_empty() {
+        f64::NAN
+    } else {
+        (residuals.iter().map(|r| r * r).sum::<f64>() / residuals.len() as f64).sqrt()
+    };
+    let residual_max_m = residuals.iter().map(|r| r.abs()).fold(0.0, f64::max);
+    let noise_floor_rms_m =
+        noise_std_m.unwrap_or(given.signature.noise_std) / (used.len() as f64).sqrt();
+    // What the noise does not explain: the residual's RMS beyond the noise floor, in quadrature.
+    let model_error_rms_m = (residual_rms_m.powi(2) - noise_floor_rms_m.powi(2))
+        .max(0.0)
+        .sqrt();
+    if model_error_rms_m.is_nan() || model_error_rms_m > MODEL_ERROR_WARNING_M {
+        warnings.push(format!(
+            "the {} membrane does not explain the no-contact frames: residual RMS {:.2} mm where the noise alone \
+             leaves {:.2} mm ({:.2} mm of model error; largest residual {:.2} mm); the membrane may sag or be dented, \
+             the camera tilted, or the frames not of this sensor: look at the residual map (tnd calibrate --figure) \
+             and consider a measured membrane mesh (--elastomer-mesh)",
+            if membrane_fitted { "calibrated" } else { "given" },
+            residual_rms_m * 1e3,
+            noise_floor_rms_m * 1e3,
+            model_error_rms_m * 1e3,
+            residual_max_m * 1e3
+        ));
+    }
+
+    let mut sensor = given.clone();
+    sensor.elastomer.footprint_x = params.footprint_m[0];
+    sensor.elastomer.footprint_y = params.footprint_m[1];
+    sensor.elastomer.inflation = params.inflation_m;
+    sensor.mount.position = params.camera_position_m;
+    if let Some(s) = noise_std_m {
+        sensor.signature.noise_std = s;
+    }
+    let mut changes = Vec::new();
+    if let Some(sd) = std_error {
+        let mut push = |setting: &str, given: f64, calibrated: f64, std_error: f64| {
+            changes.push(Change {
+                setting: setting.into(),
+                given,
+                calibrated,
+                std_error,
+            })
+        };
+        push(
+            "elastomer.inflation",
+            start.inflation_m,
+            params.inflation_m,
+            sd.inflation_m,
+        );
+        if config.fit.footprint {
+            for (i, axis) in ["footprint_x", "footprint_y"].iter().enumerate() {
+                push(
+                    &format!("elastomer.{axis}"),
+                    start.footprint_m[i],
+                    params.footprint_m[i],
+                    sd.footprint_m[i],
+                );
+            }
+        }
+        if config.fit.camera_position {
+            for (i, axis) in ["x", "y", "z"].iter().enumerate() {
+                push(
+                    &format!("mount.position.{axis}"),
+                    start.camera_position_m[i],
+                    params.camera_position_m[i],
+                    sd.camera_position_m[i],
+                );
+            }
+        }
+    }
+    if let Some(s) = noise_std_m {
+        changes.push(Change {
+            setting: "signature.noise_std".into(),
+            given: given.signature.noise_std,
+            calibrated: s,
+            std_error: 0.0,
+        });
+    }
+    if (params.inflation_m - start.inflation_m).abs() > 0.008 {
+        warnings.push(format!(
+            "the inflation is {:.1} mm from the given {:.1} mm: is the recording of this sensor, and is its depth in \
+             the units the reader assumed?",
+            (params.inflation_m - start.inflation_m).abs() * 1e3,
+            start.inflation_m * 1e3
+        ));
+    }
+    let calibration = SensorCalibration {
+        inflation_m: params.inflation_m,
+        footprint_m: params.footprint_m,
+        camera_position_m: params.camera_position_m,
+        noise_std_m,
+        noise_std_model_m,
+        depth_step_m: step,
+        residual_rms_m,
+        residual_max_m,
+        noise_floor_rms_m,
+        model_error_rms_m,
+        membrane_fitted,
+        frames: n,
+        frames_read: picks.len(),
+        no_contact_frames: used.iter().map(|&q| picks[q]).collect(),
+        frame_size: [width, height],
+        changes,
+        warnings,
+        sensor,
+    };
+    Ok((
+        calibration,
+        CalibrationImages {
+            measured,
+            fitted,
+            residual,
+        },
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::objects::ObjectSet;
+    use crate::recording::synth::{write_press_recording, DepthEncoding, PressSequence};
+    use crate::recording::FolderOptions;
+    use crate::sensor::Se2;
+    use crate::sim::PreparedObject;
+
+    /// A press recording of `object` by the sensor `truth`.
+    fn recording(
+        dir: &std::path::Path,
+        truth: &SimConfig,
+        object: &str,
+        encoding: DepthEncoding,
+        seed: u64,
+    ) -> Recording {
+        let mut seq = PressSequence::down_and_up(Se2::new(0.003, -0.002, 0.7), 0.007, 5, 6);
+        seq.encoding = encoding;
+        seq.seed = seed;
+        let path = dir.join(format!("{object}.mcap"));
+        let obj = PreparedObject::new(ObjectSet::builtin().mesh(object).unwrap()).unwrap();
+        write_press_recording(&path, truth, &obj, &seq).unwrap();
+        Recording::open(&path, &FolderOptions::default()).unwrap()
+    }
+
+    #[test]
+    fn an_off_nominal_sensor_is_recovered_from_its_recording_without_the_object() {
+        // The simulator made the recording at the native resolution (its tessellated membrane, its noise, 16-bit
+        // millimetres); the calibration starts from the nominal sensor and is not told the object.
+        let dir = tempfile::tempdir().unwrap();
+        let cases = [
+            (
+                0.0322,
+                -0.0585,
+                0.0018,
+                28.0,
+                "cylinder_r12",
+                DepthEncoding::Mm16,
+            ),
+            (
+                0.0274,
+                -0.0620,
+                0.0011,
+                15.0,
+                "cross_w12_s50",
+                DepthEncoding::F32,
+            ),
+        ];
+        for (k, (inflation, camera_z, noise, shadow, object, encoding)) in
+            cases.into_iter().enumerate()
+        {
+            let mut truth = SimConfig::default();
+            truth.elastomer.inflation = inflation;
+            truth.mount.position[2] = camera_z;
+            truth.signature.noise_std = noise;
+            truth.signature.shadow_px = shadow;
+            let rec = recording(dir.path(), &truth, object, encoding, 10 + k as u64);
+            let stream = rec.depth_stream(None).unwrap().clone();
+            let (cal, images) = calibrate(
+                &rec,
+                &stream,
+                &SimConfig::default(),
+                &CalibrateConfig::default(),
+                &mut |_, _| true,
+            )
+            .unwrap();
+            // The ten frames lifted off the object, and no frame pressed deeper than 3 mm (a light touch hides in
+            // the noise; the robust fit does not mind it).
+            let rest: Vec<usize> = (0..5).chain(16..21).collect();
+            assert!(
+                rest.iter().all(|f| cal.no_contact_frames.contains(f)),
+                "{cal:?}"
+            );
+            assert!(
+                cal.no_contact_frames.iter().all(|f| !(7..=13).contains(f)),
+                "{cal:?}"
+            );
+            assert!((cal.inflation_m - inflation).abs() < 3e-4, "{cal:?}");
+            assert!(
+                (cal.camera_position_m[2] - camera_z).abs() < 5e-4,
+                "{cal:?}"
+            );
+            let s = cal.noise_std_m.unwrap();
+            assert!((s - noise).abs() < 0.1 * noise, "noise {s} for {noise}");
+            assert_eq!(cal.sensor.elastomer.inflation, cal.inflation_m);
+            assert_eq!(cal.sensor.signature.noise_std, s);
+            assert!(cal.warnings.is_empty(), "{:?}", cal.warnings);
+            assert!(cal.model_error_rms_m < 1e-4, "{cal:?}");
+            assert_eq!((images.residual.width, images.residual.height), (224, 171));
+            assert_eq!(cal.depth_step_m.is_some(), encoding == DepthEncoding::Mm16);
+        }
+    }
+
+    #[test]
+    fn a_dented_membrane_is_named_and_a_recording_without_contact_free_frames_is_refused_or_warned()
+    {
+        let dir = tempfile::tempdir().unwrap();
+        let rec = recording(
+            dir.path(),
+            &SimConfig::default(),
+            "cylinder_r12",
+            DepthEncoding::F32,
+            1,
+        );
+        let stream = rec.depth_stream(None).unwrap().clone();
+        // One given frame: no noise measurement, and a warning that says so.
+        let config = CalibrateConfig {
+            reference: ReferenceChoice::Frame(0),
+            ..CalibrateConfig::default()
+        };
+        let (cal, _) = calibrate(
+            &rec,
+            &stream,
+            &SimConfig::default(),
+            &config,
+            &mut |_, _| true,
+        )
+        .unwrap();
+        assert!(cal.noise_std_m.is_none());
+        assert!(
+            cal.warnings
+                .iter()
+                .any(|w| w.contains("noise cannot be measured")),
+            "{:?}",
+            cal.warnings
+        );
+        assert!((cal.inflation_m - 0.03).abs() < 1e-3, "{cal:?}");
+        let config = CalibrateConfig {
+            reference: ReferenceChoice::Frame(99),
+            ..CalibrateConfig::default()
+        };
+        let e = calibrate(
+            &rec,
+            &stream,
+            &SimConfig::default(),
+            &config,
+            &mut |_, _| true,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("reference frame 99"), "{e}");
+        // A membrane mesh is checked, not fitted; a cancel is a cancel.
+        let mut c = SimConfig::default();
+        c.elastomer.mesh_file = Some(dir.path().join("bubble.obj"));
+        let dome = SimConfig::default().elastomer.build().unwrap();
+        crate::mesh::obj::write(&dir.path().join("bubble.obj"), &dome).unwrap();
+        let (cal, _) = calibrate(
+            &rec,
+            &stream,
+            &c,
+            &CalibrateConfig::default(),
+            &mut |_, _| true,
+        )
+        .unwrap();
+        assert!(!cal.membrane_fitted);
+        assert!(
+            cal.warnings.iter().any(|w| w.contains("bubble.obj")),
+            "{:?}",
+            cal.warnings
+        );
+        assert!(cal.model_error_rms_m < 1e-4, "{cal:?}");
+        assert!(matches!(
+            calibrate(
+                &rec,
+                &stream,
+                &SimConfig::default(),
+                &CalibrateConfig::default(),
+                &mut |_, _| false
+            ),
+            Err(RecordingError::Cancelled)
+        ));
+        // A membrane that is no half-ellipsoid (a 3 mm bulge beside the apex, as a dent pushed out): the fit is the
+        // nearest dome, and the warning names the residual.
+        let flat: Vec<glam::Vec3> = dome
+            .vertices()
+            .iter()
+            .map(|v| {
+                let d2 = (v.x - 0.01).powi(2) + v.y.powi(2);
+                let bulge = if v.z > 0.0 {
+                    0.003 * (-d2 / (2.0 * 0.008f32.powi(2))).exp()
+                } else {
+                    0.0
+                };
+                glam::Vec3::new(v.x, v.y, v.z + bulge)
+            })
+            .collect();
+        let sag = crate::mesh::Mesh::from_raw(flat, dome.triangles().to_vec(), "sag").unwrap();
+        crate::mesh::obj::write(&dir.path().join("sag.obj"), &sag).unwrap();
+        let mut truth = SimConfig::default();
+        truth.elastomer.mesh_file = Some(dir.path().join("sag.obj"));
+        let rec = recording(dir.path(), &truth, "cylinder_r12", DepthEncoding::F32, 2);
+        let stream = rec.depth_stream(None).unwrap().clone();
+        let (cal, _) = calibrate(
+            &rec,
+            &stream,
+            &SimConfig::default(),
+            &CalibrateConfig::default(),
+            &mut |_, _| true,
+        )
+        .unwrap();
+        assert!(
+            cal.warnings.iter().any(|w| w.contains("does not explain")),
+            "{:?}",
+            cal.warnings
+        );
+    }
+
+    #[test]
+    fn spread_about_the_mean_is_unbiased_and_ignores_a_slipped_contact() {
+        // Two frames a and b: about their mean each deviates by ±(a − b)/2, so the unbiased spread is |a − b|/√2.
+        let a = Image::from_vec(4, 1, vec![1.0, 2.0, 3.0, 4.0]).unwrap();
+        let b = Image::from_vec(4, 1, vec![1.2, 1.8, 3.2, 3.8]).unwrap();
+        let m = mean_image(&[&a, &b]);
+        let s = spread_about(&[&a, &b], &m).unwrap();
+        assert!((s - 0.2 / 2f64.sqrt()).abs() < 1e-6, "{s}");
+        assert!(spread_about(&[&a], &a).is_none());
+        assert_eq!(
+            depth_step(&Image::from_vec(2, 1, vec![0.09, 0.0]).unwrap()),
+            Some(1e-3)
+        );
+        assert_eq!(
+            depth_step(&Image::from_vec(1, 1, vec![0.0905]).unwrap()),
+            None
+        );
+    }
+}
