@@ -302,8 +302,6 @@ pub fn calibrate(
             return Err(RecordingError::Cancelled);
         }
     }
-    let (width, height) = (native[0].width, native[0].height);
-    let (intrinsics, _) = frame_intrinsics(given, width, height).map_err(frames_err)?;
     let quiet: Vec<usize> = match config.reference {
         ReferenceChoice::Frame(_) => vec![0],
         ReferenceChoice::Auto => {
@@ -315,6 +313,54 @@ pub fn calibrate(
             quiet_frames(&model, &process)
         }
     };
+    calibrate_frames(&native, &model, quiet, &picks, n, given, config).map_err(frames_err)
+}
+
+/// Calibrate the sensor `given` from frames of the membrane without contact (e.g. `tnd pose --reference`), all of
+/// them used: native (or cropped, or model-sized) depth images, metres.
+pub fn calibrate_references(
+    frames: Vec<Image>,
+    given: &SimConfig,
+    config: &CalibrateConfig,
+) -> Result<(SensorCalibration, CalibrationImages), String> {
+    if frames.is_empty() {
+        return Err("no reference frames".into());
+    }
+    let mut model = Vec::with_capacity(frames.len());
+    for (i, f) in frames.iter().enumerate() {
+        if (f.width, f.height) != (frames[0].width, frames[0].height) {
+            return Err(format!(
+                "reference {i} is {}x{} but reference 0 is {}x{}",
+                f.width, f.height, frames[0].width, frames[0].height
+            ));
+        }
+        model.push(resample::to_model(&given.camera, f)?);
+    }
+    let all: Vec<usize> = (0..frames.len()).collect();
+    calibrate_frames(
+        &frames,
+        &model,
+        all.clone(),
+        &all,
+        frames.len(),
+        given,
+        config,
+    )
+}
+
+/// The calibration from frames already read (`native` at their own resolution, `model` resampled), `quiet` the
+/// indices of those without contact, `picks` the recording's frame number of each, `frames` the recording's length.
+fn calibrate_frames(
+    native: &[Image],
+    model: &[Image],
+    quiet: Vec<usize>,
+    picks: &[usize],
+    frames: usize,
+    given: &SimConfig,
+    config: &CalibrateConfig,
+) -> Result<(SensorCalibration, CalibrationImages), String> {
+    let (width, height) = (native[0].width, native[0].height);
+    let (intrinsics, _) = frame_intrinsics(given, width, height)?;
     let mut warnings = Vec::new();
     if quiet.len() < 3 {
         warnings.push(format!(
@@ -364,16 +410,18 @@ pub fn calibrate(
                 &start,
                 &config.fit,
             )
-            .map_err(|e| frames_err(format!("membrane fit: {e}")))?;
+            .map_err(|e| format!("membrane fit: {e}"))?;
             let fitted = membrane_fit::render(&fit.params, &intrinsics, &t_sensor_camera);
             (fit.params, Some(fit.std_error), fitted)
         } else {
             // A mesh membrane is checked, not fitted: its rendering at the frames' resolution.
             let sim = match frame_intrinsics(given, width, height).map(|(_, s)| s) {
-                Ok(InputSize::Native) => Some(Simulator::native(given.clone())?),
-                Ok(InputSize::Model) => Some(Simulator::new(given.clone())?),
+                Ok(InputSize::Native) => Some(Simulator::native(given.clone())),
+                Ok(InputSize::Model) => Some(Simulator::new(given.clone())),
                 _ => None,
-            };
+            }
+            .transpose()
+            .map_err(|e| e.to_string())?;
             let fitted = sim.map_or_else(
                 || Image::filled(width, height, 0.0),
                 |s| s.nominal_depth().clone(),
@@ -499,7 +547,7 @@ pub fn calibrate(
         noise_floor_rms_m,
         model_error_rms_m,
         membrane_fitted,
-        frames: n,
+        frames,
         frames_read: picks.len(),
         no_contact_frames: used.iter().map(|&q| picks[q]).collect(),
         frame_size: [width, height],

@@ -6,6 +6,7 @@ mod calibrate_cmd;
 mod dataset_cmd;
 mod eval_cmd;
 mod eval_tables;
+mod measured;
 mod model_cmd;
 mod objects_cmd;
 mod pose_cmd;

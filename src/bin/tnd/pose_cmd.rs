@@ -7,10 +7,9 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, Result};
 use clap::Args;
 use serde_json::json;
-use tactile_derender::image::Image;
 use tactile_derender::io::figure::FigureConfig;
 use tactile_derender::io::npy;
 use tactile_derender::io::ply::PlyEncoding;
@@ -30,9 +29,8 @@ pub struct PoseArgs {
     /// or `ground-truth` (then --target is the "generated" X0).
     #[arg(long, default_value = "default")]
     pub model: String,
-    /// The imprint Y = R − S (metres, .npy at the model resolution).
-    #[arg(long)]
-    pub imprint: PathBuf,
+    #[command(flatten)]
+    pub measured: crate::measured::MeasuredArgs,
     #[command(flatten)]
     pub object: ObjectSpec,
     #[command(flatten)]
@@ -40,9 +38,6 @@ pub struct PoseArgs {
     /// The true in-contact depth X0 (.npy), used by --model ground-truth.
     #[arg(long)]
     pub target: Option<PathBuf>,
-    /// The signature S (.npy), for the threshold baseline and the signature check.
-    #[arg(long)]
-    pub signature: Option<PathBuf>,
     /// Take the registration's lowest-cost hypothesis as the estimate, without checking the hypotheses against the
     /// signature (the check needs --signature; on by default).
     #[arg(long)]
@@ -77,33 +72,17 @@ pub struct PoseArgs {
     pub rerun: crate::rerun_out::RerunArgs,
 }
 
-/// An image file (.npy, metres) the sensor must render at `want` pixels.
-pub(crate) fn read(path: &Path, want: (usize, usize)) -> Result<Image> {
-    let img = npy::read_metres_image(path)?;
-    check_size(path, &img, want)?;
-    Ok(img)
-}
-
-/// The image read from `path` has the `want` pixels the sensor renders.
-pub(crate) fn check_size(path: &Path, img: &Image, want: (usize, usize)) -> Result<()> {
-    if (img.width, img.height) != want {
-        bail!(
-            "{}: image is {}x{}, the sensor renders {}x{}",
-            path.display(),
-            img.width,
-            img.height,
-            want.0,
-            want.1
-        );
-    }
-    Ok(())
-}
-
 pub fn run(a: PoseArgs) -> Result<()> {
-    let sim = Simulator::new(a.sensor.sim_config()?)?;
+    let measured = a.measured.read(a.sensor.sim_config()?)?;
+    let sim = Simulator::new(measured.sim.clone())?;
     let rrd = a.rerun.open("tnd pose")?;
-    let res = (sim.intrinsics().width, sim.intrinsics().height);
-    let imprint = read(&a.imprint, res)?;
+    let (imprint, signature) = (measured.imprint, measured.signature);
+    let input_name = a
+        .measured
+        .imprint
+        .as_ref()
+        .or(a.measured.signature.as_ref())
+        .map_or_else(String::new, |p| p.display().to_string());
     let object = a.object.load()?;
     object.check_scale("a pose")?;
     let prepared = PreparedObject::new(object.mesh.clone())?;
@@ -112,7 +91,6 @@ pub fn run(a: PoseArgs) -> Result<()> {
         .as_deref()
         .map(|t| crate::args::parse_pose("--truth", t))
         .transpose()?;
-    let signature = a.signature.as_ref().map(|p| read(p, res)).transpose()?;
     let eval = EvalConfig {
         check_signature: !a.no_signature_check,
         imprint_proposals: !a.no_imprint_proposals,
@@ -122,7 +100,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         let target = a.target.as_ref().ok_or_else(|| {
             anyhow!("--model ground-truth needs --target FILE.npy (the in-contact depth to use as every sample)")
         })?;
-        let target = read(target, res)?;
+        let target = crate::measured::read_model(target, sim.config())?;
         (
             "ground-truth".to_string(),
             vec![target; a.derender.samples.max(1)],
@@ -167,12 +145,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
             &imprint,
             a.derender.seed,
         )?
-        .ok_or_else(|| {
-            anyhow!(
-                "{}: no sample has any contact; nothing to register",
-                a.imprint.display()
-            )
-        })?;
+        .ok_or_else(|| anyhow!("{input_name}: no sample has any contact; nothing to register"))?;
     let sensor = sim.pressing_pose(&prepared, 0.0, 0.0, 0.0, press);
     let input = PoseInput {
         t_world_camera: sim.t_world_camera(&sensor),
@@ -302,7 +275,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         "ambiguous": report.ambiguous() || estimate.signature_ambiguous(), "modes": report.major_modes(),
         "signature_rival": estimate.signature_rival, "anchor_shift_m": estimate.anchor_shift_m,
         "position_err_mm": report.samples.iter().map(|s| s.position_mm).collect::<Vec<_>>(),
-        "out": a.out});
+        "calibration": measured.calibration, "out": a.out});
     let path = a.out.join("pose.json");
     tactile_derender::io::write_atomic(&path, serde_json::to_string_pretty(&summary)?.as_bytes())
         .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;

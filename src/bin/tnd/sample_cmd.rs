@@ -22,13 +22,10 @@ pub struct SampleArgs {
     /// the bundled small one, twice as fast.
     #[arg(long, default_value = "default")]
     pub model: PathBuf,
-    /// Imprint Y as a 2-D .npy array in metres, at the model's resolution.
-    #[arg(long)]
-    pub imprint: PathBuf,
-    /// The signature S (.npy, metres) measured with the imprint: with it the samples are guided towards the imprint
-    /// on the sensor below (its membrane and tactile-shadow cloak); without it they are not.
-    #[arg(long)]
-    pub signature: Option<PathBuf>,
+    /// The imprint, or the signature and its reference; with the signature the samples are guided towards the
+    /// imprint on the sensor below (its membrane and tactile-shadow cloak); without it they are not.
+    #[command(flatten)]
+    pub measured: crate::measured::MeasuredArgs,
     #[command(flatten)]
     pub sensor: super::args::SensorArgs,
     #[command(flatten)]
@@ -48,17 +45,15 @@ pub struct SampleArgs {
 pub fn run(a: SampleArgs) -> Result<()> {
     let device = tactile_derender::model::device::open_device(&a.derender.device)?;
     let model = DiffusionModel::load_on(&a.model, &device)?;
-    let imprint = npy::read_metres_image(&a.imprint)?;
+    let measured = a.measured.read(a.sensor.sim_config()?)?;
+    let imprint = measured.imprint;
     let rrd = a.rerun.open("tnd sample")?;
     let mut bar = super::progress::bar("sampling", " steps", 0);
     // Imprint guidance needs the membrane the imprint was measured against: the signature says where it was.
-    let guidance = match &a.signature {
-        Some(path) => {
-            let sim = tactile_derender::sim::Simulator::new(a.sensor.sim_config()?)?;
-            let res = (sim.intrinsics().width, sim.intrinsics().height);
-            let signature = super::pose_cmd::read(path, res)?;
-            super::pose_cmd::check_size(&a.imprint, &imprint, res)?;
-            pipeline::imprint_guidance(&a.derender, &sim, &imprint, Some(&signature))?
+    let guidance = match &measured.signature {
+        Some(signature) => {
+            let sim = tactile_derender::sim::Simulator::new(measured.sim.clone())?;
+            pipeline::imprint_guidance(&a.derender, &sim, &imprint, Some(signature))?
         }
         None => {
             if a.derender.guidance.active() {

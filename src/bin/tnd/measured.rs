@@ -1,0 +1,113 @@
+//! The measured images of `tnd pose` and `tnd sample`: an imprint, or a signature with its no-contact reference
+//! frame(s), at the sensor's native resolution (e.g. 224 x 171, as a driver publishes them), its crop, or the model
+//! resolution — brought to the model resolution with the crop and area resampling every recording goes through.
+//! Native reference frames also calibrate the sensor ([`tactile_derender::recording::calibrate`]), so that
+//! guidance, anchoring and the signature check use the membrane that was measured, not the nominal one.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Result};
+use clap::Args;
+use tactile_derender::dataset::resample;
+use tactile_derender::image::Image;
+use tactile_derender::io::npy;
+use tactile_derender::recording::calibrate::{
+    calibrate_references, CalibrateConfig, SensorCalibration,
+};
+use tactile_derender::sim::signature::imprint as imprint_of;
+use tactile_derender::sim::SimConfig;
+
+/// Where the measured images come from.
+#[derive(Args, Debug, Clone)]
+pub struct MeasuredArgs {
+    /// The imprint Y = R − S (.npy, metres): native (e.g. 224x171), cropped, or at the model resolution. Not needed
+    /// with --signature and --reference.
+    #[arg(long)]
+    pub imprint: Option<PathBuf>,
+    /// The signature S (.npy, metres), as --imprint: for imprint guidance, the threshold baseline and the signature
+    /// check.
+    #[arg(long)]
+    pub signature: Option<PathBuf>,
+    /// A frame of the sensor touching nothing (.npy, metres; repeat for several, they are averaged): with
+    /// --signature it gives the imprint R − S, and it calibrates the sensor (membrane, camera position; the noise
+    /// too from two or more frames) unless --no-calibrate.
+    #[arg(long)]
+    pub reference: Vec<PathBuf>,
+    /// Use the sensor as given even when --reference frames could calibrate it.
+    #[arg(long)]
+    pub no_calibrate: bool,
+}
+
+/// The measured images at the model resolution, and the sensor they were measured with.
+pub struct Measured {
+    pub imprint: Image,
+    pub signature: Option<Image>,
+    /// The sensor: as given, or calibrated from the reference frames.
+    pub sim: SimConfig,
+    pub calibration: Option<SensorCalibration>,
+}
+
+/// An image file (.npy, metres) at the native, cropped or model resolution of `sim`'s camera, at the model resolution.
+pub fn read_model(path: &Path, sim: &SimConfig) -> Result<Image> {
+    let img = npy::read_metres_image(path)?;
+    resample::to_model(&sim.camera, &img).map_err(|e| anyhow!("{}: {e}", path.display()))
+}
+
+/// Per-pixel mean of same-sized images over the pixels measured in all (0 elsewhere).
+fn mean(frames: &[Image]) -> Image {
+    let mut out = Image::filled(frames[0].width, frames[0].height, 0.0);
+    for (i, o) in out.data.iter_mut().enumerate() {
+        if frames.iter().all(|f| f.data[i] > 0.0) {
+            *o = frames.iter().map(|f| f.data[i]).sum::<f32>() / frames.len() as f32;
+        }
+    }
+    out
+}
+
+impl MeasuredArgs {
+    /// Read the images for the sensor `given` (calibrated from the references where there are any).
+    pub fn read(&self, given: SimConfig) -> Result<Measured> {
+        let mut references = Vec::with_capacity(self.reference.len());
+        for p in &self.reference {
+            references.push(npy::read_metres_image(p)?);
+        }
+        let calibration = if references.is_empty() || self.no_calibrate {
+            None
+        } else {
+            let (cal, _) =
+                calibrate_references(references.clone(), &given, &CalibrateConfig::default())
+                    .map_err(|e| anyhow!("--reference {}: {e}", self.reference[0].display()))?;
+            crate::calibrate_cmd::tell_calibration(&self.reference[0], Some(&cal), None);
+            Some(cal)
+        };
+        let sim = calibration.as_ref().map_or(given, |c| c.sensor.clone());
+        let signature = self
+            .signature
+            .as_deref()
+            .map(|p| read_model(p, &sim))
+            .transpose()?;
+        let imprint = match (&self.imprint, &signature, references.is_empty()) {
+            (Some(p), _, _) => read_model(p, &sim)?,
+            (None, Some(s), false) => {
+                let model: Vec<Image> = references
+                    .iter()
+                    .zip(&self.reference)
+                    .map(|(r, p)| resample::to_model(&sim.camera, r).map_err(|e| anyhow!("{}: {e}", p.display())))
+                    .collect::<Result<_>>()?;
+                imprint_of(&mean(&model), s)
+            }
+            _ => bail!("give the imprint (--imprint Y.npy), or the signature and a frame without contact (--signature S.npy --reference R.npy)"),
+        };
+        if let Some(s) = &signature {
+            if (s.width, s.height) != (imprint.width, imprint.height) {
+                bail!("the signature and the imprint differ in size after resampling");
+            }
+        }
+        Ok(Measured {
+            imprint,
+            signature,
+            sim,
+            calibration,
+        })
+    }
+}
