@@ -151,6 +151,24 @@ fn an_off_nominal_sensor_is_calibrated_from_its_recording_and_used_by_the_import
         "{stderr}"
     );
     assert!((calibrated["calibration"]["inflation_m"].as_f64().unwrap() - inflation).abs() < 3e-4);
+    // Each pair names its frame and time stamp (frames.csv): the frames with contact, 1/30 s apart.
+    let table = std::fs::read_to_string(d.join("ds/frames.csv")).unwrap();
+    let rows: Vec<Vec<u64>> = table
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(
+        rows.len() as u64,
+        calibrated["pairs"].as_u64().unwrap(),
+        "{table}"
+    );
+    for (k, r) in rows.iter().enumerate() {
+        assert_eq!(r[0], k as u64);
+        assert!(presses[r[1] as usize] > 0.0, "{table}");
+        let t = r[2] - 1_700_000_000_000_000_000;
+        assert!((t as f64 - r[1] as f64 * 1e9 / 30.0).abs() < 2.0, "{table}");
+    }
     let (nominal, _) = import("ds_nominal", &["--no-calibrate"]);
     assert_eq!(nominal["calibration"], Value::Null);
     let manifest = |ds: &str| -> Value {

@@ -35,6 +35,10 @@ use crate::recording::{self, FolderOptions, ProcessConfig, Recording};
 use crate::sensor::{Scene, Se2};
 use crate::sim::{PreparedObject, SimConfig, SimError, Simulator};
 
+/// The file beside an imported recording's dataset that gives each pair's frame of the recording and its time
+/// stamp: `index,frame,stamp_ns` (the pair's global index, the 0-based frame of the depth stream, nanoseconds).
+pub const FRAMES_CSV: &str = "frames.csv";
+
 /// Default deepest press the press estimate considers, metres.
 pub const DEFAULT_MAX_PRESS_M: f64 = 0.03;
 
@@ -240,7 +244,10 @@ pub fn import_recording(
             ),
         });
     }
+    // Each pair's frame and time stamp, for frames.csv.
+    let mut frames_csv = String::from("index,frame,stamp_ns\n");
     for (k, r) in records.iter_mut().enumerate() {
+        frames_csv += &format!("{k},{},{}\n", r.index, processed.stamps_ns[r.index]);
         r.index = k;
     }
     let n = records.len();
@@ -257,6 +264,13 @@ pub fn import_recording(
         records,
         vec![config.split; n],
     )?;
+    let csv_path = out.join(FRAMES_CSV);
+    crate::io::write_atomic(&csv_path, frames_csv.as_bytes()).map_err(|e| {
+        DatasetError::Import {
+            path: csv_path.clone(),
+            message: format!("cannot write the frame table: {}", e.kind()),
+        }
+    })?;
     Ok(RecordingImportReport {
         frames: processed.len(),
         written,
