@@ -92,6 +92,8 @@ pub struct Launch {
     pub run_pose: bool,
     /// Put this mesh file, in these units, in the scene (after the session).
     pub object: Option<(PathBuf, Units)>,
+    /// Use this sensor (a sensor file, e.g. from `tnd calibrate --out`) instead of the session's.
+    pub sensor: Option<tactile_derender::sim::SimConfig>,
 }
 
 /// A pending `--screenshot`.
@@ -221,6 +223,9 @@ impl WorkbenchApp {
         }
         if let Some(path) = launch.session {
             app.apply(Command::OpenSession(path));
+        }
+        if let Some(sensor) = launch.sensor {
+            app.apply(Command::SetSim(sensor));
         }
         if let Some((path, units)) = launch.object {
             app.inputs.object_units = units;

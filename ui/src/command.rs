@@ -104,6 +104,8 @@ pub enum Command {
     CalibrateSensor,
     /// Stop the sensor calibration.
     CancelSensorCalibration,
+    /// Write the calibrated sensor as a sensor file beside the recording.
+    SaveSensorFile,
     /// Write the track as a CSV file beside the recording.
     SaveTrack,
     /// Show an analysis image enlarged in its own window (`None`: close it).
@@ -292,6 +294,10 @@ impl WorkbenchApp {
                 self.report("sensor calibration", r);
             }
             Command::CancelSensorCalibration => self.cancel_sensor_calibration(),
+            Command::SaveSensorFile => match self.save_sensor_file() {
+                Ok(path) => self.notice = Some(format!("sensor saved as {}", path.display())),
+                Err(e) => self.error(format!("sensor file: {e}")),
+            },
             Command::SaveTrack => match self.save_track() {
                 Ok(path) => self.notice = Some(format!("track saved as {}", path.display())),
                 Err(e) => self.error(format!("track: {e}")),

@@ -42,6 +42,9 @@ struct Args {
     /// import` guesses).
     #[arg(long, requires = "object")]
     units: Option<Units>,
+    /// Use this sensor file (JSON, e.g. from `tnd calibrate --out`) instead of the session's sensor.
+    #[arg(long, value_name = "FILE")]
+    sensor: Option<PathBuf>,
 }
 
 /// `--units`, or the unit that makes `path`'s size plausible (metres when it already is, or when it cannot be read:
@@ -79,6 +82,11 @@ fn run(args: Args) -> Result<()> {
             }
         }
     }
+    let sensor = args
+        .sensor
+        .as_deref()
+        .map(tactile_derender::sim::sensor_file::load)
+        .transpose()?;
     // The model's process-wide settings, the same as `tnd`'s (before any thread starts); a variable the user set is
     // kept.
     let kernels = tactile_derender::model::kernels::KernelSettings::default();
@@ -119,6 +127,7 @@ fn run(args: Args) -> Result<()> {
                 run_derender: args.run_derender,
                 run_pose: args.run_pose,
                 object,
+                sensor,
             };
             Ok(Box::new(WorkbenchApp::new(cc, launch)))
         }),

@@ -140,6 +140,25 @@ impl crate::app::WorkbenchApp {
         view.running = false;
     }
 
+    /// Write the calibrated sensor beside the recording as `<recording>_sensor.json` (a sensor file: `tnd ... --sensor`,
+    /// `tnd-workbench --sensor`).
+    pub(crate) fn save_sensor_file(&self) -> Result<PathBuf> {
+        let r = self
+            .recording
+            .sensor_calibration
+            .result
+            .as_ref()
+            .ok_or_else(|| anyhow!("calibrate the sensor first"))?;
+        let stem = r
+            .recording
+            .file_stem()
+            .map_or_else(|| "recording".into(), |s| s.to_string_lossy().into_owned());
+        let dir = r.recording.parent().map(PathBuf::from).unwrap_or_default();
+        let path = dir.join(format!("{stem}_sensor.json"));
+        tactile_derender::sim::sensor_file::save(&path, &r.calibration.sensor)?;
+        Ok(path)
+    }
+
     /// Take in a finished calibration: the calibrated sensor becomes the session's (undoable).
     pub(crate) fn sensor_calibrated(&mut self, generation: u64, result: Box<CalibrationResult>) {
         let view = &mut self.recording.sensor_calibration;

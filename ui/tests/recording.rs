@@ -268,6 +268,12 @@ fn one_button_calibrates_the_sensor_from_the_recording_and_every_tab_uses_it() {
         .query_by_label_contains("membrane residual: RMS")
         .is_some());
     assert!(h.query_by_label("measured - calibrated").is_some());
+    // The calibrated sensor saved as a sensor file beside the recording, which the CLI's loader reads back.
+    h.get_by_label("Save sensor file").click();
+    h.run_ok();
+    let saved =
+        tactile_derender::sim::sensor_file::load(&dir.path().join("drift_sensor.json")).unwrap();
+    assert_eq!(&saved, &h.state().state.sim);
     // Undo restores the sensor it replaced.
     h.state_mut().apply(tnd_workbench::command::Command::Undo);
     h.run_ok();

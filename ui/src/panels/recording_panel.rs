@@ -309,6 +309,16 @@ fn calibration_section(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec
                     ui.label(line);
                 }
             }
+            if ui
+                .button("Save sensor file")
+                .on_hover_text(
+                    "write the calibrated sensor beside the recording (<recording>_sensor.json): tnd --sensor FILE, \
+                     tnd-workbench --sensor FILE",
+                )
+                .clicked()
+            {
+                cmds.push(Command::SaveSensorFile);
+            }
             let Some(tex) = view.textures(&ctx) else {
                 return;
             };
