@@ -85,6 +85,22 @@ fn an_off_nominal_sensor_is_calibrated_from_its_recording_and_used_by_the_import
     assert!(std::fs::read(d.join("fit.png"))
         .unwrap()
         .starts_with(b"\x89PNG"));
+    // Told the object, the contact frames (with the recorded pose topic) give the shadow width as well.
+    let (with_object, _) = json(
+        d,
+        &[
+            "calibrate",
+            "--from",
+            "drift.mcap",
+            "--object",
+            "cylinder_r12",
+            "--json",
+        ],
+    );
+    let shadow = with_object["sensor"]["signature"]["shadow_px"]
+        .as_f64()
+        .unwrap();
+    assert!((shadow - 28.0).abs() <= 2.0, "{with_object}");
     // The sensor file is what every command takes; a misspelt key in one is named.
     let file: Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("sensor.json")).unwrap()).unwrap();
@@ -169,6 +185,15 @@ fn an_off_nominal_sensor_is_calibrated_from_its_recording_and_used_by_the_import
         let t = r[2] - 1_700_000_000_000_000_000;
         assert!((t as f64 - r[1] as f64 * 1e9 / 30.0).abs() < 2.0, "{table}");
     }
+    // The contact frames with their recorded pose give the tactile-shadow width (28 px).
+    let shadow = calibrated["calibration"]["changes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["setting"] == "signature.shadow_px")
+        .map(|c| c["calibrated"].as_f64().unwrap())
+        .unwrap();
+    assert!((shadow - 28.0).abs() <= 2.0, "{shadow}");
     let (nominal, _) = import("ds_nominal", &["--no-calibrate"]);
     assert_eq!(nominal["calibration"], Value::Null);
     let manifest = |ds: &str| -> Value {

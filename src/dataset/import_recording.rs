@@ -6,7 +6,8 @@
 //! First, unless told not to, the sensor is calibrated from the recording's no-contact frames
 //! ([`crate::recording::calibrate`]: membrane inflation and footprint, camera position, noise), and the calibrated
 //! sensor makes X0 and the press estimate and is stored with the dataset, so that evaluation (guidance, anchoring,
-//! the signature check, free space) uses the sensor that made the recording, not its nominal model.
+//! the signature check, free space) uses the sensor that made the recording, not its nominal model. The contact
+//! frames with a pose then calibrate the tactile-shadow width ([`super::shadow_fit`]).
 //!
 //! Per frame: the imprint Y = R − S from [`crate::recording::process`]; frames with less contact than
 //! `min_contact_px` (the no-contact part of a press) are skipped; the pose is the pose message nearest in time (within
@@ -25,6 +26,7 @@ use serde::{Deserialize, Serialize};
 use super::import::{
     parse_csv, refuse_unless_interrupted_import, write_real_dataset, ImportReport, RealSource,
 };
+use super::shadow_fit::{fit_shadow, ContactFrame};
 use super::shard::Record;
 use super::{DatasetError, SplitName};
 use crate::image::Image;
@@ -178,14 +180,13 @@ pub fn import_recording(
     refuse_unless_interrupted_import(out)?;
     let rec = Recording::open(from, &config.folder)?;
     let stream = rec.depth_stream(config.topic.as_deref())?.clone();
-    let (calibration, calibration_failed) = if config.calibrate {
+    let (mut calibration, calibration_failed) = if config.calibrate {
         calibrate_or_explain(&rec, &stream, sim_config, &config.process, progress)?
     } else {
         (None, None)
     };
-    let sim_config = calibration.as_ref().map_or(sim_config, |c| &c.sensor);
-    let processed =
-        recording::process(&rec, &stream, &sim_config.camera, &config.process, progress)?;
+    let given = sim_config;
+    let processed = recording::process(&rec, &stream, &given.camera, &config.process, progress)?;
     let poses = frame_poses(
         &rec,
         &processed.stamps_ns,
@@ -193,7 +194,6 @@ pub fn import_recording(
         config.max_pose_gap_s,
     )?;
 
-    let sim = noise_free_simulator(sim_config)?;
     let object = PreparedObject::new(set.mesh(&config.object)?)?;
 
     let mut skipped_no_contact = 0;
@@ -208,6 +208,23 @@ pub fn import_recording(
             skipped_no_pose += 1;
         }
     }
+    // The tactile shadow, which frames without contact cannot show, from the contact frames with a pose.
+    if let Some(cal) = &mut calibration {
+        let sim = noise_free_simulator(&cal.sensor)?;
+        let frames: Vec<ContactFrame> = todo
+            .iter()
+            .map(|&(i, fp)| ContactFrame {
+                imprint: &processed.imprints[i],
+                pose: fp.pose,
+                press: fp.press,
+            })
+            .collect();
+        if let Some(fit) = fit_shadow(&sim, &object, &frames, config.max_press_m) {
+            cal.set_shadow(fit.shadow_px);
+        }
+    }
+    let sim_config = calibration.as_ref().map_or(given, |c| &c.sensor);
+    let sim = noise_free_simulator(sim_config)?;
     let made: Vec<(Record, Option<f64>)> = todo
         .par_iter()
         .map(|&(i, fp)| {

@@ -34,6 +34,17 @@ pub struct CalibrateArgs {
     /// Keep the given camera position (fit only inflation, footprint and noise).
     #[arg(long)]
     pub keep_camera: bool,
+    /// The pressed object (an entry of --objects): with the recording's object poses (its pose topic, or --poses)
+    /// the contact frames calibrate the tactile-shadow width too.
+    #[arg(long)]
+    pub object: Option<String>,
+    /// Object set of --object: "builtin" or a directory with objects.json.
+    #[arg(long, default_value = "builtin")]
+    pub objects: String,
+    /// CSV of the object's pose per frame (columns frame or stamp_ns, x, y, theta, optional press) for --object;
+    /// default: the recording's pose topic.
+    #[arg(long)]
+    pub poses: Option<PathBuf>,
     /// Write the calibrated sensor here (JSON; pass it to any command as --sensor FILE).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -100,6 +111,62 @@ pub fn tell_calibration(from: &Path, cal: Option<&SensorCalibration>, failed: Op
     }
 }
 
+/// The tactile-shadow width from the recording's contact frames with a known pose of `name` (set in `cal`).
+fn fit_shadow_width(
+    a: &CalibrateArgs,
+    rec: &Recording,
+    stream: &tactile_derender::recording::StreamInfo,
+    name: &str,
+    cal: &mut SensorCalibration,
+) -> Result<()> {
+    use tactile_derender::dataset::import_recording::{
+        frame_poses, noise_free_simulator, PoseSource,
+    };
+    use tactile_derender::dataset::shadow_fit::{fit_shadow, ContactFrame};
+    let set = tactile_derender::objects::ObjectSet::open(&a.objects)?;
+    let object = tactile_derender::sim::PreparedObject::new(set.mesh(name)?)?;
+    let processed = tactile_derender::recording::process(
+        rec,
+        stream,
+        &cal.sensor.camera,
+        &a.read.process(),
+        &mut |_, _| true,
+    )?;
+    let source = match &a.poses {
+        Some(csv) => PoseSource::Csv(csv.clone()),
+        None => PoseSource::Topic(None),
+    };
+    let poses = frame_poses(
+        rec,
+        &processed.stamps_ns,
+        &source,
+        tactile_derender::recording::source::DEFAULT_MAX_POSE_GAP_S,
+    )?;
+    let frames: Vec<ContactFrame> = (0..processed.len())
+        .filter(|&i| processed.contact_px[i] >= 10)
+        .filter_map(|i| {
+            poses[i].map(|p| ContactFrame {
+                imprint: &processed.imprints[i],
+                pose: p.pose,
+                press: p.press,
+            })
+        })
+        .collect();
+    let sim = noise_free_simulator(&cal.sensor)?;
+    match fit_shadow(
+        &sim,
+        &object,
+        &frames,
+        tactile_derender::dataset::import_recording::DEFAULT_MAX_PRESS_M,
+    ) {
+        Some(fit) => cal.set_shadow(fit.shadow_px),
+        None => cal.warnings.push(format!(
+            "no contact frame with a pose of {name}: the shadow width is the given one"
+        )),
+    }
+    Ok(())
+}
+
 pub fn run(a: CalibrateArgs) -> Result<()> {
     let given = a.sensor.sim_config()?;
     let rec = Recording::open(&a.from, &a.read.folder())?;
@@ -122,7 +189,10 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
         &mut progress::callback(&mut bar),
     );
     progress::finish(&mut bar);
-    let (cal, images) = result?;
+    let (mut cal, images) = result?;
+    if let Some(name) = &a.object {
+        fit_shadow_width(&a, &rec, &stream, name, &mut cal)?;
+    }
     if let Some(out) = &a.out {
         tactile_derender::sim::sensor_file::save(out, &cal.sensor)?;
     }

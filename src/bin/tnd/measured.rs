@@ -65,8 +65,10 @@ fn mean(frames: &[Image]) -> Image {
 }
 
 impl MeasuredArgs {
-    /// Read the images for the sensor `given` (calibrated from the references where there are any).
-    pub fn read(&self, given: SimConfig) -> Result<Measured> {
+    /// Read the images for the sensor `given` (calibrated from the references where there are any). With
+    /// `imprint_any_size`, an imprint alone (no signature, no reference) of a size no stage of the sensor has is
+    /// taken as it is (`tnd sample` with a model of another resolution; the model checks its size).
+    pub fn read(&self, given: SimConfig, imprint_any_size: bool) -> Result<Measured> {
         let mut references = Vec::with_capacity(self.reference.len());
         for p in &self.reference {
             references.push(npy::read_metres_image(p)?);
@@ -87,6 +89,10 @@ impl MeasuredArgs {
             .map(|p| read_model(p, &sim))
             .transpose()?;
         let imprint = match (&self.imprint, &signature, references.is_empty()) {
+            (Some(p), None, true) if imprint_any_size => {
+                let img = npy::read_metres_image(p)?;
+                resample::to_model(&sim.camera, &img).unwrap_or(img)
+            }
             (Some(p), _, _) => read_model(p, &sim)?,
             (None, Some(s), false) => {
                 let model: Vec<Image> = references

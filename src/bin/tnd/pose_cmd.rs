@@ -73,7 +73,7 @@ pub struct PoseArgs {
 }
 
 pub fn run(a: PoseArgs) -> Result<()> {
-    let measured = a.measured.read(a.sensor.sim_config()?)?;
+    let measured = a.measured.read(a.sensor.sim_config()?, false)?;
     let sim = Simulator::new(measured.sim.clone())?;
     let rrd = a.rerun.open("tnd pose")?;
     let (imprint, signature) = (measured.imprint, measured.signature);

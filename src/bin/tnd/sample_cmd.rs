@@ -45,7 +45,7 @@ pub struct SampleArgs {
 pub fn run(a: SampleArgs) -> Result<()> {
     let device = tactile_derender::model::device::open_device(&a.derender.device)?;
     let model = DiffusionModel::load_on(&a.model, &device)?;
-    let measured = a.measured.read(a.sensor.sim_config()?)?;
+    let measured = a.measured.read(a.sensor.sim_config()?, true)?;
     let imprint = measured.imprint;
     let rrd = a.rerun.open("tnd sample")?;
     let mut bar = super::progress::bar("sampling", " steps", 0);
