@@ -33,6 +33,10 @@ pub struct GenConfig {
     /// Elastomer inflation drawn per pair (`None`, the default: every pair uses the sensor's inflation).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub inflation: Option<InflationVariation>,
+    /// The whole sensor varied per pair (inflation, camera distance, footprint, shadow, noise; `None`, the default:
+    /// every pair uses the sensor as it is). Not together with `inflation`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor_variation: Option<super::sensor_variation::SensorVariation>,
 }
 
 /// Per-pair variation of the membrane's inflation height, as a real Soft Bubble's drifts with its air pressure and
@@ -79,6 +83,7 @@ impl Default for GenConfig {
             shard_pairs: 1000,
             holdout_every: 10,
             inflation: None,
+            sensor_variation: None,
         }
     }
 }
@@ -119,6 +124,13 @@ impl GenConfig {
         }
         if self.pairs == 0 {
             return bad("the number of pairs must be at least 1".into());
+        }
+        if self.inflation.is_some() && self.sensor_variation.is_some() {
+            return bad(
+                "an inflation variation and a sensor variation together: give the inflation range in the sensor \
+                 variation"
+                    .into(),
+            );
         }
         if let Some(v) = &self.inflation {
             let [lo, hi] = v.range;

@@ -75,8 +75,18 @@ pub fn generate(
     if set.entries().is_empty() {
         return Err(DatasetError::Config("the object set is empty".into()));
     }
-    // The sensor, or one per inflation level (a parametric membrane rebuilt at each height).
+    // The sensor, or one per inflation level (a parametric membrane rebuilt at each height), or one per level of a
+    // sensor variation.
     let sims: Vec<Simulator> = match &config.inflation {
+        None if config.sensor_variation.is_some() => {
+            let v = config.sensor_variation.as_ref().copied();
+            let v = v.ok_or_else(|| DatasetError::Config("no sensor variation".into()))?;
+            v.validate(sim_config)?;
+            v.sensors(sim_config)
+                .into_par_iter()
+                .map(Simulator::new)
+                .collect::<Result<_, _>>()?
+        }
         None => vec![Simulator::new(sim_config.clone())?],
         Some(_) if sim_config.elastomer.mesh_file.is_some() => {
             return Err(DatasetError::Config(

@@ -25,6 +25,7 @@ pub mod npz;
 pub mod reader;
 pub mod resample;
 pub mod sample;
+pub mod sensor_variation;
 pub mod shadow_fit;
 pub mod shard;
 pub mod split;

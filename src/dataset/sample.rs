@@ -72,7 +72,8 @@ impl OffsetBox {
 
 /// Draws contacts for planned pairs.
 pub struct Sampler<'a> {
-    /// The sensor; with an inflation variation, one per inflation level ([`GenConfig::inflation`]).
+    /// The sensor; with an inflation or sensor variation, one per level ([`GenConfig::inflation`],
+    /// [`GenConfig::sensor_variation`]).
     pub sims: &'a [Simulator],
     pub objects: &'a [PreparedObject],
     pub names: &'a [String],
@@ -118,8 +119,9 @@ impl<'a> Sampler<'a> {
             .objects
             .get(object_index)
             .ok_or_else(|| DatasetError::Config("the object set is empty".into()))?;
-        let level = match (&self.config.inflation, self.sims.len()) {
-            (Some(v), n) if n > 1 => v.level(plan.seed).min(n - 1),
+        let level = match (&self.config.inflation, &self.config.sensor_variation) {
+            (Some(v), _) if self.sims.len() > 1 => v.level(plan.seed).min(self.sims.len() - 1),
+            (None, Some(v)) if self.sims.len() > 1 => v.level(plan.seed).min(self.sims.len() - 1),
             _ => 0,
         };
         let (sim, b) = match (self.sims.get(level), self.offsets.get(level)) {

@@ -98,6 +98,23 @@ pub struct GenArgs {
     /// Number of inflation heights of --inflation-range (2..=64).
     #[arg(long, default_value_t = 5)]
     pub inflation_levels: usize,
+    /// Vary the camera's distance behind the membrane base per pair: MIN,MAX metres (e.g. 0.057,0.063). With any of
+    /// the ranges below, the pairs come from --sensor-levels sensors spread over all given ranges (--inflation-range
+    /// among them).
+    #[arg(long)]
+    pub camera_offset_range: Option<String>,
+    /// Vary the footprint per pair: MIN,MAX scale of the sensor's (e.g. 0.95,1.05).
+    #[arg(long)]
+    pub footprint_scale_range: Option<String>,
+    /// Vary the tactile-shadow width per pair: MIN,MAX native pixels (e.g. 15,30).
+    #[arg(long)]
+    pub shadow_range: Option<String>,
+    /// Vary the depth noise per pair: MIN,MAX standard deviation in metres (e.g. 0.001,0.0025).
+    #[arg(long)]
+    pub noise_range: Option<String>,
+    /// Number of sensors a sensor variation spreads over its ranges (2..=64).
+    #[arg(long, default_value_t = 16)]
+    pub sensor_levels: usize,
 }
 
 #[derive(Args, Debug)]
@@ -210,15 +227,47 @@ fn gen(a: GenArgs) -> Result<()> {
     for p in press_range {
         crate::args::check_press("--press", p, false)?;
     }
-    let inflation = a
+    let inflation_range = a
         .inflation_range
         .as_deref()
         .map(|s| pair("inflation-range", s, "0.027,0.033"))
-        .transpose()?
-        .map(|range| dataset::config::InflationVariation {
+        .transpose()?;
+    let range = |flag: &str, v: &Option<String>, example: &str| -> Result<Option<[f64; 2]>> {
+        v.as_deref()
+            .map(|s| {
+                s.split_once(',')
+                    .and_then(|(x, y)| {
+                        Some([x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?])
+                    })
+                    .ok_or_else(|| anyhow!("--{flag} '{s}' must be MIN,MAX, e.g. {example}"))
+            })
+            .transpose()
+    };
+    let variation = dataset::sensor_variation::SensorVariation {
+        inflation: inflation_range,
+        camera_offset: range("camera-offset-range", &a.camera_offset_range, "0.057,0.063")?,
+        footprint_scale: range(
+            "footprint-scale-range",
+            &a.footprint_scale_range,
+            "0.95,1.05",
+        )?,
+        shadow_px: range("shadow-range", &a.shadow_range, "15,30")?,
+        noise_std: range("noise-range", &a.noise_range, "0.001,0.0025")?,
+        levels: a.sensor_levels,
+    };
+    let whole_sensor = variation.camera_offset.is_some()
+        || variation.footprint_scale.is_some()
+        || variation.shadow_px.is_some()
+        || variation.noise_std.is_some();
+    let (inflation, sensor_variation) = if whole_sensor {
+        (None, Some(variation))
+    } else {
+        let inflation = inflation_range.map(|range| dataset::config::InflationVariation {
             range,
             levels: a.inflation_levels,
         });
+        (inflation, None)
+    };
     let config = GenConfig {
         pairs: a.pairs,
         seed: a.seed,
@@ -228,6 +277,7 @@ fn gen(a: GenArgs) -> Result<()> {
         max_attempts: a.max_attempts,
         shard_pairs: a.shard_pairs,
         inflation,
+        sensor_variation,
         ..GenConfig::default()
     };
     let sim = a.sensor.sim_config()?;
