@@ -483,7 +483,7 @@ fn calibrate_frames(
             "the {} membrane does not explain the no-contact frames: residual RMS {:.2} mm where the noise alone \
              leaves {:.2} mm ({:.2} mm of model error; largest residual {:.2} mm); the membrane may sag or be dented, \
              the camera tilted, or the frames not of this sensor: look at the residual map (tnd calibrate --figure) \
-             and consider a measured membrane mesh (--elastomer-mesh)",
+             and use the measured membrane (tnd calibrate --measured-membrane membrane.obj --out sensor.json)",
             if membrane_fitted { "calibrated" } else { "given" },
             residual_rms_m * 1e3,
             noise_floor_rms_m * 1e3,

@@ -10,6 +10,7 @@
 //! | [`source`] | opening an MCAP file or a frame folder, listing streams, reading a frame |
 //! | [`process`] | reference detection, imprint and contact area per frame |
 //! | [`calibrate`] | the sensor (membrane, camera position, noise) fitted to the no-contact frames |
+//! | [`measured_membrane`] | a membrane mesh made of those frames, where the parametric dome cannot explain them |
 //! | [`synth`] | writing a simulated press sequence as an MCAP recording (demos and tests) |
 //!
 //! Turning a recording into scored pairs (X0 simulated from a known object pose) is
@@ -17,6 +18,7 @@
 
 pub mod calibrate;
 pub mod decode;
+pub mod measured_membrane;
 pub mod process;
 pub mod ros;
 pub mod source;

@@ -45,6 +45,11 @@ pub struct CalibrateArgs {
     /// default: the recording's pose topic.
     #[arg(long)]
     pub poses: Option<PathBuf>,
+    /// Also write the measured membrane here (OBJ, sensor frame, metres): the calibrated dome plus the measured
+    /// residual, smoothed, closed into a solid; the sensor file then uses it as its membrane. For a membrane the
+    /// dome cannot explain (the calibration warns of its model error).
+    #[arg(long, value_name = "OBJ")]
+    pub measured_membrane: Option<PathBuf>,
     /// Write the calibrated sensor here (JSON; pass it to any command as --sensor FILE).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -192,6 +197,14 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     let (mut cal, images) = result?;
     if let Some(name) = &a.object {
         fit_shadow_width(&a, &rec, &stream, name, &mut cal)?;
+    }
+    if let Some(obj) = &a.measured_membrane {
+        let mesh = tactile_derender::recording::measured_membrane::measured_membrane(&cal, &images)
+            .map_err(|e| anyhow!("--measured-membrane {}: {e}", obj.display()))?;
+        tactile_derender::mesh::obj::write(obj, &mesh)?;
+        let path = std::fs::canonicalize(obj).unwrap_or_else(|_| obj.clone());
+        cal.sensor.elastomer.mesh_file = Some(path);
+        cal.sensor.elastomer.mesh_units = tactile_derender::mesh::Units::M;
     }
     if let Some(out) = &a.out {
         tactile_derender::sim::sensor_file::save(out, &cal.sensor)?;
