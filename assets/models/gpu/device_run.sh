@@ -8,7 +8,7 @@
 #
 #     [PAIRS=300000] [INFLATION=0.027,0.033] [MODELS="a b"|a|b] [B_INIT=b.safetensors] [LR_B=3e-4] [SAVE_EVERY_S=120] \
 #         [OBJECT_SEED=2] [PAIR_SEED=41] [TRAIN_MESHES=.dev/train_meshes.tar.xz] [MESH_SHARE=0.3] \
-#         [BOUNDARY_WEIGHT=0] \
+#         [BOUNDARY_WEIGHT=0] [SENSOR_VARIATION="--camera-offset-range 0.057,0.063 --shadow-range 15,30 ..."] \
 #         assets/models/gpu/device_run.sh TND OUT BUDGET_S
 set -u
 tnd=$1 out=$2 budget=$3
@@ -39,8 +39,11 @@ fi
 echo "data ready to stream after $(( $(date +%s) - t0 )) s" >> "$out/gen.log"
 # INFLATION= (empty) keeps every pair at the sensor's nominal inflation.
 inflation=${INFLATION-0.027,0.033}
+# SENSOR_VARIATION: further tnd dataset gen sensor ranges (--camera-offset-range, --footprint-scale-range,
+# --shadow-range, --noise-range, --sensor-levels); with them the inflation range is one of the sensor's ranges.
+# shellcheck disable=SC2086
 nice -n 5 "$tnd" dataset gen --out "$w/train" --pairs "${PAIRS:-300000}" --seed "${PAIR_SEED:-41}" --objects "$w/objects" $objs \
-    ${inflation:+--inflation-range "$inflation"} >> "$out/gen.log" 2>&1 &
+    ${inflation:+--inflation-range "$inflation"} ${SENSOR_VARIATION:-} >> "$out/gen.log" 2>&1 &
 gen=$!
 left=$(( budget - ($(date +%s) - t0) - 25 ))
 save=${SAVE_EVERY_S:-120}
