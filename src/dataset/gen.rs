@@ -77,24 +77,22 @@ pub fn generate(
     }
     // The sensor, or one per inflation level (a parametric membrane rebuilt at each height), or one per level of a
     // sensor variation.
-    let sims: Vec<Simulator> = match &config.inflation {
-        None if config.sensor_variation.is_some() => {
-            let v = config.sensor_variation.as_ref().copied();
-            let v = v.ok_or_else(|| DatasetError::Config("no sensor variation".into()))?;
+    let sims: Vec<Simulator> = match (&config.inflation, &config.sensor_variation) {
+        (None, Some(v)) => {
             v.validate(sim_config)?;
             v.sensors(sim_config)
                 .into_par_iter()
                 .map(Simulator::new)
                 .collect::<Result<_, _>>()?
         }
-        None => vec![Simulator::new(sim_config.clone())?],
-        Some(_) if sim_config.elastomer.mesh_file.is_some() => {
+        (None, None) => vec![Simulator::new(sim_config.clone())?],
+        (Some(_), _) if sim_config.elastomer.mesh_file.is_some() => {
             return Err(DatasetError::Config(
                 "an inflation range needs the parametric membrane; the elastomer is a mesh file"
                     .into(),
             ))
         }
-        Some(v) => v
+        (Some(v), _) => v
             .heights()
             .par_iter()
             .map(|&h| {

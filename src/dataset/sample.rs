@@ -120,10 +120,11 @@ impl<'a> Sampler<'a> {
             .get(object_index)
             .ok_or_else(|| DatasetError::Config("the object set is empty".into()))?;
         let level = match (&self.config.inflation, &self.config.sensor_variation) {
-            (Some(v), _) if self.sims.len() > 1 => v.level(plan.seed).min(self.sims.len() - 1),
-            (None, Some(v)) if self.sims.len() > 1 => v.level(plan.seed).min(self.sims.len() - 1),
-            _ => 0,
-        };
+            (Some(v), _) => v.level(plan.seed),
+            (None, Some(v)) => v.level(plan.seed),
+            (None, None) => 0,
+        }
+        .min(self.sims.len().saturating_sub(1));
         let (sim, b) = match (self.sims.get(level), self.offsets.get(level)) {
             (Some(s), Some(b)) => (s, b),
             _ => {

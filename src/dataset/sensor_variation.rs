@@ -6,6 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::split::mix64;
 use super::DatasetError;
 use crate::sim::SimConfig;
 
@@ -30,13 +31,6 @@ pub struct SensorVariation {
     pub noise_std: Option<[f64; 2]>,
     /// Number of sensors (2..=64; each is one prepared membrane).
     pub levels: usize,
-}
-
-/// SplitMix64 finaliser.
-fn mix(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 impl SensorVariation {
@@ -90,7 +84,7 @@ impl SensorVariation {
     fn fraction(&self, j: usize, k: usize) -> f64 {
         let n = self.levels.max(2);
         let mut order: Vec<usize> = (0..n).collect();
-        order.sort_by_key(|&l| mix(0x5E75_0A11 ^ ((j as u64) << 32) ^ l as u64));
+        order.sort_by_key(|&l| mix64(0x5E75_0A11 ^ ((j as u64) << 32) ^ l as u64));
         let stratum = order.iter().position(|&l| l == k % n).unwrap_or(0);
         (stratum as f64 + 0.5) / n as f64
     }
@@ -128,7 +122,7 @@ impl SensorVariation {
 
     /// The level pair `pair_seed` uses (independent of the ChaCha stream the pair draws its contact from).
     pub fn level(&self, pair_seed: u64) -> usize {
-        (mix(pair_seed ^ 0x2C4E_6A8B_0D1F_3579) % self.levels.max(2) as u64) as usize
+        (mix64(pair_seed ^ 0x2C4E_6A8B_0D1F_3579) % self.levels.max(2) as u64) as usize
     }
 }
 

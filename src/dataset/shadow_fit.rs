@@ -91,7 +91,8 @@ pub fn fit_shadow(
         total / prepared.len() as f64
     };
     let given = sim.config().signature.shadow_px;
-    let mut best = (given, cost(given));
+    let given_residual_m = cost(given);
+    let mut best = (given, given_residual_m);
     for k in 0..=24 {
         let w = 2.0 * k as f64;
         let c = cost(w);
@@ -113,7 +114,7 @@ pub fn fit_shadow(
         shadow_px: best.0,
         given_shadow_px: given,
         residual_m: best.1,
-        given_residual_m: cost(given),
+        given_residual_m,
         frames: prepared.len(),
     })
 }

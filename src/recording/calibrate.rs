@@ -177,7 +177,7 @@ impl SensorCalibration {
 }
 
 /// The intrinsics of frames of `width x height` under `camera` (native, cropped or model-sized).
-fn frame_intrinsics(
+pub(crate) fn frame_intrinsics(
     sim: &SimConfig,
     width: usize,
     height: usize,
@@ -192,7 +192,7 @@ fn frame_intrinsics(
 }
 
 /// Per-pixel mean over `frames` of the pixels measured in all of them (0 elsewhere).
-fn mean_image(frames: &[&Image]) -> Image {
+pub fn mean_image(frames: &[&Image]) -> Image {
     let first = frames[0];
     let mut out = Image::filled(first.width, first.height, 0.0);
     for (i, o) in out.data.iter_mut().enumerate() {

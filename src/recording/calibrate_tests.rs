@@ -8,6 +8,15 @@ use crate::recording::FolderOptions;
 use crate::sensor::Se2;
 use crate::sim::PreparedObject;
 
+/// Calibrate starting from the nominal sensor.
+fn nominal(
+    rec: &Recording,
+    stream: &StreamInfo,
+    config: &CalibrateConfig,
+) -> Result<(SensorCalibration, CalibrationImages), RecordingError> {
+    calibrate(rec, stream, &SimConfig::default(), config, &mut |_, _| true)
+}
+
 /// A press recording of `object` by the sensor `truth`.
 fn recording(
     dir: &std::path::Path,
@@ -57,14 +66,7 @@ fn an_off_nominal_sensor_is_recovered_from_its_recording_without_the_object() {
         truth.signature.shadow_px = shadow;
         let rec = recording(dir.path(), &truth, object, encoding, 10 + k as u64);
         let stream = rec.depth_stream(None).unwrap().clone();
-        let (cal, images) = calibrate(
-            &rec,
-            &stream,
-            &SimConfig::default(),
-            &CalibrateConfig::default(),
-            &mut |_, _| true,
-        )
-        .unwrap();
+        let (cal, images) = nominal(&rec, &stream, &CalibrateConfig::default()).unwrap();
         // The ten frames lifted off the object, and no frame pressed deeper than 3 mm (a light touch hides in
         // the noise; the robust fit does not mind it).
         let rest: Vec<usize> = (0..5).chain(16..21).collect();
@@ -108,14 +110,7 @@ fn a_dented_membrane_is_named_and_a_recording_without_contact_free_frames_is_ref
         reference: ReferenceChoice::Frame(0),
         ..CalibrateConfig::default()
     };
-    let (cal, _) = calibrate(
-        &rec,
-        &stream,
-        &SimConfig::default(),
-        &config,
-        &mut |_, _| true,
-    )
-    .unwrap();
+    let (cal, _) = nominal(&rec, &stream, &config).unwrap();
     assert!(cal.noise_std_m.is_none());
     assert!(
         cal.warnings
@@ -129,14 +124,7 @@ fn a_dented_membrane_is_named_and_a_recording_without_contact_free_frames_is_ref
         reference: ReferenceChoice::Frame(99),
         ..CalibrateConfig::default()
     };
-    let e = calibrate(
-        &rec,
-        &stream,
-        &SimConfig::default(),
-        &config,
-        &mut |_, _| true,
-    )
-    .unwrap_err();
+    let e = nominal(&rec, &stream, &config).unwrap_err();
     assert!(e.to_string().contains("reference frame 99"), "{e}");
     // A membrane mesh is checked, not fitted; a cancel is a cancel.
     let mut c = SimConfig::default();
@@ -189,14 +177,7 @@ fn a_dented_membrane_is_named_and_a_recording_without_contact_free_frames_is_ref
     truth.elastomer.mesh_file = Some(dir.path().join("sag.obj"));
     let rec = recording(dir.path(), &truth, "cylinder_r12", DepthEncoding::F32, 2);
     let stream = rec.depth_stream(None).unwrap().clone();
-    let (cal, _) = calibrate(
-        &rec,
-        &stream,
-        &SimConfig::default(),
-        &CalibrateConfig::default(),
-        &mut |_, _| true,
-    )
-    .unwrap();
+    let (cal, images) = nominal(&rec, &stream, &CalibrateConfig::default()).unwrap();
     assert!(
         cal.warnings.iter().any(|w| w.contains("does not explain")),
         "{:?}",
@@ -204,14 +185,6 @@ fn a_dented_membrane_is_named_and_a_recording_without_contact_free_frames_is_ref
     );
     // The measured membrane explains it: rendered by the simulator it is the bulged membrane, to a fraction of the
     // parametric fit's error.
-    let (cal, images) = calibrate(
-        &rec,
-        &stream,
-        &SimConfig::default(),
-        &CalibrateConfig::default(),
-        &mut |_, _| true,
-    )
-    .unwrap();
     let mesh = crate::recording::measured_membrane::measured_membrane(&cal, &images).unwrap();
     assert!(mesh.report().closed && mesh.report().volume_m3 > 0.0);
     crate::mesh::obj::write(&dir.path().join("measured.obj"), &mesh).unwrap();

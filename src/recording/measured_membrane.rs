@@ -9,7 +9,6 @@
 use glam::{DVec3, Vec3};
 
 use super::calibrate::{CalibrationImages, SensorCalibration};
-use crate::dataset::resample::{self, InputSize};
 use crate::image::Image;
 use crate::mesh::Mesh;
 
@@ -20,11 +19,7 @@ pub fn measured_membrane(
 ) -> Result<Mesh, String> {
     let sensor = &cal.sensor;
     let (w, h) = (images.measured.width, images.measured.height);
-    let intrinsics = match resample::classify(&sensor.camera, w, h)? {
-        InputSize::Native => sensor.camera.native,
-        InputSize::Cropped => sensor.camera.crop(),
-        InputSize::Model => sensor.camera.intrinsics(),
-    };
+    let (intrinsics, _) = super::calibrate::frame_intrinsics(sensor, w, h)?;
     if w < 2 || h < 2 {
         return Err(format!("a {w}x{h} reference is too small for a membrane"));
     }

@@ -232,14 +232,12 @@ fn gen(a: GenArgs) -> Result<()> {
         .as_deref()
         .map(|s| pair("inflation-range", s, "0.027,0.033"))
         .transpose()?;
+    // The other sensor ranges are not all lengths (shadow in pixels, footprint a scale): the example gives the unit.
     let range = |flag: &str, v: &Option<String>, example: &str| -> Result<Option<[f64; 2]>> {
         v.as_deref()
             .map(|s| {
-                s.split_once(',')
-                    .and_then(|(x, y)| {
-                        Some([x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?])
-                    })
-                    .ok_or_else(|| anyhow!("--{flag} '{s}' must be MIN,MAX, e.g. {example}"))
+                pair(flag, s, example)
+                    .map_err(|_| anyhow!("--{flag} '{s}' must be MIN,MAX, e.g. {example}"))
             })
             .transpose()
     };

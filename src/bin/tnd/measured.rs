@@ -12,7 +12,7 @@ use tactile_derender::dataset::resample;
 use tactile_derender::image::Image;
 use tactile_derender::io::npy;
 use tactile_derender::recording::calibrate::{
-    calibrate_references, CalibrateConfig, SensorCalibration,
+    calibrate_references, mean_image, CalibrateConfig, SensorCalibration,
 };
 use tactile_derender::sim::signature::imprint as imprint_of;
 use tactile_derender::sim::SimConfig;
@@ -53,17 +53,6 @@ pub fn read_model(path: &Path, sim: &SimConfig) -> Result<Image> {
     resample::to_model(&sim.camera, &img).map_err(|e| anyhow!("{}: {e}", path.display()))
 }
 
-/// Per-pixel mean of same-sized images over the pixels measured in all (0 elsewhere).
-fn mean(frames: &[Image]) -> Image {
-    let mut out = Image::filled(frames[0].width, frames[0].height, 0.0);
-    for (i, o) in out.data.iter_mut().enumerate() {
-        if frames.iter().all(|f| f.data[i] > 0.0) {
-            *o = frames.iter().map(|f| f.data[i]).sum::<f32>() / frames.len() as f32;
-        }
-    }
-    out
-}
-
 impl MeasuredArgs {
     /// Read the images for the sensor `given` (calibrated from the references where there are any). With
     /// `imprint_any_size`, an imprint alone (no signature, no reference) of a size no stage of the sensor has is
@@ -100,7 +89,7 @@ impl MeasuredArgs {
                     .zip(&self.reference)
                     .map(|(r, p)| resample::to_model(&sim.camera, r).map_err(|e| anyhow!("{}: {e}", p.display())))
                     .collect::<Result<_>>()?;
-                imprint_of(&mean(&model), s)
+                imprint_of(&mean_image(&model.iter().collect::<Vec<_>>()), s)
             }
             _ => bail!("give the imprint (--imprint Y.npy), or the signature and a frame without contact (--signature S.npy --reference R.npy)"),
         };

@@ -17,17 +17,13 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     open_row(app, ui, cmds);
     if app.recording.loading {
         ui.horizontal(|ui| {
-            let (done, total) = app.recording.progress.unwrap_or((0, 0));
-            ui.label(format!("reading frames… {done}/{total}"));
-            ui.add(
-                egui::ProgressBar::new(if total > 0 {
-                    done as f32 / total as f32
-                } else {
-                    0.0
-                })
-                .desired_width(200.0),
-            );
-            if ui.button("Cancel reading").clicked() {
+            if progress_row(
+                ui,
+                "reading frames",
+                "",
+                app.recording.progress,
+                "Cancel reading",
+            ) {
                 cmds.push(Command::CancelRecording);
             }
         });
@@ -260,28 +256,41 @@ fn open_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     });
 }
 
+/// "`what`… done/total`unit`", a progress bar and a cancel button (true when it was clicked), in the current row.
+fn progress_row(
+    ui: &mut egui::Ui,
+    what: &str,
+    unit: &str,
+    progress: Option<(usize, usize)>,
+    cancel: &str,
+) -> bool {
+    let (done, total) = progress.unwrap_or((0, 0));
+    ui.label(format!("{what}… {done}/{total}{unit}"));
+    ui.add(
+        egui::ProgressBar::new(if total > 0 {
+            done as f32 / total as f32
+        } else {
+            0.0
+        })
+        .desired_width(200.0),
+    );
+    ui.button(cancel).clicked()
+}
+
 /// The sensor calibration: one button, its progress, and the fit (what changed, the residual, three images).
 fn calibration_section(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let view = &app.recording.sensor_calibration;
     ui.horizontal(|ui| {
         if view.running {
-            let (done, total) = view.progress.unwrap_or((0, 0));
-            ui.label(format!("calibrating… {done}/{total} frames"));
-            ui.add(
-                egui::ProgressBar::new(if total > 0 {
-                    done as f32 / total as f32
-                } else {
-                    0.0
-                })
-                .desired_width(200.0),
-            );
-            if ui.button("Cancel calibration").clicked() {
+            if progress_row(ui, "calibrating", " frames", view.progress, "Cancel calibration") {
                 cmds.push(Command::CancelSensorCalibration);
             }
         } else if ui
             .button("Calibrate sensor from this recording")
             .on_hover_text(
-                "fit the membrane (inflation, footprint), the camera position and the depth noise to the frames                  without contact, and use the calibrated sensor in every tab (Undo restores the previous one);                  `tnd calibrate --from` does the same",
+                "fit the membrane (inflation; footprint with tnd calibrate --fit-footprint), the camera position and the depth \
+                 noise to the frames without contact, and use the calibrated sensor in every tab (Undo restores the \
+                 previous one); `tnd calibrate --from` does the same",
             )
             .clicked()
         {
@@ -391,17 +400,7 @@ fn track_section(
     let t = &app.recording.track;
     ui.horizontal(|ui| {
         if t.running {
-            let (done, total) = t.progress.unwrap_or((0, 0));
-            ui.label(format!("tracking… {done}/{total} frames"));
-            ui.add(
-                egui::ProgressBar::new(if total > 0 {
-                    done as f32 / total as f32
-                } else {
-                    0.0
-                })
-                .desired_width(200.0),
-            );
-            if ui.button("Cancel tracking").clicked() {
+            if progress_row(ui, "tracking", " frames", t.progress, "Cancel tracking") {
                 cmds.push(Command::CancelTrack);
             }
         } else if ui
