@@ -29,6 +29,18 @@ pub fn render(err: &dyn std::error::Error) -> String {
     out
 }
 
+/// `path: error`, or the error alone when its message names `path` already (an error from
+/// [`crate::io::write_atomic`] does), so that each path is printed once.
+pub fn with_path(path: &std::path::Path, error: &dyn std::fmt::Display) -> String {
+    let message = error.to_string();
+    let shown = path.display().to_string();
+    if message.contains(&shown) {
+        message
+    } else {
+        format!("{shown}: {message}")
+    }
+}
+
 /// [`render`] for an `anyhow::Error` (its context lines and the library error beneath them).
 pub fn render_anyhow(err: &anyhow::Error) -> String {
     render(err.as_ref())

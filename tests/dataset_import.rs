@@ -235,5 +235,5 @@ fn an_interrupted_import_is_redone_by_the_same_command_and_a_finished_one_is_kep
     Dataset::open(&out).unwrap().verify().unwrap();
     // A finished dataset is not overwritten.
     let err = import(&fixture(), &out, &sim, &set, &ImportConfig::default()).unwrap_err();
-    assert!(matches!(err, DatasetError::NotADataset { .. }), "{err}");
+    assert!(matches!(err, DatasetError::Exists { .. }), "{err}");
 }

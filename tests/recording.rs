@@ -371,7 +371,7 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
     assert_eq!(rec["frames"], 3 + 6 + 5 + 3);
     let info = run(&["recording", "info", "press.mcap"]);
     assert_eq!(info["frames"], 17);
-    // A folder of frames named by a relative path (the README's `--from frames/`): each frame is read once from
+    // A folder of frames named by a relative path (docs/recordings.md's `--from frames/`): each frame is read once from
     // that folder, not from frames/frames/.
     let folder = dir.path().join("frames");
     std::fs::create_dir_all(&folder).unwrap();

@@ -16,6 +16,9 @@ pub enum DatasetError {
     },
     #[error("{path}: not a dataset: {message}")]
     NotADataset { path: PathBuf, message: String },
+    /// A new dataset's output folder holds a finished one.
+    #[error("{path}: holds a finished dataset already ({}); choose a new --out, or delete the folder to make it again", super::manifest::MANIFEST_FILE)]
+    Exists { path: PathBuf },
     #[error("{path}: malformed manifest: {message}")]
     Manifest { path: PathBuf, message: String },
     #[error("{path}: unsupported dataset format version {found} (this build reads version {supported}; regenerate the dataset or use a matching tnd)")]

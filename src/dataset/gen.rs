@@ -445,6 +445,11 @@ pub(crate) fn refuse_foreign_dir(out: &Path) -> Result<(), DatasetError> {
     match std::fs::read_dir(out) {
         Ok(mut entries) => {
             if entries.next().is_some() {
+                if out.join(MANIFEST_FILE).is_file() {
+                    return Err(DatasetError::Exists {
+                        path: out.to_path_buf(),
+                    });
+                }
                 return Err(DatasetError::NotADataset {
                     path: out.to_path_buf(),
                     message: format!(

@@ -51,6 +51,126 @@ pub fn write_atomic_with(
     result.map_err(named)
 }
 
+/// Replace the folder `dir` as a whole: `fill` writes the new content into a sibling temporary folder, which is
+/// synced and then swapped in for `dir` in one rename, so that a run killed or a disk filled at any point leaves
+/// either the old folder complete or the new one complete, never a mix. Files of the old folder that `fill` did not
+/// write (a user's notes) are copied across first. Without an old folder the new one appears by the rename alone.
+/// A temporary folder of a killed run is removed by the next run's output lock ([`super::lock::OutputLock`]).
+pub fn replace_dir_atomic<T>(
+    dir: &Path,
+    fill: impl FnOnce(&Path) -> std::io::Result<T>,
+) -> std::io::Result<T> {
+    let named =
+        |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", dir.display()));
+    let name = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .ok_or_else(|| named(std::io::Error::other("not a folder name")))?;
+    let parent = match dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent).map_err(named)?;
+    let tmp = parent.join(format!(".{name}.tmp.{}", std::process::id()));
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp).map_err(named)?;
+    }
+    let result = (|| {
+        std::fs::create_dir(&tmp)?;
+        let value = fill(&tmp)?;
+        if dir.is_dir() {
+            copy_missing(dir, &tmp)?;
+        }
+        sync_dir(&tmp)?;
+        if dir.exists() {
+            swap_in(&tmp, dir, &parent, &name)?;
+        } else {
+            std::fs::rename(&tmp, dir)?;
+        }
+        sync_dir(&parent)?;
+        Ok(value)
+    })();
+    if tmp.exists() {
+        // The old folder after a swap, or the unfinished new one after an error.
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
+    result.map_err(named)
+}
+
+/// Copy what `from` holds and `to` does not (recursively), so a replacement keeps files it did not write.
+fn copy_missing(from: &Path, to: &Path) -> std::io::Result<()> {
+    for entry in std::fs::read_dir(from)? {
+        let entry = entry?;
+        let target = to.join(entry.file_name());
+        if target.exists() {
+            continue;
+        }
+        if entry.file_type()?.is_dir() {
+            std::fs::create_dir(&target)?;
+            copy_missing(&entry.path(), &target)?;
+        } else {
+            std::fs::copy(entry.path(), &target)?;
+        }
+    }
+    Ok(())
+}
+
+fn sync_dir(dir: &Path) -> std::io::Result<()> {
+    // Directories cannot be opened for syncing on Windows; there the renames are what is atomic.
+    #[cfg(unix)]
+    std::fs::File::open(dir)?.sync_all()?;
+    #[cfg(not(unix))]
+    let _ = dir;
+    Ok(())
+}
+
+/// Exchange `new` and `dir`: afterwards `dir` is the new folder and `new` holds the old one.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn swap_in(new: &Path, dir: &Path, _parent: &Path, _name: &str) -> std::io::Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = |p: &Path| {
+        std::ffi::CString::new(p.as_os_str().as_bytes())
+            .map_err(|_| std::io::Error::other("a path with a NUL byte"))
+    };
+    let (a, b) = (c(new)?, c(dir)?);
+    // SAFETY: both arguments are valid NUL-terminated paths that outlive the call.
+    let rc = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            a.as_ptr(),
+            libc::AT_FDCWD,
+            b.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if rc == 0 {
+        return Ok(());
+    }
+    let e = std::io::Error::last_os_error();
+    // File systems without the exchange (some network mounts): two renames.
+    match e.raw_os_error() {
+        Some(libc::EINVAL) | Some(libc::ENOSYS) => swap_by_two_renames(new, dir),
+        _ => Err(e),
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn swap_in(new: &Path, dir: &Path, _parent: &Path, _name: &str) -> std::io::Result<()> {
+    swap_by_two_renames(new, dir)
+}
+
+/// `dir` → a sibling, `new` → `dir`, the old one → `new`. Between the first two renames `dir` is absent and the old
+/// folder is complete under `.<name>.old.<pid>`; the next run's output lock puts it back if the run dies there.
+fn swap_by_two_renames(new: &Path, dir: &Path) -> std::io::Result<()> {
+    let old = super::lock::old_path(dir);
+    std::fs::rename(dir, &old)?;
+    if let Err(e) = std::fs::rename(new, dir) {
+        let _ = std::fs::rename(&old, dir);
+        return Err(e);
+    }
+    std::fs::rename(&old, new)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -86,5 +206,63 @@ mod tests {
         let err = write_atomic_with(&p, |_| Err(std::io::Error::other("boom"))).unwrap_err();
         assert!(err.to_string().contains("a.txt"));
         assert_eq!(std::fs::read(&p).unwrap(), b"old");
+    }
+
+    #[test]
+    fn a_folder_is_replaced_whole_keeping_foreign_files_and_kept_whole_on_failure() {
+        let root = tempfile::tempdir().unwrap();
+        let dir = root.path().join("model");
+        replace_dir_atomic(&dir, |d| {
+            std::fs::write(d.join("config.json"), "old")?;
+            std::fs::write(d.join("weights"), "old")
+        })
+        .unwrap();
+        std::fs::write(dir.join("notes.txt"), "mine").unwrap();
+        // A failure half-way (after one file of the new model): the old folder is untouched.
+        let e = replace_dir_atomic(&dir, |d| {
+            std::fs::write(d.join("config.json"), "new")?;
+            Err::<(), _>(std::io::Error::other("disk full"))
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("disk full"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(dir.join("config.json")).unwrap(),
+            "old"
+        );
+        assert_eq!(std::fs::read_to_string(dir.join("weights")).unwrap(), "old");
+        replace_dir_atomic(&dir, |d| {
+            std::fs::write(d.join("config.json"), "new")?;
+            std::fs::write(d.join("weights"), "new")
+        })
+        .unwrap();
+        for (file, text) in [
+            ("config.json", "new"),
+            ("weights", "new"),
+            ("notes.txt", "mine"),
+        ] {
+            assert_eq!(
+                std::fs::read_to_string(dir.join(file)).unwrap(),
+                text,
+                "{file}"
+            );
+        }
+        let names: Vec<_> = std::fs::read_dir(root.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("model")], "leftovers");
+    }
+
+    #[test]
+    fn the_two_rename_fallback_swaps_too() {
+        let root = tempfile::tempdir().unwrap();
+        let (new, dir) = (root.path().join("new"), root.path().join("dir"));
+        std::fs::create_dir(&new).unwrap();
+        std::fs::create_dir(&dir).unwrap();
+        std::fs::write(new.join("a"), "new").unwrap();
+        std::fs::write(dir.join("a"), "old").unwrap();
+        swap_by_two_renames(&new, &dir).unwrap();
+        assert_eq!(std::fs::read_to_string(dir.join("a")).unwrap(), "new");
+        assert_eq!(std::fs::read_to_string(new.join("a")).unwrap(), "old");
     }
 }

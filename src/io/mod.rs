@@ -3,6 +3,7 @@
 
 pub mod atomic;
 pub mod figure;
+pub mod lock;
 pub mod npy;
 pub mod ply;
 pub mod preview;

@@ -43,7 +43,8 @@ pub struct DepthMetrics {
     pub l1_mm: f64,
     /// Mean absolute error over the union of both contact masks, mm (`None`: both masks empty).
     pub l1_union_mm: Option<f64>,
-    /// Peak signal-to-noise ratio, dB (+∞ when identical).
+    /// Peak signal-to-noise ratio, dB (+∞ when identical; `"inf"` in JSON).
+    #[serde(with = "super::summary::json_f64")]
     pub psnr_db: f64,
     /// Structural similarity (mean SSIM).
     pub ssim: f64,
@@ -114,6 +115,12 @@ mod tests {
         let same = depth_metrics(&truth, &truth, &DepthMetricsConfig::default()).unwrap();
         assert_eq!(same.l1_mm, 0.0);
         assert!(same.psnr_db.is_infinite() && (same.ssim - 1.0).abs() < 1e-12);
+        // Records round-trip every value they hold, the infinite PSNR of identical images included.
+        let text = serde_json::to_string(&same).unwrap();
+        assert!(text.contains("\"psnr_db\":\"inf\""), "{text}");
+        let back: DepthMetrics = serde_json::from_str(&text).unwrap();
+        assert_eq!(back.psnr_db, f64::INFINITY);
+        assert_eq!(back, same);
         let other = Image::filled(8, 16, 0.0);
         assert!(depth_metrics(&other, &truth, &DepthMetricsConfig::default()).is_err());
     }

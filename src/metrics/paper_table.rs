@@ -4,7 +4,7 @@
 //!
 //! Built from [`MethodSummary`] rows, which `tnd eval --json` writes one split at a time, so several evaluation
 //! runs (one per trained model) can be set side by side without evaluating again. Comparability: the paper's
-//! figures are on real sensor data and its PSNR uses another range; see the README's Evaluation section.
+//! figures are on real sensor data and its PSNR uses another range; see docs/evaluation.md.
 
 use std::fmt::Write as _;
 

@@ -28,6 +28,49 @@ fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> 
     Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
+/// An `f64` in JSON that keeps infinities: finite values as numbers, ±∞ as the strings `"inf"` / `"-inf"` (JSON has
+/// no number for them; serde_json would write null and then refuse to read it as an `f64`), NaN as null. Reads
+/// numbers, those strings, `"nan"`, and null (as NaN). For `#[serde(with = "…")]`.
+pub mod json_f64 {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    /// Write `v` (see the module docs).
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_f64(*v)
+        } else if v.is_nan() {
+            s.serialize_none()
+        } else if *v > 0.0 {
+            s.serialize_str("inf")
+        } else {
+            s.serialize_str("-inf")
+        }
+    }
+
+    /// Read a value written by [`serialize`] (or a plain number or null).
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Repr {
+            Number(f64),
+            Text(String),
+            Null(()),
+        }
+        match Option::<Repr>::deserialize(d)? {
+            Some(Repr::Number(v)) => Ok(v),
+            None | Some(Repr::Null(())) => Ok(f64::NAN),
+            Some(Repr::Text(t)) => match t.as_str() {
+                "inf" | "+inf" | "Infinity" => Ok(f64::INFINITY),
+                "-inf" | "-Infinity" => Ok(f64::NEG_INFINITY),
+                "nan" | "NaN" => Ok(f64::NAN),
+                other => Err(serde::de::Error::custom(format!(
+                    "'{other}' is not a number (a number, \"inf\", \"-inf\" or null)"
+                ))),
+            },
+        }
+    }
+}
+
 impl MeanStd {
     /// Aggregate `values` (see the type docs).
     pub fn of(values: impl IntoIterator<Item = Option<f64>>) -> Self {

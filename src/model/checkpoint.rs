@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 
-use super::config::UNet2DConfig;
+use super::config::{PredictionType, UNet2DConfig};
 use super::unet::UNet2DModel;
 use super::ModelError;
 use crate::io::write_atomic;
@@ -160,6 +160,21 @@ pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
             run: path.to_path_buf(),
         });
     }
+    if path.is_dir() && !weights.exists() {
+        let bin = path.join("diffusion_pytorch_model.bin");
+        return Err(ModelError::Config {
+            source_name: path.display().to_string(),
+            message: if bin.is_file() {
+                "holds diffusion_pytorch_model.bin (a PyTorch pickle, which tnd does not read); save it as \
+                 safetensors: UNet2DModel.from_pretrained(DIR).save_pretrained(DIR, safe_serialization=True)"
+                    .into()
+            } else {
+                "not a model folder: no diffusion_pytorch_model.safetensors (a diffusers folder) or \
+                 model.safetensors (a tnd train run) in it"
+                    .into()
+            },
+        });
+    }
     let file = read_tensors(&weights)?;
     if let Some(text) = file.metadata.get("config") {
         let cfg = UNet2DConfig::from_json(
@@ -182,7 +197,11 @@ pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
                 path: candidate.clone(),
                 error: source,
             })?;
-            let cfg = UNet2DConfig::from_json(&text, &candidate.display().to_string())?;
+            let mut cfg = UNet2DConfig::from_json(&text, &candidate.display().to_string())?;
+            let scheduler = dir.join("scheduler_config.json");
+            if candidate.ends_with("config.json") && scheduler.is_file() {
+                apply_scheduler_config(&mut cfg, &text, &candidate, &scheduler)?;
+            }
             return Ok((file, cfg));
         }
     }
@@ -192,6 +211,82 @@ pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
             "no config: neither a \"config\" metadata entry nor {stem}_config.json / config.json next to it"
         ),
     })
+}
+
+/// A diffusers folder's `scheduler_config.json` beside its `config.json`: the prediction type and the training
+/// schedule are the model's, so they are taken from it where `config.json` does not say (a folder saved by diffusers
+/// has no `tactile_derender` section), and a folder where the two files disagree is refused, naming both; a schedule
+/// we do not implement is refused rather than replaced by ours.
+fn apply_scheduler_config(
+    cfg: &mut UNet2DConfig,
+    config_text: &str,
+    config_path: &Path,
+    scheduler_path: &Path,
+) -> Result<(), ModelError> {
+    let bad = |message: String| ModelError::Config {
+        source_name: scheduler_path.display().to_string(),
+        message,
+    };
+    let text = std::fs::read_to_string(scheduler_path).map_err(|error| ModelError::Io {
+        path: scheduler_path.to_path_buf(),
+        error,
+    })?;
+    let scheduler: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
+    let config: serde_json::Value = serde_json::from_str(config_text)?;
+    let ours = config.get("tactile_derender");
+    let stated = |key: &str| ours.and_then(|o| o.get(key)).is_some();
+    if scheduler.get("trained_betas").is_some_and(|b| !b.is_null()) {
+        return Err(bad(
+            "trained_betas (a custom noise schedule) is not supported; only the cosine schedule"
+                .into(),
+        ));
+    }
+    let t = &mut cfg.tactile_derender;
+    if let Some(value) = scheduler.get("prediction_type") {
+        let found = match value.as_str() {
+            Some("epsilon") => PredictionType::Epsilon,
+            Some("v_prediction") => PredictionType::VPrediction,
+            _ => {
+                return Err(bad(format!(
+                    "prediction_type {value} is not supported (epsilon or v_prediction)"
+                )))
+            }
+        };
+        if stated("prediction_type") && found != t.prediction_type {
+            return Err(bad(format!(
+                "prediction_type {value} contradicts {}'s tactile_derender.prediction_type {:?}; correct one of them",
+                config_path.display(),
+                t.prediction_type
+            )));
+        }
+        t.prediction_type = found;
+    }
+    if let Some(value) = scheduler.get("num_train_timesteps") {
+        let found = value
+            .as_u64()
+            .and_then(|v| usize::try_from(v).ok())
+            .ok_or_else(|| bad(format!("num_train_timesteps {value} is not a count")))?;
+        if stated("num_train_timesteps") && found != t.num_train_timesteps {
+            return Err(bad(format!(
+                "num_train_timesteps {found} contradicts {}'s tactile_derender.num_train_timesteps {}; correct \
+                 one of them",
+                config_path.display(),
+                t.num_train_timesteps
+            )));
+        }
+        t.num_train_timesteps = found;
+    }
+    if let Some(value) = scheduler.get("beta_schedule") {
+        let found = value.as_str().unwrap_or_default();
+        if found != t.beta_schedule {
+            return Err(bad(format!(
+                "beta_schedule {value} is not supported: tnd samples with the cosine schedule \
+                 (\"squaredcos_cap_v2\") only, and this model was trained with another"
+            )));
+        }
+    }
+    cfg.validate(&scheduler_path.display().to_string())
 }
 
 /// A U-Net whose parameters live in a [`VarMap`] (trainable; also used for inference).

@@ -7,6 +7,22 @@ use serde::{Deserialize, Serialize};
 use super::normalise::Normalisation;
 use super::ModelError;
 
+/// Largest image side a config may ask for, pixels.
+pub const MAX_SAMPLE_SIZE: usize = 4096;
+/// Most input or output channels.
+pub const MAX_IO_CHANNELS: usize = 64;
+/// Widest level, channels.
+pub const MAX_CHANNELS: usize = 4096;
+/// Most ResNet blocks per level.
+pub const MAX_LAYERS_PER_BLOCK: usize = 16;
+/// Most resolution levels.
+pub const MAX_LEVELS: usize = 8;
+/// Most diffusion steps of a training schedule.
+pub const MAX_TIMESTEPS: usize = 100_000;
+/// Most parameters (estimated by [`UNet2DConfig::parameter_estimate`]): 2 GB of f32, far above any U-Net trained
+/// for this task (the bundled default has 2.7 M).
+pub const MAX_PARAMETERS: u128 = 500_000_000;
+
 /// diffusers `UNet2DModel` configuration (`diffusers/models/unets/unet_2d.py`). Field names and meanings are
 /// diffusers'; values we do not implement are rejected by [`UNet2DConfig::validate`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -73,9 +89,9 @@ pub struct UNet2DConfig {
 }
 
 impl Default for UNet2DConfig {
-    /// The shipped default architecture (see `assets/models/README.md`): 64 × 64, four levels 16/32/64/64, one ResNet
-    /// per level, attention at the coarsest level (8 × 8) and in the middle block — the peer script's "smaller U-Net"
-    /// (1.09 M parameters), so that PyTorch figures exist for it.
+    /// The architecture of the bundled `small` model (the bundled default, which `tnd train` starts from, is the same
+    /// network with levels 32/64/96/96, 2.7 M parameters; `assets/models/README.md`): 64 × 64, four levels 16/32/64/64, one ResNet per level, attention at the coarsest level (8 × 8) and in the middle block —
+    /// the peer script's "smaller U-Net" (1.09 M parameters), so that PyTorch figures exist for it.
     fn default() -> Self {
         Self {
             sample_size: 64,
@@ -123,7 +139,7 @@ impl Default for UNet2DConfig {
 
 /// Our part of the config: how images in metres map to the model's range, and the diffusion schedule.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct TactileConfig {
     /// Imprint (input condition) normalisation.
     pub imprint: Normalisation,
@@ -188,12 +204,37 @@ impl Default for TactileConfig {
 }
 
 impl UNet2DConfig {
-    /// Parse a config JSON (ours or diffusers'); `source` names the file in errors.
+    /// Parse a config JSON (ours or diffusers'); `source` names the file in errors. A key that is neither a
+    /// `UNet2DModel` argument nor diffusers metadata (`_class_name`, `_diffusers_version`, …) is refused, so a setting
+    /// in the wrong place (`prediction_type` beside `block_out_channels` instead of under `tactile_derender`) cannot
+    /// silently fall back to its default.
     pub fn from_json(text: &str, source: &str) -> Result<Self, ModelError> {
-        let cfg: Self = serde_json::from_str(text).map_err(|e| ModelError::Config {
+        let bad = |message: String| ModelError::Config {
             source_name: source.into(),
-            message: format!("not a valid UNet2DModel config: {e}"),
-        })?;
+            message,
+        };
+        let value: serde_json::Value = serde_json::from_str(text)
+            .map_err(|e| bad(format!("not a valid UNet2DModel config: {e}")))?;
+        let object = value
+            .as_object()
+            .ok_or_else(|| bad("not a valid UNet2DModel config: not a JSON object".into()))?;
+        let known = serde_json::to_value(Self::default()).map_err(|e| bad(e.to_string()))?;
+        let ours =
+            serde_json::to_value(TactileConfig::default()).map_err(|e| bad(e.to_string()))?;
+        for key in object.keys() {
+            if key.starts_with('_') || known.get(key).is_some() {
+                continue;
+            }
+            return Err(bad(if ours.get(key).is_some() {
+                format!(
+                    "unknown key \"{key}\" at the top level; it belongs under \"tactile_derender\""
+                )
+            } else {
+                format!("unknown key \"{key}\" (not a UNet2DModel setting)")
+            }));
+        }
+        let cfg: Self = serde_json::from_value(value)
+            .map_err(|e| bad(format!("not a valid UNet2DModel config: {e}")))?;
         cfg.validate(source)?;
         Ok(cfg)
     }
@@ -213,6 +254,21 @@ impl UNet2DConfig {
         })
     }
 
+    /// An upper estimate of the parameter count from the channel widths (3x3 convolutions of every ResNet, down and
+    /// up, and the middle block), cheap to compute before anything is allocated.
+    pub fn parameter_estimate(&self) -> u128 {
+        let layers = self.layers_per_block as u128;
+        let channels: Vec<u128> = self.block_out_channels.iter().map(|&c| c as u128).collect();
+        let mut total = 0u128;
+        for (i, &c) in channels.iter().enumerate() {
+            let wider = channels.get(i + 1).copied().unwrap_or(c).max(c);
+            // Down: `layers` ResNets of two convolutions; up: `layers + 1` of them at up to twice the width in.
+            total += 9 * 2 * layers * c * c + 9 * 2 * (layers + 1) * 2 * wider * wider;
+        }
+        let last = channels.last().copied().unwrap_or(0);
+        total + 9 * 4 * last * last
+    }
+
     /// Width of the time embedding.
     pub fn time_embed_dim(&self) -> usize {
         self.time_embedding_dim
@@ -227,7 +283,75 @@ impl UNet2DConfig {
                 message,
             })
         };
+        // Sizes are bounded before anything is allocated: an absurd value in a config or a checkpoint's metadata is
+        // refused naming the field, instead of aborting in a multi-terabyte allocation.
         let n = self.block_out_channels.len();
+        for (field, value, max) in [
+            ("sample_size", self.sample_size, MAX_SAMPLE_SIZE),
+            ("in_channels", self.in_channels, MAX_IO_CHANNELS),
+            ("out_channels", self.out_channels, MAX_IO_CHANNELS),
+            (
+                "layers_per_block",
+                self.layers_per_block,
+                MAX_LAYERS_PER_BLOCK,
+            ),
+            ("block_out_channels (levels)", n, MAX_LEVELS),
+            ("norm_num_groups", self.norm_num_groups, MAX_CHANNELS),
+            (
+                "time_embedding_dim",
+                self.time_embedding_dim.unwrap_or(1),
+                4 * MAX_CHANNELS,
+            ),
+            (
+                "attention_head_dim",
+                self.attention_head_dim.unwrap_or(1),
+                MAX_CHANNELS,
+            ),
+            (
+                "num_train_timesteps",
+                self.num_train_timesteps.unwrap_or(1),
+                MAX_TIMESTEPS,
+            ),
+            (
+                "tactile_derender.num_train_timesteps",
+                self.tactile_derender.num_train_timesteps,
+                MAX_TIMESTEPS,
+            ),
+        ] {
+            if value > max {
+                return bad(format!("{field} {value} is out of range (at most {max})"));
+            }
+        }
+        if self.time_embedding_dim == Some(0) {
+            return bad("time_embedding_dim must be at least 1".into());
+        }
+        for &c in &self.block_out_channels {
+            if c == 0 || c > MAX_CHANNELS {
+                return bad(format!(
+                    "block_out_channels {c} is out of range (1 to {MAX_CHANNELS})"
+                ));
+            }
+        }
+        let parameters = self.parameter_estimate();
+        if parameters > MAX_PARAMETERS {
+            return bad(format!(
+                "block_out_channels {:?} with layers_per_block {} make about {:.1e} parameters, more than the {:.0e} \
+                 a model here may have",
+                self.block_out_channels, self.layers_per_block, parameters as f64, MAX_PARAMETERS as f64
+            ));
+        }
+        if !(self.dropout.is_finite() && (0.0..1.0).contains(&self.dropout)) {
+            return bad(format!("dropout {} must be in [0, 1)", self.dropout));
+        }
+        for (field, value) in [
+            ("norm_eps", self.norm_eps),
+            ("mid_block_scale_factor", self.mid_block_scale_factor),
+            ("freq_shift", self.freq_shift),
+        ] {
+            if !value.is_finite() {
+                return bad(format!("{field} {value} must be finite"));
+            }
+        }
         if n == 0 || self.down_block_types.len() != n || self.up_block_types.len() != n {
             return bad(format!(
                 "block_out_channels, down_block_types and up_block_types must have the same non-zero length \

@@ -64,8 +64,33 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> ModelError + '_ {
     }
 }
 
-/// Write `model` as a diffusers folder `dir` (created if missing; files replaced atomically); returns the paths.
+/// Write `model` as a diffusers folder `dir`; returns the paths. A folder that holds a model already is replaced
+/// whole ([`crate::io::atomic::replace_dir_atomic`]: a kill or a full disk half-way leaves the old model loadable,
+/// never a new config beside old weights), as is a new folder; into an existing folder without a model (a user's
+/// folder of other things) the files are written one by one, each atomically.
 pub fn export(model: &DiffusionModel, dir: &Path) -> Result<Vec<PathBuf>, ModelError> {
+    if dir.is_dir() && !dir.join(FILES[1]).exists() {
+        return write_files(model, dir);
+    }
+    let mut failure = None;
+    let written = crate::io::atomic::replace_dir_atomic(dir, |tmp| {
+        write_files(model, tmp).map_err(|e| {
+            let message = e.to_string();
+            failure = Some(e);
+            std::io::Error::other(message)
+        })
+    });
+    match (written, failure) {
+        (Ok(_), _) => Ok(FILES.iter().map(|f| dir.join(f)).collect()),
+        (Err(_), Some(e)) => Err(e),
+        (Err(error), None) => Err(ModelError::Io {
+            path: dir.to_path_buf(),
+            error,
+        }),
+    }
+}
+
+fn write_files(model: &DiffusionModel, dir: &Path) -> Result<Vec<PathBuf>, ModelError> {
     std::fs::create_dir_all(dir).map_err(io_err(dir))?;
     let cfg = model.config();
     let mut config: serde_json::Value = serde_json::from_str(&cfg.to_json()?)?;

@@ -66,7 +66,7 @@ pub enum ModelError {
     },
     #[error("{}: not a valid safetensors file: {message}", path.display())]
     BadFile { path: PathBuf, message: String },
-    #[error("{source_name}: config mismatch: {message}")]
+    #[error("{source_name}: {message}")]
     Config {
         source_name: String,
         message: String,
@@ -93,7 +93,7 @@ pub enum ModelError {
     Cancelled,
     #[error("{message}")]
     Device { spec: String, message: String },
-    #[error("{}: {error}", path.display())]
+    #[error("{}", crate::error::with_path(path, error))]
     Io {
         path: PathBuf,
         error: std::io::Error,

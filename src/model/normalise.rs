@@ -9,7 +9,7 @@ use super::ModelError;
 
 /// Affine map `model = (metres - offset_m) / scale_m`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct Normalisation {
     /// Value in metres that maps to 0, metres.
     pub offset_m: f32,

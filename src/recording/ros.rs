@@ -279,6 +279,19 @@ pub fn decode_pose_stamped(buf: &[u8], encoding: Encoding) -> Result<Pose2dMsg, 
         r.f64("orientation.z")?,
         r.f64("orientation.w")?,
     );
+    // A zero or far-from-unit quaternion is no rotation (an uninitialised message); its "yaw" would be arbitrary.
+    let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+    if !(0.9..=1.1).contains(&norm) {
+        return Err(format!(
+            "orientation ({qx}, {qy}, {qz}, {qw}) is not a unit quaternion (norm {norm:.3})"
+        ));
+    }
+    // Normalised only when it is not unit already (a division by 1 ± ulp would move an exact yaw by an ulp).
+    let (qx, qy, qz, qw) = if (norm - 1.0).abs() > 1e-9 {
+        (qx / norm, qy / norm, qz / norm, qw / norm)
+    } else {
+        (qx, qy, qz, qw)
+    };
     let theta = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
     finite_pose(Pose2dMsg {
         stamp_ns: Some(stamp_ns),
@@ -500,6 +513,12 @@ mod tests {
         assert_eq!(p.stamp_ns, Some(42));
         assert!((p.x - 0.01).abs() < 1e-15 && (p.y + 0.02).abs() < 1e-15);
         assert!((p.theta - 2.5).abs() < 1e-12, "{}", p.theta);
+        // The orientation is the message's last four doubles: a zero quaternion is refused, not read as a yaw of 0.
+        let mut zero = b.clone();
+        let n = zero.len();
+        zero[n - 32..].fill(0);
+        let e = decode_pose_stamped(&zero, Encoding::Cdr).unwrap_err();
+        assert!(e.contains("not a unit quaternion"), "{e}");
         let pc = PointCloudMsg {
             stamp_ns: 3,
             height: 1,

@@ -274,13 +274,12 @@ impl Recording {
         accept: impl Fn(StreamKind) -> bool,
     ) -> Result<&StreamInfo, RecordingError> {
         let candidates: Vec<&StreamInfo> = self.streams.iter().filter(|s| accept(s.kind)).collect();
-        let list = || {
-            let names: Vec<&str> = candidates.iter().map(|s| s.name.as_str()).collect();
-            if names.is_empty() {
-                format!("it has no {what} topic")
-            } else {
-                format!("its {what} topics: {}", names.join(", "))
-            }
+        let names: Vec<&str> = candidates.iter().map(|s| s.name.as_str()).collect();
+        let others: Vec<&str> = self.streams.iter().map(|s| s.name.as_str()).collect();
+        let elsewhere = if others.is_empty() {
+            "the recording holds no messages at all".to_string()
+        } else {
+            format!("messages only on {}", others.join(", "))
         };
         let found = match name {
             Some(n) => candidates.iter().find(|s| s.name == n).copied(),
@@ -289,9 +288,17 @@ impl Recording {
         };
         found.ok_or_else(|| RecordingError::Topic {
             path: self.path.clone(),
-            message: match name {
-                Some(n) => format!("no {what} topic '{n}'; {}", list()),
-                None => format!("choose a {what} topic; {}", list()),
+            message: match (name, names.is_empty()) {
+                (Some(n), true) => format!("topic '{n}' holds no {what} messages ({elsewhere})"),
+                (Some(n), false) => format!(
+                    "no {what} topic '{n}'; its {what} topics: {}",
+                    names.join(", ")
+                ),
+                (None, true) => format!("it has no {what} topic with messages ({elsewhere})"),
+                (None, false) => format!(
+                    "choose a {what} topic; its {what} topics: {}",
+                    names.join(", ")
+                ),
             },
         })
     }

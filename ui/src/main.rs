@@ -82,6 +82,11 @@ fn run(args: Args) -> Result<()> {
             }
         }
     }
+    // A session that does not load fails here too (the window would otherwise open on the default scene with the
+    // error in its status bar, and a screenshot run would exit 0).
+    if let Some(p) = &args.session {
+        tnd_workbench::session::read(p)?;
+    }
     let sensor = args
         .sensor
         .as_deref()

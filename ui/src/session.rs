@@ -64,9 +64,11 @@ fn resolve_beside(state: &mut State, session_dir: &Path) {
     }
 }
 
-/// Write `state` to `path` atomically (temp file + rename).
+/// Write `state` to `path` atomically (temp file + rename), holding the file's output lock while writing, so that a
+/// `tnd` run or another workbench writing the same file at that moment is refused rather than interleaved.
 pub fn write(path: &Path, state: &State) -> Result<()> {
     let text = serde_json::to_string_pretty(state).context("cannot encode the session")?;
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(path)?;
     write_atomic(path, format!("{text}\n").as_bytes())
         .map_err(|e| anyhow!("cannot save the session: {e}"))
 }

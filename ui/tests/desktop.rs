@@ -187,3 +187,27 @@ fn a_missing_session_or_mesh_on_the_command_line_fails_before_any_window_opens()
         assert_eq!(stderr.trim(), format!("error: {flag} {path}: no such file"));
     }
 }
+
+#[test]
+fn an_invalid_session_on_the_command_line_fails_before_any_window_opens() {
+    // A screenshot run of a session that does not load must not render the default scene and exit 0.
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, "{\"version\": 1, \"scene\": {\"press\": -1.0}").unwrap();
+    let shot = dir.path().join("shot.png");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_tnd-workbench"))
+        .arg("--session")
+        .arg(&bad)
+        .arg("--screenshot")
+        .arg(&shot)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("bad.json: not a valid session file"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert!(!shot.exists());
+}

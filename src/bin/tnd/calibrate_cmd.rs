@@ -173,6 +173,11 @@ fn fit_shadow_width(
 }
 
 pub fn run(a: CalibrateArgs) -> Result<()> {
+    let _locks = [a.out.as_deref(), a.figure.as_deref()]
+        .into_iter()
+        .flatten()
+        .map(tactile_derender::io::lock::OutputLock::acquire)
+        .collect::<Result<Vec<_>, _>>()?;
     let given = a.sensor.sim_config()?;
     let rec = Recording::open(&a.from, &a.read.folder())?;
     let stream = rec.depth_stream(a.read.topic.as_deref())?.clone();

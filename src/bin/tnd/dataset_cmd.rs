@@ -215,6 +215,7 @@ fn say_how_to_resume_when_interrupted() {
 }
 
 fn gen(a: GenArgs) -> Result<()> {
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
     let pair = |flag: &str, s: &str, example: &str| {
         s.split_once(',')
             .and_then(|(x, y)| Some([x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?]))
@@ -312,7 +313,7 @@ fn gen(a: GenArgs) -> Result<()> {
     println!(
         "{}",
         json!({
-            "out": a.out,
+            "out": crate::path_json(&a.out),
             "pairs": report.pairs,
             "generated": report.generated,
             "kept_chunks": report.kept_chunks,
@@ -329,6 +330,7 @@ fn gen(a: GenArgs) -> Result<()> {
 }
 
 fn run_import(a: ImportArgs) -> Result<()> {
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
     let sim = a.sensor.sim_config()?;
     let set = ObjectSet::open(&a.objects).with_context(|| format!("--objects {}", a.objects))?;
     let split = match a.split.as_str() {
@@ -391,6 +393,7 @@ fn run_import(a: ImportArgs) -> Result<()> {
 }
 
 fn stats(dir: PathBuf, as_json: bool, verify: bool) -> Result<()> {
+    tactile_derender::io::lock::check_not_written(&dir)?;
     let ds = Dataset::open(&dir)?;
     if verify {
         ds.verify()?;
@@ -462,6 +465,8 @@ fn stats(dir: PathBuf, as_json: bool, verify: bool) -> Result<()> {
 }
 
 fn show(dir: PathBuf, index: usize, split: &str, out: PathBuf) -> Result<()> {
+    tactile_derender::io::lock::check_not_written(&dir)?;
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(&out)?;
     let split: SplitName = split
         .parse()
         .map_err(|e: String| anyhow!(e))
@@ -502,6 +507,6 @@ fn show(dir: PathBuf, index: usize, split: &str, out: PathBuf) -> Result<()> {
         ),
     ];
     preview::save_png(&out, &preview::side_by_side(&panels, &caption))?;
-    println!("{}", json!({"out": out, "meta": m}));
+    println!("{}", json!({"out": crate::path_json(&out), "meta": m}));
     Ok(())
 }

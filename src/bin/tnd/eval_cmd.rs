@@ -105,7 +105,7 @@ pub struct EvalArgs {
     #[arg(long)]
     pub records: Option<PathBuf>,
     /// Also save every scored pair's imprint, signature, true X0 and model samples (all --pose-samples of them) as
-    /// DIR/<split>/<index>.npz, metres, for analysis in numpy (README, "Evaluation").
+    /// DIR/<split>/<index>.npz, metres, for analysis in numpy (docs/evaluation.md).
     #[arg(long, value_name = "DIR")]
     pub save_samples: Option<PathBuf>,
     /// The rerun recording has one step per pair on the "pair" timeline: the imprint, the true and generated X0 under
@@ -197,6 +197,16 @@ fn splits(s: &str) -> Result<Vec<SplitName>> {
     })?])
 }
 
+/// `dir` exists (created if needed) and takes a file: a report folder that cannot is refused before the evaluation.
+fn check_writable_folder(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| anyhow!("{}: cannot create: {e}", dir.display()))?;
+    let probe = dir.join(format!(".tnd-write-check.{}", std::process::id()));
+    std::fs::write(&probe, b"")
+        .map_err(|e| anyhow!("{}: cannot write the report there: {e}", dir.display()))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
 pub fn run(a: EvalArgs) -> Result<()> {
     if !a.tables_from.is_empty() {
         print!("{}", paper_tables(&tables_from(&a.tables_from)?));
@@ -206,6 +216,21 @@ pub fn run(a: EvalArgs) -> Result<()> {
         .data
         .as_deref()
         .ok_or_else(|| anyhow!("--data DIR is needed (or --tables-from FILE)"))?;
+    tactile_derender::io::lock::check_not_written(data)?;
+    // One writer per output, refused before any work; the report folder must take files before the evaluation runs,
+    // not after it.
+    let _locks = [
+        a.records.as_deref(),
+        a.report.as_deref(),
+        a.save_samples.as_deref(),
+    ]
+    .into_iter()
+    .flatten()
+    .map(tactile_derender::io::lock::OutputLock::acquire)
+    .collect::<Result<Vec<_>, _>>()?;
+    if let Some(dir) = &a.report {
+        check_writable_folder(dir)?;
+    }
     let (gen, mapping) = generator(&a.model, &a.sampler, &a.guidance)?;
     let dataset = Dataset::open(data)?;
     warn_if_the_model_does_not_fit(
@@ -368,9 +393,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
         eprintln!("records: {}", log.path().display());
     }
     if let Some(dir) = &a.report {
-        std::fs::create_dir_all(dir)?;
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow!("{}: cannot create: {e}", dir.display()))?;
         let mut text = format!(
-            "# Evaluation\n\nGenerator `{}`, dataset `{}`, seed {}. Metric definitions: README, section Evaluation.\n\n",
+            "# Evaluation\n\nGenerator `{}`, dataset `{}`, seed {}. Metric definitions: docs/evaluation.md.\n\n",
             gen.name(),
             data.display(),
             a.seed

@@ -20,6 +20,12 @@ mod train_cmd;
 
 use clap::{Parser, Subcommand};
 
+/// A path in a command's JSON output. A name that is not UTF-8 is shown with replacement characters (the files were
+/// written under the real name) instead of stopping the command after its work is done.
+pub fn path_json(path: impl AsRef<std::path::Path>) -> serde_json::Value {
+    serde_json::Value::String(path.as_ref().to_string_lossy().into_owned())
+}
+
 /// Tactile Neural De-rendering for Soft Bubble sensors: simulate, generate data, train, de-render, estimate poses.
 #[derive(Parser)]
 #[command(name = "tnd", version, about)]

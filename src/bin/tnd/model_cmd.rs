@@ -104,6 +104,7 @@ pub fn run(a: ModelArgs) -> Result<()> {
         ModelCommand::Verify(v) => verify(&v),
         ModelCommand::Diagnose(d) => diagnose(&d),
         ModelCommand::Export(e) => {
+            let _lock = tactile_derender::io::lock::OutputLock::acquire(&e.diffusers)?;
             let held = e.diffusers.join("diffusion_pytorch_model.safetensors");
             if held.exists() && !e.force {
                 bail!(
@@ -115,11 +116,13 @@ pub fn run(a: ModelArgs) -> Result<()> {
             let files = diffusers_folder::export(&model, &e.diffusers)?;
             println!(
                 "{}",
-                json!({"model": e.model, "diffusers": e.diffusers, "files": files})
+                json!({"model": crate::path_json(&e.model), "diffusers": crate::path_json(&e.diffusers),
+                    "files": files.iter().map(crate::path_json).collect::<Vec<_>>()})
             );
             Ok(())
         }
         ModelCommand::Import(i) => {
+            let _lock = tactile_derender::io::lock::OutputLock::acquire(&i.out)?;
             let model = DiffusionModel::load(&i.diffusers)?;
             save_model(
                 &i.out,
@@ -127,7 +130,10 @@ pub fn run(a: ModelArgs) -> Result<()> {
                 model.config(),
                 Default::default(),
             )?;
-            println!("{}", json!({"diffusers": i.diffusers, "out": i.out}));
+            println!(
+                "{}",
+                json!({"diffusers": crate::path_json(&i.diffusers), "out": crate::path_json(&i.out)})
+            );
             Ok(())
         }
     }
@@ -189,7 +195,7 @@ fn verify(a: &VerifyArgs) -> Result<()> {
         .to_scalar()?;
     println!(
         "{}",
-        json!({"max_abs_diff": d, "model": a.model, "io": a.io})
+        json!({"max_abs_diff": d, "model": crate::path_json(&a.model), "io": crate::path_json(&a.io)})
     );
     if let Some(tol) = a.tol {
         if d.is_nan() || d > tol {

@@ -106,11 +106,12 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
             }
         }
         ObjectsCommand::Export { dir } => {
+            let _lock = tactile_derender::io::lock::OutputLock::acquire(&dir)?;
             let set = ObjectSet::builtin();
             set.export(&dir)?;
             println!(
                 "{}",
-                serde_json::json!({"exported": set.entries().len(), "dir": dir})
+                serde_json::json!({"exported": set.entries().len(), "dir": crate::path_json(&dir)})
             );
         }
         ObjectsCommand::Check { mesh, units } => {
@@ -138,6 +139,7 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
                 "unseen" => Split::Unseen,
                 other => bail!("--split must be seen or unseen, got '{other}'"),
             };
+            let _lock = tactile_derender::io::lock::OutputLock::acquire(&dir)?;
             let path = dir.join(MANIFEST_FILE);
             if path.exists() && !force {
                 bail!(
@@ -218,6 +220,7 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
             kinds,
             include,
         } => {
+            let _lock = tactile_derender::io::lock::OutputLock::acquire(&dir)?;
             let config = ProceduralConfig {
                 count,
                 seed,
@@ -249,7 +252,7 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
             println!(
                 "{}",
                 serde_json::json!({
-                    "generated": count, "objects": set.entries().len(), "dir": dir, "included": included
+                    "generated": count, "objects": set.entries().len(), "dir": crate::path_json(&dir), "included": included
                 })
             );
         }

@@ -73,6 +73,7 @@ pub struct PoseArgs {
 }
 
 pub fn run(a: PoseArgs) -> Result<()> {
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
     let measured = a.measured.read(a.sensor.sim_config()?, false)?;
     let sim = Simulator::new(measured.sim.clone())?;
     let rrd = a.rerun.open("tnd pose")?;
@@ -264,7 +265,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         let e = tactile_derender::uncertainty::SampleError::new(best, 0.0, t, &object.symmetry);
         json!({"position_mm": e.position_mm, "theta_deg": e.theta_deg})
     });
-    let summary = json!({"object": object.name, "generator": generator, "rerun": rerun, "samples": report.samples.len(),
+    let summary = json!({"object": object.name, "generator": generator, "rerun": rerun.as_deref().map(crate::path_json), "samples": report.samples.len(),
         "seed": a.derender.seed, "press_m": press, "estimate": estimate.best(), "estimate_error": estimate_error,
         "signature_checked": estimate.checked.is_some(),
         "checked_from_imprint": estimate.checked_from_imprint,

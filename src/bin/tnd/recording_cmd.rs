@@ -142,7 +142,7 @@ fn info(a: InfoArgs) -> Result<()> {
     println!(
         "{}",
         json!({
-            "recording": rec.path(),
+            "recording": crate::path_json(rec.path()),
             "streams": rec.streams(),
             "depth_topic": stream.name,
             "frames": p.len(),
@@ -169,11 +169,12 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     if a.no_pose_topic {
         seq.pose_topic = None;
     }
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
     let frames = synth::write_press_recording(&a.out, &config, &object, &seq)?;
     println!(
         "{}",
         json!({
-            "out": a.out,
+            "out": crate::path_json(&a.out),
             "object": loaded.name,
             "frames": frames,
             "depth_topic": seq.depth_topic,

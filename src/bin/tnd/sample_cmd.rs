@@ -43,6 +43,7 @@ pub struct SampleArgs {
 }
 
 pub fn run(a: SampleArgs) -> Result<()> {
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
     let device = tactile_derender::model::device::open_device(&a.derender.device)?;
     let model = DiffusionModel::load_on(&a.model, &device)?;
     let measured = a.measured.read(a.sensor.sim_config()?, true)?;
@@ -121,9 +122,9 @@ pub fn run(a: SampleArgs) -> Result<()> {
     let rerun = crate::rerun_out::finish(rrd)?;
     println!(
         "{}",
-        json!({"samples": samples.len(), "sampler": a.derender.sampler, "seed": a.derender.seed, "out": a.out,
+        json!({"samples": samples.len(), "sampler": a.derender.sampler, "seed": a.derender.seed, "out": crate::path_json(&a.out),
             "imprint_guided": guided,
-            "seconds": out.seconds, "rerun": rerun,
+            "seconds": out.seconds, "rerun": rerun.as_deref().map(crate::path_json),
             "mean_std_m": out.std.data.iter().map(|&v| f64::from(v)).sum::<f64>() / out.std.data.len() as f64})
     );
     Ok(())

@@ -62,6 +62,7 @@ fn image_of<'a>(out: &'a SimOutput, name: &str) -> &'a Image {
 }
 
 pub fn run(a: SimArgs) -> Result<()> {
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
     let pose = crate::args::parse_pose("--pose", &a.pose)?;
     crate::args::check_press("--press", a.press, false)?;
     let config = a.sensor.sim_config()?;
@@ -158,8 +159,8 @@ pub fn run(a: SimArgs) -> Result<()> {
         "imprint_range_m": range(&out.imprint, false),
         "sensor_position_m": scene.sensor.position,
         "elapsed_s": elapsed_s,
-        "out": a.out,
-        "rerun": rerun,
+        "out": crate::path_json(&a.out),
+        "rerun": rerun.as_deref().map(crate::path_json),
     });
     println!("{summary}");
     Ok(())

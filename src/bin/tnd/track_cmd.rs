@@ -181,6 +181,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
     if a.every == 0 {
         bail!("--every must be at least 1");
     }
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
     let sim_config = a.sensor.sim_config()?;
     let settings = settings(&a, &sim_config);
     // Refuse another run's folder before any long work; nothing is written until the track can start.
@@ -316,7 +317,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
         mean_median(rows.iter().filter_map(get).collect())
     };
     let summary = json!({
-        "recording": a.recording, "depth_topic": stream.name, "object": object.name,
+        "recording": crate::path_json(&a.recording), "depth_topic": stream.name, "object": object.name,
         "frames": processed.len(), "reference_frames": processed.reference_frames,
         "tracked": rows.len(), "this_run": this_run,
         "no_estimate": rows.iter().filter(|r| r.estimate.is_none()).count(),

@@ -116,21 +116,34 @@ fn check_run_inputs(a: &TrainArgs) -> Result<()> {
     Ok(())
 }
 
-fn model_config(a: &TrainArgs, resolution: (usize, usize)) -> Result<UNet2DConfig> {
-    let mut cfg = match a.config.as_deref() {
-        None => tactile_derender::model::checkpoint::locate(std::path::Path::new("default"))?.1,
-        Some("small") => {
-            tactile_derender::model::checkpoint::locate(std::path::Path::new("small"))?.1
-        }
+/// The architecture to train: the bundled default's, the small one's, or a `--config` file or inline JSON, checked
+/// before any data is read; `true` when it states its own `tactile_derender` mapping.
+fn given_config(a: &TrainArgs) -> Result<(UNet2DConfig, bool)> {
+    Ok(match a.config.as_deref() {
+        None => (
+            tactile_derender::model::checkpoint::locate(std::path::Path::new("default"))?.1,
+            false,
+        ),
+        Some("small") => (
+            tactile_derender::model::checkpoint::locate(std::path::Path::new("small"))?.1,
+            false,
+        ),
         Some(c) => {
-            let text = if std::path::Path::new(c).is_file() {
-                std::fs::read_to_string(c).with_context(|| c.to_string())?
+            let (text, source) = if std::path::Path::new(c).is_file() {
+                let text = std::fs::read_to_string(c).with_context(|| c.to_string())?;
+                (text, c.to_string())
             } else {
-                c.to_string()
+                (c.to_string(), "--config (inline JSON)".to_string())
             };
-            UNet2DConfig::from_json(&text, "--config")?
+            let cfg = UNet2DConfig::from_json(&text, &source)?;
+            let states_mapping = serde_json::from_str::<serde_json::Value>(&text)
+                .is_ok_and(|v| v.get("tactile_derender").is_some());
+            (cfg, states_mapping)
         }
-    };
+    })
+}
+
+fn model_config(mut cfg: UNet2DConfig, resolution: (usize, usize)) -> Result<UNet2DConfig> {
     if resolution.0 != resolution.1 {
         bail!(
             "the dataset's images are {}x{}; the model needs square images",
@@ -147,7 +160,12 @@ fn model_config(a: &TrainArgs, resolution: (usize, usize)) -> Result<UNet2DConfi
 /// fine-tune (`--init`) or a `--config` that sets its own `tactile_derender` mapping must already hold them (else the
 /// run is refused, saying why); otherwise the mapping is fitted to them, as the default's is to the default sensor,
 /// so that a sensor with shallower or deeper contact does not train a model whose every sample decodes as no contact.
-fn fit_to_data(a: &TrainArgs, ds: &Dataset, cfg: UNet2DConfig) -> Result<UNet2DConfig> {
+fn fit_to_data(
+    a: &TrainArgs,
+    ds: &Dataset,
+    cfg: UNet2DConfig,
+    states_mapping: bool,
+) -> Result<UNet2DConfig> {
     let Some([lo, hi]) = target_range_sample(ds, SplitName::Train, 256)? else {
         return Ok(cfg);
     };
@@ -166,10 +184,7 @@ fn fit_to_data(a: &TrainArgs, ds: &Dataset, cfg: UNet2DConfig) -> Result<UNet2DC
     let Some(problem) = cfg.tactile_derender.contact_range_problem(lo, hi) else {
         return Ok(cfg);
     };
-    if a.config
-        .as_deref()
-        .is_some_and(|c| c.contains("tactile_derender"))
-    {
+    if states_mapping {
         bail!(
             "{}: the --config does not fit this sensor: {problem}; fit its tactile_derender.target and \
              contact_min_depth_m to the sensor, or leave tactile_derender out and tnd train fits them",
@@ -195,10 +210,17 @@ fn fit_to_data(a: &TrainArgs, ds: &Dataset, cfg: UNet2DConfig) -> Result<UNet2DC
 }
 
 pub fn run(a: TrainArgs) -> Result<()> {
+    // One writer per run folder: a second `tnd train --out` here is refused at once, naming the first's pid.
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
+    tactile_derender::io::lock::check_not_written(&a.data)?;
+    if let Some(val) = &a.val_data {
+        tactile_derender::io::lock::check_not_written(val)?;
+    }
+    let (given, states_mapping) = given_config(&a)?;
     let dataset = Dataset::open(&a.data)?;
-    let mut cfg = model_config(&a, dataset.resolution())?;
+    let mut cfg = model_config(given, dataset.resolution())?;
     if !a.out.join("train_state.safetensors").is_file() {
-        cfg = fit_to_data(&a, &dataset, cfg)?;
+        cfg = fit_to_data(&a, &dataset, cfg, states_mapping)?;
     }
     let tc = a.train.clone();
     if let Some(d) = tc.ema {
@@ -249,7 +271,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
     println!(
         "{}",
         json!({"steps": summary.steps, "resumed_from": summary.resumed_from, "last_loss": summary.last_loss,
-            "model": summary.model_path})
+            "model": crate::path_json(&summary.model_path)})
     );
     Ok(())
 }

@@ -42,7 +42,7 @@ pub enum SamplerName {
 /// Which sampler runs and how: the one definition behind `tnd sample`, `tnd eval` and `tnd pose` (flattened into
 /// their arguments) and the workbench's De-render tab (stored in its session), with one set of defaults: DDIM, 25
 /// steps, η = 0, trailing spacing (within 5 % of DDPM-250 on the depth metrics at a tenth of the time; see
-/// `assets/models/README.md`).
+/// `docs/experiments/2026-11-24-v-prediction-model.md`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(default)]
 pub struct SamplerConfig {

@@ -1,0 +1,162 @@
+//! The smaller ways a run could go wrong for an unlucky user, each with the one-line message that names the file:
+//! an MCAP whose depth channel holds no messages, a second import into a finished dataset, a report folder that
+//! cannot be written (refused before the evaluation, not after it).
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn tnd_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tnd"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run tnd")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn a_depth_channel_without_messages_is_named_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty_depth.mcap");
+    let mut w = mcap::WriteOptions::new()
+        .create(std::io::BufWriter::new(
+            std::fs::File::create(&path).unwrap(),
+        ))
+        .unwrap();
+    let meta = BTreeMap::new();
+    let img = w
+        .add_schema("sensor_msgs/msg/Image", "ros2msg", b"")
+        .unwrap();
+    let pose = w
+        .add_schema("geometry_msgs/msg/PoseStamped", "ros2msg", b"")
+        .unwrap();
+    w.add_channel(img, "/bubble/depth", "cdr", &meta).unwrap();
+    let c_pose = w.add_channel(pose, "/object/pose", "cdr", &meta).unwrap();
+    let msg = tactile_derender::recording::ros::encode_pose_stamped(7, 0.0, 0.0, 0.0, "world");
+    let header = mcap::records::MessageHeader {
+        channel_id: c_pose,
+        sequence: 0,
+        log_time: 7,
+        publish_time: 7,
+    };
+    w.write_to_known_channel(&header, &msg).unwrap();
+    w.finish().unwrap();
+    drop(w);
+    for (args, expected) in [
+        (
+            vec!["recording", "info", "empty_depth.mcap"],
+            "it has no depth topic with messages (messages only on /object/pose)",
+        ),
+        (
+            vec![
+                "recording",
+                "info",
+                "empty_depth.mcap",
+                "--topic",
+                "/bubble/depth",
+            ],
+            "topic '/bubble/depth' holds no depth messages (messages only on /object/pose)",
+        ),
+    ] {
+        let o = tnd_in(dir.path(), &args);
+        let err = stderr(&o);
+        assert!(!o.status.success());
+        assert!(err.contains("empty_depth.mcap"), "{err}");
+        assert!(err.contains(expected), "{err}");
+        assert_eq!(err.matches("no depth").count(), 1, "said twice: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+}
+
+#[test]
+fn a_second_import_into_a_finished_dataset_says_it_is_finished() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = tnd_in(
+        dir.path(),
+        &[
+            "recording",
+            "simulate",
+            "rec.mcap",
+            "--object",
+            "cross_w12_s50",
+            "--rest",
+            "2",
+            "--ramp",
+            "3",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let import = [
+        "dataset",
+        "import",
+        "-q",
+        "--from",
+        "rec.mcap",
+        "--object",
+        "cross_w12_s50",
+        "--out",
+        "imp",
+    ];
+    let o = tnd_in(dir.path(), &import);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let manifest = std::fs::read(dir.path().join("imp/manifest.json")).unwrap();
+    let o = tnd_in(dir.path(), &import);
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("imp: holds a finished dataset already (manifest.json)"),
+        "{err}"
+    );
+    assert!(!err.contains("holds no"), "{err}");
+    assert_eq!(
+        std::fs::read(dir.path().join("imp/manifest.json")).unwrap(),
+        manifest
+    );
+}
+
+#[test]
+fn an_unwritable_report_folder_is_refused_before_the_evaluation() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = tnd_in(
+        dir.path(),
+        &[
+            "dataset", "gen", "-q", "--out", "ds", "--pairs", "24", "--seed", "3",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    // A file where the report's folder should be (root can write anywhere, so permissions would not test this).
+    std::fs::write(dir.path().join("taken"), "a file").unwrap();
+    let t0 = Instant::now();
+    let o = tnd_in(
+        dir.path(),
+        &[
+            "eval",
+            "-q",
+            "--data",
+            "ds",
+            "--split",
+            "train",
+            "--model",
+            "small",
+            "--steps",
+            "2",
+            "--pose-samples",
+            "4",
+            "--report",
+            "taken/report",
+        ],
+    );
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(err.contains("taken/report"), "{err}");
+    // Refused before the model is loaded or a pair is scored (an evaluation takes far longer).
+    assert!(t0.elapsed() < Duration::from_secs(5), "{:?}", t0.elapsed());
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+}
