@@ -20,6 +20,8 @@ pub mod pipeline;
 pub mod pose;
 pub mod recon;
 pub mod recording;
+pub mod rrd;
+pub mod seed;
 pub mod sensor;
 pub mod sim;
 pub mod uncertainty;

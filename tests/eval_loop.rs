@@ -422,7 +422,7 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
 
     // `estimate_pose` (tnd pose, the workbench) pools the same proposals into its single-sample estimate and says
     // where the pick came from.
-    use tactile_derender::pipeline::{estimate_pose, ObjectSpec, PoseInput};
+    use tactile_derender::pipeline::{estimate_pose, ObjectSpec, Observation, PoseInput};
     let sim = tactile_derender::sim::Simulator::new(SimConfig::default()).unwrap();
     // The cross (pair 1, the lying cylinder, leaves its axis free: errors along it are not errors).
     let pair = src.pair(0).unwrap();
@@ -430,10 +430,12 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
     let samples = [CornerContact::apply(&pair.signature)];
     let input = PoseInput {
         t_world_camera: pair.t_world_camera,
-        samples: &samples,
-        imprint: &pair.imprint,
-        signature: Some(&pair.signature),
-        truth: Some(pair.object_pose),
+        observation: Observation {
+            samples: &samples,
+            imprint: &pair.imprint,
+            signature: Some(&pair.signature),
+            truth: Some(pair.object_pose),
+        },
     };
     let pose = |imprint_proposals: bool| {
         let config = EvalConfig {
@@ -468,7 +470,7 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
 #[test]
 fn pose_estimate_steps_are_counted_and_named() {
     use tactile_derender::pipeline::{
-        estimate_pose, pose_stage, pose_steps, ObjectSpec, PoseInput,
+        estimate_pose, pose_stage, pose_steps, ObjectSpec, Observation, PoseInput,
     };
     let src = source();
     let sim = tactile_derender::sim::Simulator::new(SimConfig::default()).unwrap();
@@ -478,10 +480,12 @@ fn pose_estimate_steps_are_counted_and_named() {
     for signature in [Some(&pair.signature), None] {
         let input = PoseInput {
             t_world_camera: pair.t_world_camera,
-            samples: &samples,
-            imprint: &pair.imprint,
-            signature,
-            truth: Some(pair.object_pose),
+            observation: Observation {
+                samples: &samples,
+                imprint: &pair.imprint,
+                signature,
+                truth: Some(pair.object_pose),
+            },
         };
         let mut seen = Vec::new();
         estimate_pose(

@@ -20,7 +20,6 @@
 //! ([`super::resample`]) — S and R as depths, then Y = R − S at the model resolution, as the simulator does.
 
 use std::collections::BTreeMap;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -30,14 +29,14 @@ use super::manifest::{
     DatasetKind, DatasetManifest, ImportInfo, ObjectSetInfo, SplitCounts, FORMAT_NAME,
     FORMAT_VERSION, MANIFEST_FILE, OBJECTS_DIR,
 };
-use super::resample;
 use super::shard::SHARDS_DIR;
 use super::shard::{self, Record};
 use super::split;
 use super::{DatasetError, SplitName};
 use crate::image::Image;
-use crate::io::npy;
+use crate::io::depth_file;
 use crate::objects::ObjectSet;
+use crate::sensor::resample;
 use crate::sensor::{Se2, SensorPose};
 use crate::sim::{PreparedObject, SimConfig, Simulator};
 
@@ -505,101 +504,10 @@ pub(crate) fn load_image(
     rel: &str,
     config: &ImportConfig,
 ) -> Result<Image, DatasetError> {
-    let (file, member) = match rel.rsplit_once(':') {
-        Some((f, m)) if f.to_ascii_lowercase().ends_with(".npz") => (f, Some(m)),
-        _ => (rel, None),
-    };
-    let path = from.join(file);
-    let bad = |message: String| DatasetError::Import {
-        path: path.clone(),
-        message,
-    };
-    if !path.is_file() {
-        return Err(bad(
-            "file not found (paths in the pair table are relative to its directory)".into(),
-        ));
-    }
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
-    let (img, scale) = match ext.as_str() {
-        "npy" => (
-            npy::read_image(&path).map_err(|e| bad(e.to_string()))?,
-            config.npy_scale,
-        ),
-        "npz" => (read_npz_image(&path, member)?, config.npy_scale),
-        "png" => {
-            let dynamic = image::open(&path).map_err(|e| bad(format!("cannot read PNG: {e}")))?;
-            if !matches!(dynamic, image::DynamicImage::ImageLuma16(_)) {
-                return Err(bad(format!(
-                    "PNG is {:?}; depth PNGs must be 16-bit grayscale",
-                    dynamic.color()
-                )));
-            }
-            let g = dynamic.to_luma16();
-            let (w, h) = (g.width() as usize, g.height() as usize);
-            let data = g.into_raw().into_iter().map(f32::from).collect();
-            (
-                Image::from_vec(w, h, data).ok_or_else(|| bad("PNG size".into()))?,
-                config.png_scale,
-            )
+    depth_file::read(from, rel, config.npy_scale, config.png_scale).map_err(|e| {
+        DatasetError::Import {
+            path: e.path,
+            message: e.message,
         }
-        _ => {
-            return Err(bad(
-                "unsupported image file (use .npy, .npz or 16-bit .png)".into(),
-            ))
-        }
-    };
-    let scale = scale as f32;
-    Ok(Image {
-        data: img.data.iter().map(|&x| x * scale).collect(),
-        ..img
     })
-}
-
-/// One array of an `.npz` (any compression numpy writes): `member`, or the only array.
-fn read_npz_image(path: &Path, member: Option<&str>) -> Result<Image, DatasetError> {
-    let bad = |message: String| DatasetError::Import {
-        path: path.to_path_buf(),
-        message,
-    };
-    let file = std::fs::File::open(path).map_err(|e| DatasetError::io(path, e))?;
-    let mut zip = zip::ZipArchive::new(file).map_err(|e| bad(format!("not an npz: {e}")))?;
-    let names: Vec<String> = zip
-        .file_names()
-        .filter_map(|n| n.ok()?.strip_suffix(".npy").map(str::to_string))
-        .collect();
-    let name = match member {
-        Some(m) => m.to_string(),
-        None if names.len() == 1 => names[0].clone(),
-        None => {
-            return Err(bad(format!(
-                "holds {} arrays ({}); name one as file.npz:name",
-                names.len(),
-                names.join(", ")
-            )))
-        }
-    };
-    let mut bytes = Vec::new();
-    zip.by_name(&format!("{name}.npy"))
-        .map_err(|_| bad(format!("no array '{name}' (has {})", names.join(", "))))?
-        .read_to_end(&mut bytes)
-        .map_err(|e| bad(format!("array '{name}': {e}")))?;
-    let a = npy::decode(&bytes).map_err(|e| bad(format!("array '{name}': {e}")))?;
-    let (h, w) = match a.shape.as_slice() {
-        [h, w] | [1, h, w] => (*h, *w),
-        s => {
-            return Err(bad(format!(
-                "array '{name}' has shape {s:?}; expected (H, W)"
-            )))
-        }
-    };
-    if let Some(i) = a.data.iter().position(|x| !x.is_finite()) {
-        return Err(bad(format!(
-            "array '{name}' has a non-finite value at flat index {i}"
-        )));
-    }
-    Image::from_vec(w, h, a.data).ok_or_else(|| bad(format!("array '{name}': size mismatch")))
 }

@@ -23,7 +23,8 @@ pub mod import_recording;
 pub mod manifest;
 pub mod npz;
 pub mod reader;
-pub mod resample;
+/// Native camera frames to the model's resolution (moved to the sensor, which the recording stage shares).
+pub use crate::sensor::resample;
 pub mod sample;
 pub mod sensor_variation;
 pub mod shadow_fit;

@@ -15,13 +15,7 @@ use rand_chacha::ChaCha8Rng;
 use super::SplitName;
 use crate::objects::Split;
 
-/// SplitMix64 finaliser: a bijective 64-bit mix.
-pub fn mix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
+pub use crate::seed::mix64;
 
 /// The seed of pair `index` in a dataset generated with `seed`.
 pub fn pair_seed(seed: u64, index: usize) -> u64 {

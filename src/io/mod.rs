@@ -2,12 +2,12 @@
 //! JET colour map.
 
 pub mod atomic;
+pub mod depth_file;
 pub mod figure;
 pub mod lock;
 pub mod npy;
 pub mod ply;
 pub mod preview;
-pub mod rrd;
 pub mod settings;
 
 pub use atomic::write_atomic;

@@ -9,7 +9,6 @@ use std::path::Path;
 use glam::DVec3;
 
 use super::write_atomic;
-use crate::mesh::Mesh;
 
 /// PLY body encoding.
 #[derive(
@@ -101,60 +100,23 @@ pub fn write_points(
     write_atomic(path, &out)
 }
 
-/// Write `mesh` with every vertex mapped by `transform` (e.g. `t_world_object`) as a PLY triangle mesh at `path`
-/// (atomically).
-pub fn write_mesh(
+/// Write a triangle mesh (vertices in the frame the comment names, metres) as PLY at `path` (atomically);
+/// [`crate::mesh::ply::write_mesh`] writes a [`crate::mesh::Mesh`] at a pose.
+pub fn write_triangles(
     path: &Path,
-    mesh: &Mesh,
-    transform: &glam::DAffine3,
+    vertices: &[[f32; 3]],
+    faces: &[[u32; 3]],
     comment: &str,
     encoding: PlyEncoding,
 ) -> std::io::Result<()> {
-    let vertices: Vec<[f32; 3]> = mesh
-        .vertices()
-        .iter()
-        .map(|v| {
-            let p = transform.transform_point3(v.as_dvec3());
-            [p.x as f32, p.y as f32, p.z as f32]
-        })
-        .collect();
-    let faces = mesh.triangles();
     let mut out = header(encoding, comment, vertices.len(), Some(faces.len())).into_bytes();
-    body(encoding, &vertices, faces, &mut out);
+    body(encoding, vertices, faces, &mut out);
     write_atomic(path, &out)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::{self, LoadOptions};
-
-    #[test]
-    fn meshes_read_back_through_the_ply_loader_in_both_encodings() {
-        let dir = tempfile::tempdir().unwrap();
-        let cube = Mesh::from_raw(
-            vec![
-                glam::Vec3::new(0.0, 0.0, 0.0),
-                glam::Vec3::new(0.01, 0.0, 0.0),
-                glam::Vec3::new(0.0, 0.02, 0.0),
-                glam::Vec3::new(0.0, 0.0, 0.03),
-            ],
-            vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
-            "tetrahedron",
-        )
-        .unwrap();
-        let t = glam::DAffine3::from_translation(DVec3::new(1.0, -2.0, 0.5));
-        for enc in [PlyEncoding::Binary, PlyEncoding::Ascii] {
-            let p = dir.path().join(format!("tet_{enc:?}.ply"));
-            write_mesh(&p, &cube, &t, "a tetrahedron\nworld frame, metres", enc).unwrap();
-            let back = mesh::load(&p, &LoadOptions::default()).unwrap();
-            assert_eq!(back.triangles(), cube.triangles());
-            for (a, b) in back.vertices().iter().zip(cube.vertices()) {
-                let want = t.transform_point3(b.as_dvec3()).as_vec3();
-                assert!((*a - want).length() < 1e-6, "{a} vs {want}");
-            }
-        }
-    }
 
     #[test]
     fn point_clouds_have_the_declared_count_and_values() {

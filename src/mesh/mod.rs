@@ -9,10 +9,12 @@ pub mod gltf;
 pub mod obj;
 pub mod ply;
 pub mod query;
+pub mod sample;
 pub mod stl;
 pub mod winding;
 
 pub use query::{RayCaster, SignMethod, SignedDistance};
+pub use sample::sample_surface;
 pub use winding::FastWinding;
 
 use std::path::{Path, PathBuf};

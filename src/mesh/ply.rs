@@ -11,7 +11,7 @@ use glam::Vec3;
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{DefaultElement, Property};
 
-use super::MeshError;
+use super::{Mesh, MeshError};
 
 /// Read a PLY file: raw vertex positions in file units and triangle indices.
 pub fn read(path: &Path) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), MeshError> {
@@ -121,6 +121,26 @@ fn index_list(p: &Property) -> Option<Vec<i64>> {
     })
 }
 
+/// Write `mesh` with every vertex mapped by `transform` (e.g. `t_world_object`) as a PLY triangle mesh at `path`
+/// (atomically), for Open3D, trimesh and MeshLab.
+pub fn write_mesh(
+    path: &Path,
+    mesh: &Mesh,
+    transform: &glam::DAffine3,
+    comment: &str,
+    encoding: crate::io::ply::PlyEncoding,
+) -> std::io::Result<()> {
+    let vertices: Vec<[f32; 3]> = mesh
+        .vertices()
+        .iter()
+        .map(|v| {
+            let p = transform.transform_point3(v.as_dvec3());
+            [p.x as f32, p.y as f32, p.z as f32]
+        })
+        .collect();
+    crate::io::ply::write_triangles(path, &vertices, mesh.triangles(), comment, encoding)
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -173,5 +193,35 @@ mod tests {
         let huge = "ply\nformat binary_little_endian 1.0\nelement vertex 4611686018427387904\nproperty float x\n\
             property float y\nproperty float z\nend_header\n";
         assert!(decode(huge.as_bytes()).is_err());
+    }
+
+    #[test]
+    fn meshes_read_back_through_the_ply_loader_in_both_encodings() {
+        let dir = tempfile::tempdir().unwrap();
+        let cube = Mesh::from_raw(
+            vec![
+                glam::Vec3::new(0.0, 0.0, 0.0),
+                glam::Vec3::new(0.01, 0.0, 0.0),
+                glam::Vec3::new(0.0, 0.02, 0.0),
+                glam::Vec3::new(0.0, 0.0, 0.03),
+            ],
+            vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+            "tetrahedron",
+        )
+        .unwrap();
+        let t = glam::DAffine3::from_translation(glam::DVec3::new(1.0, -2.0, 0.5));
+        for enc in [
+            crate::io::ply::PlyEncoding::Binary,
+            crate::io::ply::PlyEncoding::Ascii,
+        ] {
+            let p = dir.path().join(format!("tet_{enc:?}.ply"));
+            write_mesh(&p, &cube, &t, "a tetrahedron\nworld frame, metres", enc).unwrap();
+            let back = crate::mesh::load(&p, &crate::mesh::LoadOptions::default()).unwrap();
+            assert_eq!(back.triangles(), cube.triangles());
+            for (a, b) in back.vertices().iter().zip(cube.vertices()) {
+                let want = t.transform_point3(b.as_dvec3()).as_vec3();
+                assert!((*a - want).length() < 1e-6, "{a} vs {want}");
+            }
+        }
     }
 }

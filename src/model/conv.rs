@@ -32,20 +32,7 @@ pub enum ConvBackend {
     Direct,
 }
 
-/// Geometry of one convolution: kernel size, stride and zero padding before/after (rows and columns alike).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct ConvGeom {
-    pub kernel: usize,
-    pub stride: usize,
-    pub pad_begin: usize,
-    pub pad_end: usize,
-}
-
-impl ConvGeom {
-    fn out_size(&self, n: usize) -> usize {
-        (n + self.pad_begin + self.pad_end - self.kernel) / self.stride + 1
-    }
-}
+pub use super::kernels::ConvGeom;
 
 /// `nn.Conv2d` with the keys `weight` `[Cout, Cin, k, k]` and `bias` `[Cout]` (optional).
 #[derive(Clone, Debug)]

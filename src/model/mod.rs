@@ -34,19 +34,7 @@ pub mod unet_blocks;
 
 use std::path::PathBuf;
 
-use candle_core::{CpuStorage, Layout};
-
-/// The `f32` data of a contiguous CPU tensor, for our custom ops; `what` ("conv: weight") names it in the error.
-pub(crate) fn contiguous_f32<'a>(
-    storage: &'a CpuStorage,
-    layout: &Layout,
-    what: &str,
-) -> candle_core::Result<&'a [f32]> {
-    match layout.contiguous_offsets() {
-        Some((start, end)) => Ok(&storage.as_slice::<f32>()?[start..end]),
-        None => candle_core::bail!("{what} must be contiguous"),
-    }
-}
+pub(crate) use kernels::simd::contiguous_f32;
 
 pub use config::{PredictionType, TactileConfig, UNet2DConfig};
 pub use diffusion::DiffusionModel;

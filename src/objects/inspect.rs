@@ -182,7 +182,7 @@ pub fn guess_symmetry(mesh: &Mesh) -> Symmetry {
     let Ok(trimesh) = TriMesh::new(mesh.vertices().to_vec(), mesh.triangles().to_vec()) else {
         return Symmetry::default();
     };
-    let samples = crate::pose::sample_surface(mesh, 1000, 7);
+    let samples = mesh::sample_surface(mesh, 1000, 7);
     // At most 1 % of the samples may land off the surface (a keyway, a can's pull tab, a scan's spike: features the
     // sensor rarely touches); counting stops at the first sample over that, so that the many angles that fail cost
     // a few queries each.

@@ -26,8 +26,8 @@ use super::shapes::{extrude_z, icosphere_directions, sphere};
 use super::sweeps;
 use super::triangulate::{signed_area, simplify, triangulate};
 use super::{ObjectEntry, ObjectError, RotationSymmetry, Split, Symmetry};
-use crate::dataset::split::mix64;
 use crate::mesh::Mesh;
+use crate::seed::mix64;
 
 /// What to generate.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

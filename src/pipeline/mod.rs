@@ -35,8 +35,8 @@ pub mod track;
 pub use derender::{derender, imprint_guidance, mean_std, DerenderConfig, Derendered};
 pub use object::{LoadedObject, ObjectSpec};
 pub use pose::{
-    estimate_pose, pose_stage, pose_steps, write_fit_figure, write_pose_geometry, PoseEstimate,
-    PoseInput,
+    estimate_pose, place_and_estimate, pose_stage, pose_steps, write_fit_figure,
+    write_pose_geometry, Observation, PlacedEstimate, Placement, PoseEstimate, PoseInput,
 };
 
 use std::path::PathBuf;

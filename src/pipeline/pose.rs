@@ -18,19 +18,22 @@ use crate::uncertainty::analysis::{analyse_with_progress, first_registration, Si
 use crate::uncertainty::UncertaintyReport;
 use crate::uncertainty::{same_pose, SampleError};
 
-/// What the sensor saw: the camera's pose, the generated samples and the imprint (metres).
+/// What the sensor saw, placed: the camera's pose and the [`Observation`] (its fields read through `input.samples`
+/// and so on).
 #[derive(Clone, Copy, Debug)]
 pub struct PoseInput<'a> {
     /// `t_world_camera` of the sensor camera.
     pub t_world_camera: DAffine3,
-    /// X̂0 samples of the generator.
-    pub samples: &'a [Image],
-    /// Y, the imprint (for the threshold baseline).
-    pub imprint: &'a Image,
-    /// S, the signature; without it there is no baseline.
-    pub signature: Option<&'a Image>,
-    /// The true pose `t_world_object`, when known (errors are then measured against it).
-    pub truth: Option<Se2>,
+    /// The samples, the imprint, the signature and the truth.
+    pub observation: Observation<'a>,
+}
+
+impl<'a> std::ops::Deref for PoseInput<'a> {
+    type Target = Observation<'a>;
+
+    fn deref(&self) -> &Observation<'a> {
+        &self.observation
+    }
 }
 
 /// The pose of one signature, from one sample and from many.
@@ -86,6 +89,106 @@ impl PoseEstimate {
         let s = crate::pose::from_depth::shift_contact(s, shift.unwrap_or(0.0));
         crate::recon::back_project(&s, sim.intrinsics(), &input.t_world_camera).p_world
     }
+}
+
+/// Where the sensor was when it took the imprint: a known camera pose (a simulation, a session's scene), or a press
+/// to find over the object ([`super::press`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Placement {
+    /// `t_world_camera` of the sensor camera.
+    Camera(DAffine3),
+    /// Placed over the object at this press (fixed, or found from the samples and the signature).
+    Press(super::press::PressChoice),
+}
+
+/// One imprint's samples as the pose use case takes them (metres, the model's resolution).
+#[derive(Clone, Copy, Debug)]
+pub struct Observation<'a> {
+    /// X̂0 samples of the generator.
+    pub samples: &'a [Image],
+    /// Y, the imprint (for the threshold baseline).
+    pub imprint: &'a Image,
+    /// S, the signature (the check, the press search and the baseline need it).
+    pub signature: Option<&'a Image>,
+    /// The true pose `t_world_object`, when known (errors are then measured against it).
+    pub truth: Option<Se2>,
+}
+
+/// A pose estimate with the sensor placement it was made at.
+#[derive(Clone, Debug)]
+pub struct PlacedEstimate {
+    /// The press the sensor was placed at, metres (`None` for a known camera pose).
+    pub press_m: Option<f64>,
+    /// `t_world_camera` the samples were registered from.
+    pub t_world_camera: DAffine3,
+    /// The estimate.
+    pub estimate: PoseEstimate,
+}
+
+impl PlacedEstimate {
+    /// The [`PoseInput`] the estimate was made from, for figures and geometry files.
+    pub fn input<'a>(&self, observation: &Observation<'a>) -> PoseInput<'a> {
+        PoseInput {
+            t_world_camera: self.t_world_camera,
+            observation: *observation,
+        }
+    }
+}
+
+/// **The pose use case** that `tnd pose`, `tnd recording track` and the workbench's Pose job share: place the sensor
+/// over `object` ([`Placement`]; `prepared` is the same object prepared for rendering, built here when `None` and a
+/// press is to be found), then [`estimate_pose`]. [`PipelineError::NoContact`] when no sample has contact.
+#[allow(clippy::too_many_arguments)]
+pub fn place_and_estimate(
+    object: &LoadedObject,
+    prepared: Option<&crate::sim::PreparedObject>,
+    sim: &Simulator,
+    observation: &Observation<'_>,
+    placement: Placement,
+    config: &EvalConfig,
+    seed: u64,
+    progress: Progress<'_>,
+) -> Result<PlacedEstimate, PipelineError> {
+    let (press_m, t_world_camera) = match placement {
+        Placement::Camera(t) => (None, t),
+        Placement::Press(choice) => {
+            let built;
+            let prepared = match prepared {
+                Some(p) => p,
+                None => {
+                    built = crate::sim::PreparedObject::new(object.mesh.clone())?;
+                    &built
+                }
+            };
+            let placement = super::press::SensorPlacement {
+                sim,
+                object,
+                prepared,
+                eval: config,
+            };
+            let press = placement
+                .press(
+                    choice,
+                    observation.samples,
+                    observation.signature,
+                    observation.imprint,
+                    seed,
+                )?
+                .ok_or(PipelineError::NoContact)?;
+            let sensor = sim.pressing_pose(prepared, 0.0, 0.0, 0.0, press);
+            (Some(press), sim.t_world_camera(&sensor))
+        }
+    };
+    let input = PoseInput {
+        t_world_camera,
+        observation: *observation,
+    };
+    let estimate = estimate_pose(object, sim, &input, config, seed, progress)?;
+    Ok(PlacedEstimate {
+        press_m,
+        t_world_camera,
+        estimate,
+    })
 }
 
 /// Register `input`'s samples to `object` seen by `sim`'s sensor (see the module docs). `progress` counts the
@@ -247,7 +350,8 @@ pub fn write_pose_geometry(
     seed: u64,
     encoding: crate::io::ply::PlyEncoding,
 ) -> Result<Vec<GeometryFile>, PipelineError> {
-    use crate::io::ply::{write_mesh, write_points};
+    use crate::io::ply::write_points;
+    use crate::mesh::ply::write_mesh;
     use crate::recon::{back_project, free_space_points};
     std::fs::create_dir_all(dir).map_err(|source| PipelineError::Write {
         path: dir.to_path_buf(),

@@ -1,6 +1,6 @@
 //! # Tracking: the object's pose on every contact frame of a recording
 //!
-//! [`track_frame`] is the De-render and Pose use cases ([`super::derender()`], [`super::estimate_pose`]) on one frame
+//! [`track_frame`] is the De-render and Pose use cases ([`super::derender()`], [`super::place_and_estimate`]) on one frame
 //! of a processed recording ([`crate::recording::ProcessedRecording`]): N samples of the in-contact depth, the
 //! single-sample estimate, the multi-sample estimate and the threshold baseline, scored against the recorded pose
 //! when the recording has one (the estimate never sees it). Frames are estimated independently, each with its own
@@ -12,8 +12,7 @@
 use serde::{Deserialize, Serialize};
 
 pub use super::press::PressChoice;
-use super::press::SensorPlacement;
-use super::{LoadedObject, PipelineError, PoseInput, Progress};
+use super::{LoadedObject, PipelineError, Progress};
 use crate::metrics::evaluate::EvalConfig;
 use crate::model::DiffusionModel;
 use crate::objects::Symmetry;
@@ -311,43 +310,28 @@ pub fn track_frame(
         recording.contact_px.get(frame).copied().unwrap_or(0),
         out.samples.len(),
     );
-    let placement = SensorPlacement {
-        sim: ctx.sim,
-        object: ctx.object,
-        prepared: ctx.prepared,
-        eval: ctx.eval,
-    };
-    let press = placement.press(
-        ctx.press,
-        &out.samples,
-        Some(signature),
-        imprint,
-        derender.seed,
-    )?;
-    let Some(press) = press else {
-        return Ok(row);
-    };
-    row.press_m = Some(press);
-    let sensor = ctx.sim.pressing_pose(ctx.prepared, 0.0, 0.0, 0.0, press);
-    let input = PoseInput {
-        t_world_camera: ctx.sim.t_world_camera(&sensor),
+    let observation = super::Observation {
         samples: &out.samples,
         imprint,
         signature: Some(signature),
         truth: None,
     };
-    let estimate = match super::estimate_pose(
+    let placed = match super::place_and_estimate(
         ctx.object,
+        Some(ctx.prepared),
         ctx.sim,
-        &input,
+        &observation,
+        super::Placement::Press(ctx.press),
         ctx.eval,
         derender.seed,
         &mut |done, total| progress(done, total),
     ) {
-        Ok(e) => e,
+        Ok(p) => p,
         Err(PipelineError::NoContact) => return Ok(row),
         Err(e) => return Err(e),
     };
+    row.press_m = placed.press_m;
+    let estimate = placed.estimate;
     let report = &estimate.report;
     row.registered = report.samples.len();
     row.estimate = estimate.best();

@@ -16,11 +16,18 @@ pub mod sdf_grid;
 pub mod sdf_register;
 pub mod signature_check;
 
+pub use crate::mesh::sample_surface;
 pub use baseline::{threshold_contact, BaselineConfig};
 pub use register::{
     initial_poses, register, Hypothesis, InitStrategy, Registration, RegistrationProblem,
 };
-pub use sdf::{sample_surface, ExactSdf, ObjectSdf};
+
+/// Poses this close (position mm, θ degrees, both reduced by the object's symmetry) are one pose: the samples of a
+/// signature that register within it form one mode, and the signature check's alternative must lie beyond it.
+pub const MODE_POSITION_MM: f64 = 2.0;
+/// See [`MODE_POSITION_MM`].
+pub const MODE_THETA_DEG: f64 = 15.0;
+pub use sdf::{ExactSdf, ObjectSdf};
 pub use sdf_grid::{SdfGrid, SdfGridConfig};
 pub use sdf_register::{RobustLoss, SdfRegistration, SdfRegistrationConfig};
 

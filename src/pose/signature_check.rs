@@ -17,12 +17,12 @@ use serde::{Deserialize, Serialize};
 use super::register::wrap_angle;
 use super::sdf_register::RobustLoss;
 use super::PoseError;
+use super::{MODE_POSITION_MM, MODE_THETA_DEG};
 use crate::image::Image;
 use crate::mesh::RayCaster;
 use crate::sensor::{Intrinsics, Se2};
 use crate::sim::render::render_depth;
 use crate::sim::shadows::tactile_signature;
-use crate::uncertainty::{MODE_POSITION_MM, MODE_THETA_DEG};
 
 /// Settings of the signature check.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -14,9 +14,9 @@ use serde::{Deserialize, Serialize};
 use super::process::{quiet_frames, ProcessConfig, ReferenceChoice};
 use super::source::{Recording, StreamInfo};
 use super::RecordingError;
-use crate::dataset::resample::{self, InputSize};
 use crate::image::Image;
 use crate::sensor::membrane_fit::{self, MembraneFitConfig, MembraneParams};
+use crate::sensor::resample::{self, InputSize};
 use crate::sensor::Intrinsics;
 use crate::sim::{SimConfig, Simulator};
 

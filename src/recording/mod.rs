@@ -1,6 +1,6 @@
 //! **Real sensor recordings** in: a Soft Bubble's depth stream recorded as an MCAP file (ROS 2 bags; ROS 1 messages
 //! too) or as a folder of depth frames, turned into one imprint Y = R − S per frame exactly as the simulator and
-//! `tnd dataset import` do (crop and area-resample with the sensor's intrinsics, [`crate::dataset::resample`]), with
+//! `tnd dataset import` do (crop and area-resample with the sensor's intrinsics, [`crate::sensor::resample`]), with
 //! the no-contact reference frame R picked by the user or detected.
 //!
 //! | module | what |

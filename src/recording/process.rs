@@ -13,8 +13,8 @@ use serde::{Deserialize, Serialize};
 
 use super::source::{Recording, StreamInfo};
 use super::RecordingError;
-use crate::dataset::resample;
 use crate::image::Image;
+use crate::sensor::resample;
 use crate::sensor::CameraConfig;
 use crate::sim::signature::imprint;
 

@@ -12,8 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use super::ros::{self, Encoding};
 use super::RecordingError;
-use crate::dataset::import::{load_image, ImportConfig};
 use crate::image::Image;
+use crate::io::depth_file;
 use crate::sensor::{Intrinsics, Se2};
 
 /// What a stream holds.
@@ -316,11 +316,6 @@ impl Recording {
                 let file = files
                     .get(index)
                     .ok_or_else(|| self.no_frame(stream, index))?;
-                let config = ImportConfig {
-                    npy_scale: options.npy_scale,
-                    png_scale: options.png_scale,
-                    ..ImportConfig::default()
-                };
                 // `file` already holds the folder (a relative folder joined twice was looked for inside itself).
                 let (dir, name) = (
                     file.parent().unwrap_or(Path::new("")),
@@ -328,10 +323,10 @@ impl Recording {
                         .map(|n| n.to_string_lossy())
                         .unwrap_or_default(),
                 );
-                let depth =
-                    load_image(dir, &name, &config).map_err(|e| RecordingError::Format {
+                let depth = depth_file::read(dir, &name, options.npy_scale, options.png_scale)
+                    .map_err(|e| RecordingError::Format {
                         path: file.clone(),
-                        message: e.to_string(),
+                        message: e.message,
                     })?;
                 Ok(DepthFrame {
                     stamp_ns: (index as f64 * 1e9 / options.fps).round() as u64,

@@ -1,11 +1,13 @@
 //! The Soft Bubble sensor: its depth camera ([`camera`]), its membrane ([`elastomer`], fitted to a measurement by
-//! [`membrane_fit`]) and where both are in the world ([`pose`]). Frames: `world` (table at z = 0, z up), `sensor` (membrane base at z = 0, dome towards +z, i.e. towards
+//! [`membrane_fit`]), where both are in the world ([`pose`]), and native frames brought to the model resolution
+//! ([`resample`]). Frames: `world` (table at z = 0, z up), `sensor` (membrane base at z = 0, dome towards +z, i.e. towards
 //! the object), `camera` (OpenCV: x right, y down, z forward), `object` (resting pose, lowest point at z = 0).
 
 pub mod camera;
 pub mod elastomer;
 pub mod membrane_fit;
 pub mod pose;
+pub mod resample;
 
 pub use camera::{CameraConfig, Intrinsics};
 pub use elastomer::{ElastomerConfig, ElastomerError};

@@ -66,10 +66,7 @@ impl SampleError {
     }
 }
 
-/// Samples whose registered poses are this close (position mm, θ degrees, both reduced by the object's symmetry)
-/// are one pose.
-pub const MODE_POSITION_MM: f64 = 2.0;
-pub const MODE_THETA_DEG: f64 = 15.0;
+pub use crate::pose::{MODE_POSITION_MM, MODE_THETA_DEG};
 
 /// One of the distinct poses the samples of a signature register to.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -530,10 +530,12 @@ impl WorkbenchApp {
         };
         let input = tactile_derender::pipeline::PoseInput {
             t_world_camera: c.t_world_camera,
-            samples: &req.samples,
-            imprint: &req.imprint,
-            signature: Some(&c.signature),
-            truth: c.truth,
+            observation: tactile_derender::pipeline::Observation {
+                samples: &req.samples,
+                imprint: &req.imprint,
+                signature: Some(&c.signature),
+                truth: c.truth,
+            },
         };
         let files = tactile_derender::pipeline::write_pose_geometry(
             &dir,
@@ -541,7 +543,7 @@ impl WorkbenchApp {
             &sim,
             &input,
             &estimate,
-            &tactile_derender::metrics::evaluate::EvalConfig::default(),
+            &req.eval_config(),
             req.seed,
             tactile_derender::io::ply::PlyEncoding::Binary,
         )?;

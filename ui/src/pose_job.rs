@@ -10,9 +10,9 @@ use std::sync::Arc;
 use anyhow::{Context, Result};
 use tactile_derender::image::Image;
 use tactile_derender::metrics::evaluate::EvalConfig;
-use tactile_derender::pipeline::press::{PressChoice, SensorPlacement};
-use tactile_derender::pipeline::{self, PoseInput};
-use tactile_derender::sim::{PreparedObject, Simulator};
+use tactile_derender::pipeline::press::PressChoice;
+use tactile_derender::pipeline::{self, Observation, Placement};
+use tactile_derender::sim::Simulator;
 
 use crate::derender::PoseContext;
 use crate::pose_view::{outline, PoseAnalysis};
@@ -34,6 +34,17 @@ pub struct PoseRequest {
     pub imprint_proposals: bool,
 }
 
+impl PoseRequest {
+    /// The pose settings this request runs with: the one definition the job and the exports of its result share.
+    pub fn eval_config(&self) -> EvalConfig {
+        EvalConfig {
+            check_signature: self.check_signature,
+            imprint_proposals: self.imprint_proposals,
+            ..EvalConfig::default()
+        }
+    }
+}
+
 /// Register the samples and the baseline ([`pipeline::estimate_pose`], as `tnd pose` does), reporting
 /// `progress(done, total)` after each registration; `cancel` stops it at the next one.
 pub fn run(
@@ -43,47 +54,26 @@ pub fn run(
 ) -> Result<PoseAnalysis> {
     let sim = Simulator::new(req.context.sim.clone()).context("sensor configuration")?;
     let object = req.context.object.spec().load()?;
-    let eval = EvalConfig {
-        check_signature: req.check_signature,
-        imprint_proposals: req.imprint_proposals,
-        ..EvalConfig::default()
-    };
+    let eval = req.eval_config();
     // Where the press is not known, the sensor goes where the samples and the signature say (as `tnd pose`).
-    let mut req = req.clone();
-    let mut press_found_m = None;
-    if req.context.find_press {
-        let prepared = PreparedObject::new(object.mesh.clone())?;
-        let placement = SensorPlacement {
-            sim: &sim,
-            object: &object,
-            prepared: &prepared,
-            eval: &eval,
-        };
-        let c = &req.context;
-        press_found_m = placement.press(
-            PressChoice::Auto,
-            &req.samples,
-            Some(&c.signature),
-            &req.imprint,
-            req.seed,
-        )?;
-        if let Some(p) = press_found_m {
-            req.context.t_world_camera =
-                sim.t_world_camera(&sim.pressing_pose(&prepared, 0.0, 0.0, 0.0, p));
-        }
-    }
     let c = &req.context;
-    let input = PoseInput {
-        t_world_camera: c.t_world_camera,
+    let placement = if c.find_press {
+        Placement::Press(PressChoice::Auto)
+    } else {
+        Placement::Camera(c.t_world_camera)
+    };
+    let observation = Observation {
         samples: &req.samples,
         imprint: &req.imprint,
         signature: Some(&c.signature),
         truth: c.truth,
     };
-    let estimate = pipeline::estimate_pose(
+    let placed = pipeline::place_and_estimate(
         &object,
+        None,
         &sim,
-        &input,
+        &observation,
+        placement,
         &eval,
         req.seed,
         &mut |done, total| {
@@ -91,6 +81,9 @@ pub fn run(
             !cancel.load(Ordering::Relaxed)
         },
     )?;
+    let (press_found_m, placed_camera) = (placed.press_m, placed.t_world_camera);
+    let input = placed.input(&observation);
+    let estimate = placed.estimate;
     let contacts = estimate
         .contact_points(&sim, &input)
         .iter()
@@ -109,7 +102,12 @@ pub fn run(
         report: estimate.report,
         sample_index: estimate.with_contact,
         anchor_shift_m: estimate.anchor_shift_m,
-        inputs: Some(Box::new(req.clone())),
+        // The request as registered: at the camera the press search placed it, when it searched.
+        inputs: Some(Box::new({
+            let mut req = req.clone();
+            req.context.t_world_camera = placed_camera;
+            req
+        })),
         press_found_m,
     })
 }

@@ -531,7 +531,7 @@ fn uncertainty_plots(
 
 /// The rerun recording of `tnd eval`: one step per evaluated pair on the timeline "pair", numbered across splits.
 struct PairLog<'a> {
-    log: &'a tactile_derender::io::rrd::RrdLog,
+    log: &'a tactile_derender::rrd::RrdLog,
     /// Step of the current split's pair 0.
     first_step: usize,
     /// Step of each pair logged in the current split, by name (the records name their pairs).
@@ -541,7 +541,7 @@ struct PairLog<'a> {
 }
 
 impl<'a> PairLog<'a> {
-    fn new(log: &'a tactile_derender::io::rrd::RrdLog) -> Self {
+    fn new(log: &'a tactile_derender::rrd::RrdLog) -> Self {
         Self {
             log,
             first_step: 0,

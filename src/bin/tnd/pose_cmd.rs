@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, bail, Result};
 use clap::Args;
 use serde_json::json;
 use tactile_derender::io::figure::FigureConfig;
@@ -15,8 +15,8 @@ use tactile_derender::io::npy;
 use tactile_derender::io::ply::PlyEncoding;
 use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::DiffusionModel;
-use tactile_derender::pipeline::press::{PressChoice, SensorPlacement};
-use tactile_derender::pipeline::{self, DerenderConfig, ObjectSpec, PoseInput};
+use tactile_derender::pipeline::press::PressChoice;
+use tactile_derender::pipeline::{self, DerenderConfig, ObjectSpec};
 use tactile_derender::pose::from_depth::contact_probability;
 use tactile_derender::sim::{PreparedObject, Simulator};
 
@@ -132,39 +132,32 @@ pub fn run(a: PoseArgs) -> Result<()> {
             Some(out.contact_probability),
         )
     };
-    let placement = SensorPlacement {
-        sim: &sim,
-        object: &object,
-        prepared: &prepared,
-        eval: &eval,
-    };
-    let press = placement
-        .press(
-            a.press,
-            &samples,
-            signature.as_ref(),
-            &imprint,
-            a.derender.seed,
-        )?
-        .ok_or_else(|| anyhow!("{input_name}: no sample has any contact; nothing to register"))?;
-    let sensor = sim.pressing_pose(&prepared, 0.0, 0.0, 0.0, press);
-    let input = PoseInput {
-        t_world_camera: sim.t_world_camera(&sensor),
+    let observation = pipeline::Observation {
         samples: &samples,
         imprint: &imprint,
         signature: signature.as_ref(),
         truth,
     };
     let mut bar = progress::bar("registering", " fits", 0);
-    let estimate = pipeline::estimate_pose(
+    let placed = match pipeline::place_and_estimate(
         &object,
+        Some(&prepared),
         &sim,
-        &input,
+        &observation,
+        pipeline::Placement::Press(a.press),
         &eval,
         a.derender.seed,
         &mut progress::callback(&mut bar),
-    )?;
+    ) {
+        Err(tactile_derender::pipeline::PipelineError::NoContact) => {
+            bail!("{input_name}: no sample has any contact; nothing to register")
+        }
+        other => other?,
+    };
     progress::finish(&mut bar);
+    let press = placed.press_m.unwrap_or_default();
+    let input = placed.input(&observation);
+    let estimate = placed.estimate;
     let report = &estimate.report;
     if report.ambiguous() {
         let modes = report.major_modes();

@@ -1,5 +1,5 @@
 //! `--rerun FILE.rrd` for `tnd sim`, `sample`, `pose` and `eval`: the same results as the files they write, as a
-//! rerun recording ([`tactile_derender::io::rrd`]): the camera with its intrinsics and pose, depth images under it,
+//! rerun recording ([`tactile_derender::rrd`]): the camera with its intrinsics and pose, depth images under it,
 //! contact points and the object at its true and estimated poses in the world (the table) frame.
 
 use std::path::PathBuf;
@@ -8,9 +8,9 @@ use anyhow::Result;
 use clap::Args;
 use glam::DAffine3;
 use tactile_derender::image::Image;
-use tactile_derender::io::rrd::RrdLog;
 use tactile_derender::mesh::Mesh;
 use tactile_derender::recon::back_project;
+use tactile_derender::rrd::RrdLog;
 use tactile_derender::sensor::{Intrinsics, Se2};
 
 /// Colours: the object at its true pose, at an estimate, contact points.

@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use super::conv_tiled::SendPtr;
 use super::sgemm::{matmul_nt_offsets, GemmBackend, Init, PackedA};
-use crate::model::conv::ConvGeom;
+use super::ConvGeom;
 
 /// Whether [`conv2d_direct`] computes a convolution of this geometry: stride 1, odd kernel, padding
 /// `(kernel − 1) / 2` on every side (the output has the input's size).
@@ -208,9 +208,9 @@ impl CustomOp3 for DirectConv {
         s3: &CpuStorage,
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
-        let x = crate::model::contiguous_f32(s1, l1, "conv: input")?;
-        let w = crate::model::contiguous_f32(s2, l2, "conv: weight")?;
-        let bias = crate::model::contiguous_f32(s3, l3, "conv: bias")?;
+        let x = super::simd::contiguous_f32(s1, l1, "conv: input")?;
+        let w = super::simd::contiguous_f32(s2, l2, "conv: weight")?;
+        let bias = super::simd::contiguous_f32(s3, l3, "conv: bias")?;
         let (g, c) = Grid::new(l1.shape().dims(), self.kernel)?;
         let co = l2.shape().dims()[0];
         let kk = c * g.k * g.k;
@@ -332,9 +332,9 @@ impl CustomOp3 for DirectConvBackward {
         s3: &CpuStorage,
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
-        let x = crate::model::contiguous_f32(s1, l1, "conv: input")?;
-        let w = crate::model::contiguous_f32(s2, l2, "conv: weight")?;
-        let dy = crate::model::contiguous_f32(s3, l3, "conv: output gradient")?;
+        let x = super::simd::contiguous_f32(s1, l1, "conv: input")?;
+        let w = super::simd::contiguous_f32(s2, l2, "conv: weight")?;
+        let dy = super::simd::contiguous_f32(s3, l3, "conv: output gradient")?;
         let (g, c) = Grid::new(l1.shape().dims(), self.kernel)?;
         let co = l2.shape().dims()[0];
         let (hw, kk, taps) = (g.h * g.w, c * g.k * g.k, g.k * g.k);

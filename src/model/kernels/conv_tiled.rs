@@ -14,7 +14,7 @@ use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
 
 use super::sgemm::{matmul_nt, GemmBackend, Init, PackedA};
-use crate::model::conv::ConvGeom;
+use super::ConvGeom;
 
 /// Forward op on `(x [B,Cin,H,W], w [Cout,Cin,k,k], bias [Cout])`.
 #[derive(Clone, Debug)]
@@ -205,9 +205,9 @@ impl CustomOp3 for TiledConv {
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let g = self.geom;
-        let x = crate::model::contiguous_f32(s1, l1, "conv: input")?;
-        let w = crate::model::contiguous_f32(s2, l2, "conv: weight")?;
-        let bias = crate::model::contiguous_f32(s3, l3, "conv: bias")?;
+        let x = super::simd::contiguous_f32(s1, l1, "conv: input")?;
+        let w = super::simd::contiguous_f32(s2, l2, "conv: weight")?;
+        let bias = super::simd::contiguous_f32(s3, l3, "conv: bias")?;
         let co = l2.shape().dims()[0];
         let d = Dims::new(l1.shape().dims(), g)?;
         if w.len() != co * d.k || bias.len() != co {
@@ -279,9 +279,9 @@ impl CustomOp3 for TiledConvBackward {
         l3: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let g = self.geom;
-        let x = crate::model::contiguous_f32(s1, l1, "conv: input")?;
-        let w = crate::model::contiguous_f32(s2, l2, "conv: weight")?;
-        let dy = crate::model::contiguous_f32(s3, l3, "conv: output gradient")?;
+        let x = super::simd::contiguous_f32(s1, l1, "conv: input")?;
+        let w = super::simd::contiguous_f32(s2, l2, "conv: weight")?;
+        let dy = super::simd::contiguous_f32(s3, l3, "conv: output gradient")?;
         let co = l2.shape().dims()[0];
         let d = Dims::new(l1.shape().dims(), g)?;
         let hw = d.ho * d.wo;

@@ -16,8 +16,25 @@ pub(crate) mod conv_direct;
 pub(crate) mod conv_tiled;
 pub mod parallel_batch;
 pub mod sgemm;
+pub(crate) mod simd;
 
 use serde::{Deserialize, Serialize};
+
+/// Geometry of one convolution: kernel size, stride and zero padding before/after (rows and columns alike).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ConvGeom {
+    pub kernel: usize,
+    pub stride: usize,
+    pub pad_begin: usize,
+    pub pad_end: usize,
+}
+
+impl ConvGeom {
+    /// Output rows (or columns) of an input of `n`.
+    pub fn out_size(&self, n: usize) -> usize {
+        (n + self.pad_begin + self.pad_end - self.kernel) / self.stride + 1
+    }
+}
 
 /// Which implementation of the network's custom operations a model runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

@@ -12,8 +12,8 @@
 use candle_core::{CpuStorage, CustomOp1, CustomOp3, Layout, Result, Shape, Tensor};
 use rayon::prelude::*;
 
-use crate::model::contiguous_f32;
-use crate::model::group_norm::simd_level;
+use super::simd::contiguous_f32;
+use super::simd::simd_level;
 
 mod rows;
 use rows::*;

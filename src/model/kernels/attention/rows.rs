@@ -3,8 +3,8 @@
 //! vectors ([`V16`]) so LLVM keeps the partial sums in registers. They are `#[inline(always)]` into the per-head
 //! functions that [`super`] compiles for AVX-512 and AVX2.
 
+use super::super::simd::exp_f32;
 use super::Packed;
-use crate::model::group_norm::exp_f32;
 
 /// `s_j = Σ_e a_e · bt[e][j]` for every j: a row of `a` (length d) against `bt` `[d, N]`. Blocks of [`LANES`]
 /// columns are summed in registers and stored once (an e-outer loop would load and store all of `s` d times).

@@ -3,8 +3,8 @@
 //! the block of input pixels whose image-plane area it replaces — the same mapping as
 //! [`crate::sensor::Intrinsics::resized`], so an output pixel's centre ray is the simulator's ray for that pixel.
 
+use super::CameraConfig;
 use crate::image::Image;
-use crate::sensor::CameraConfig;
 
 /// A depth pixel of the output is valid when at least this fraction of its area is covered by valid (non-zero)
 /// input pixels; its value is the area-weighted mean of those.
