@@ -5,23 +5,14 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod cli_common;
+
 use std::path::Path;
-use std::process::{Command, Output};
+
+use cli_common::{stderr, tnd_in};
 use std::time::{Duration, Instant};
 
 use tactile_derender::model::{DiffusionModel, PredictionType};
-
-fn tnd_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tnd"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run tnd")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 fn edit_json(path: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
     let mut v: serde_json::Value =

@@ -5,23 +5,14 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod cli_common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use cli_common::{stderr, tnd_in};
 use tactile_derender::io::lock::OutputLock;
-
-fn tnd_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tnd"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run tnd")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// Every file under `dir` (relative path → bytes), lock files aside.
 fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {

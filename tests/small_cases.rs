@@ -4,22 +4,12 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod cli_common;
+
 use std::collections::BTreeMap;
-use std::path::Path;
-use std::process::{Command, Output};
+
+use cli_common::{stderr, tnd_in};
 use std::time::{Duration, Instant};
-
-fn tnd_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tnd"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run tnd")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 #[test]
 fn a_depth_channel_without_messages_is_named_as_such() {

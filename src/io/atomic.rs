@@ -2,7 +2,27 @@
 //! over the destination, so a reader (or a run killed half-way) never sees a half-written file.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// The folder `path` is in (`.` for a bare name) and its file name: where a writer's temporary siblings go.
+pub(crate) fn parent_and_name(path: &Path) -> (PathBuf, String) {
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    (parent, name)
+}
+
+/// `.<name>.<kind>.<pid>` beside `path`: a write under way (`tmp`) or an old folder parked during a replacement
+/// (`old`). [`super::lock`] recognises these names to clean up after killed runs.
+pub(crate) fn sibling(path: &Path, kind: &str, pid: u32) -> PathBuf {
+    let (parent, name) = parent_and_name(path);
+    parent.join(format!(".{name}.{kind}.{pid}"))
+}
 
 /// Write `bytes` to `path` atomically (temp file in the same directory + fsync + rename). Parent directories are
 /// created. The error message names `path`.
@@ -17,10 +37,7 @@ pub fn write_atomic_with(
 ) -> std::io::Result<()> {
     let named =
         |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", path.display()));
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
+    let (dir, _) = parent_and_name(path);
     std::fs::create_dir_all(&dir).map_err(|e| match dir.ancestors().find(|a| a.is_file()) {
         // `--out results.txt` where results.txt is a file: say so, not "File exists".
         Some(file) => std::io::Error::new(
@@ -32,11 +49,7 @@ pub fn write_atomic_with(
         ),
         None => named(e),
     })?;
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
-    let tmp = dir.join(format!(".{file_name}.tmp.{}", std::process::id()));
+    let tmp = sibling(path, "tmp", std::process::id());
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;
         let mut w = std::io::BufWriter::new(file);
@@ -62,16 +75,12 @@ pub fn replace_dir_atomic<T>(
 ) -> std::io::Result<T> {
     let named =
         |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", dir.display()));
-    let name = dir
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .ok_or_else(|| named(std::io::Error::other("not a folder name")))?;
-    let parent = match dir.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
+    if dir.file_name().is_none() {
+        return Err(named(std::io::Error::other("not a folder name")));
+    }
+    let (parent, _) = parent_and_name(dir);
     std::fs::create_dir_all(&parent).map_err(named)?;
-    let tmp = parent.join(format!(".{name}.tmp.{}", std::process::id()));
+    let tmp = sibling(dir, "tmp", std::process::id());
     if tmp.exists() {
         std::fs::remove_dir_all(&tmp).map_err(named)?;
     }
@@ -83,7 +92,7 @@ pub fn replace_dir_atomic<T>(
         }
         sync_dir(&tmp)?;
         if dir.exists() {
-            swap_in(&tmp, dir, &parent, &name)?;
+            swap_in(&tmp, dir)?;
         } else {
             std::fs::rename(&tmp, dir)?;
         }
@@ -126,7 +135,7 @@ fn sync_dir(dir: &Path) -> std::io::Result<()> {
 
 /// Exchange `new` and `dir`: afterwards `dir` is the new folder and `new` holds the old one.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
-fn swap_in(new: &Path, dir: &Path, _parent: &Path, _name: &str) -> std::io::Result<()> {
+fn swap_in(new: &Path, dir: &Path) -> std::io::Result<()> {
     use std::os::unix::ffi::OsStrExt;
     let c = |p: &Path| {
         std::ffi::CString::new(p.as_os_str().as_bytes())
@@ -155,14 +164,14 @@ fn swap_in(new: &Path, dir: &Path, _parent: &Path, _name: &str) -> std::io::Resu
 }
 
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-fn swap_in(new: &Path, dir: &Path, _parent: &Path, _name: &str) -> std::io::Result<()> {
+fn swap_in(new: &Path, dir: &Path) -> std::io::Result<()> {
     swap_by_two_renames(new, dir)
 }
 
 /// `dir` → a sibling, `new` → `dir`, the old one → `new`. Between the first two renames `dir` is absent and the old
 /// folder is complete under `.<name>.old.<pid>`; the next run's output lock puts it back if the run dies there.
 fn swap_by_two_renames(new: &Path, dir: &Path) -> std::io::Result<()> {
-    let old = super::lock::old_path(dir);
+    let old = sibling(dir, "old", std::process::id());
     std::fs::rename(dir, &old)?;
     if let Err(e) = std::fs::rename(new, dir) {
         let _ = std::fs::rename(&old, dir);

@@ -16,6 +16,8 @@ use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
 
+use super::atomic::parent_and_name;
+
 /// Why an output could not be locked.
 #[derive(Debug, thiserror::Error)]
 pub enum LockError {
@@ -61,14 +63,7 @@ pub struct OutputLock {
 
 /// The hidden sibling file that carries `output`'s lock.
 pub fn lock_path(output: &Path) -> PathBuf {
-    let name = output
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "output".into());
-    let parent = match output.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
+    let (parent, name) = parent_and_name(output);
     parent.join(format!(".{name}.tnd-lock"))
 }
 
@@ -147,35 +142,15 @@ pub fn check_not_written(output: &Path) -> Result<(), LockError> {
     }
 }
 
-/// Where [`super::atomic::replace_dir_atomic`]'s fallback parks the old folder between its two renames.
-pub fn old_path(output: &Path) -> PathBuf {
-    sibling(output, "old", std::process::id())
-}
-
-fn sibling(output: &Path, kind: &str, pid: u32) -> PathBuf {
-    let name = output
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "output".into());
-    let parent = match output.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    parent.join(format!(".{name}.{kind}.{pid}"))
-}
-
-/// The pid of a temporary name `.<name>.tmp.<pid>` (or `.old.`) of a process that no longer runs.
-fn dead_writer(file_name: &std::ffi::OsStr, prefix: &str) -> Option<(bool, u32)> {
-    let text = file_name.to_str()?;
-    let rest = text.strip_prefix(prefix)?;
-    let (kind, pid) = rest.rsplit_once('.')?;
-    let old = match kind {
-        "old" => true,
-        "tmp" => false,
-        _ => return None,
-    };
+/// A writer's sibling name `.<name>.<kind>.<pid>` ([`super::atomic::sibling`]) left by a process that no longer
+/// runs: `(name, kind)`, kind `tmp` or `old`.
+fn dead_sibling(file_name: &std::ffi::OsStr) -> Option<(&str, &str)> {
+    let rest = file_name.to_str()?.strip_prefix('.')?;
+    let (rest, pid) = rest.rsplit_once('.')?;
+    let (name, kind) = rest.rsplit_once('.')?;
     let pid: u32 = pid.parse().ok()?;
-    (pid != std::process::id() && !alive(pid)).then_some((old, pid))
+    (matches!(kind, "tmp" | "old") && pid != std::process::id() && !alive(pid))
+        .then_some((name, kind))
 }
 
 /// Temporary files and folders of killed runs on `output`, which we now hold: `.<name>.tmp.<pid>` beside it
@@ -183,22 +158,18 @@ fn dead_writer(file_name: &std::ffi::OsStr, prefix: &str) -> Option<(bool, u32)>
 /// writes), and an old folder parked by an interrupted replacement, which is put back when the new one never
 /// arrived. Best effort: what cannot be removed stays as it was.
 fn remove_leftovers(output: &Path) {
-    let name = output
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let parent = match output.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let prefix = format!(".{name}.");
+    let (parent, name) = parent_and_name(output);
     if let Ok(entries) = std::fs::read_dir(&parent) {
         for entry in entries.flatten() {
-            let Some((old, _)) = dead_writer(&entry.file_name(), &prefix) else {
+            let file_name = entry.file_name();
+            let Some((of, kind)) = dead_sibling(&file_name) else {
                 continue;
             };
+            if of != name {
+                continue;
+            }
             let path = entry.path();
-            if old && !output.exists() {
+            if kind == "old" && !output.exists() {
                 let _ = std::fs::rename(&path, output);
             } else {
                 remove_any(&path);
@@ -213,16 +184,8 @@ fn remove_temp_files_in(dir: &Path, depth: usize) {
         return;
     };
     for entry in entries.flatten() {
-        let file_name = entry.file_name();
         let is_dir = entry.file_type().map(|t| t.is_dir()).unwrap_or(false);
-        let stale = file_name.to_str().is_some_and(|n| {
-            n.starts_with('.')
-                && n.rsplit_once(".tmp.").is_some_and(|(_, pid)| {
-                    pid.parse::<u32>()
-                        .is_ok_and(|p| p != std::process::id() && !alive(p))
-                })
-        });
-        if stale {
+        if dead_sibling(&entry.file_name()).is_some_and(|(_, kind)| kind == "tmp") {
             remove_any(&entry.path());
         } else if is_dir && depth > 1 {
             remove_temp_files_in(&entry.path(), depth - 1);
