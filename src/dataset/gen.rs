@@ -177,12 +177,14 @@ pub fn generate(
         reopen_finished(out, &dataset)?;
     }
     let mut state = start_or_resume(out, dataset)?;
+    // progress.json is the first thing a fresh run writes, so that a run killed at any later point leaves a folder
+    // the next run resumes instead of refusing as foreign.
+    state.save(&out.join(PROGRESS_FILE))?;
     set.export(&out.join(OBJECTS_DIR))?;
     if let Some((name, bytes)) = &membrane {
         crate::io::write_atomic(&out.join(name), bytes)
             .map_err(|e| DatasetError::io(out.join(name), e))?;
     }
-    state.save(&out.join(PROGRESS_FILE))?;
     remove_all_stale_temp_files(out)?;
     let todo = keep_intact_chunks(out, config, &mut state, progress);
     report.kept_chunks = config.chunks() - todo.len();
