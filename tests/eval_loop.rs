@@ -405,8 +405,14 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
     let with = run(true);
     for r in &with.records {
         let m = r.model.pose.unwrap().position_mm;
-        let c = r.model_combined.unwrap().pose.unwrap().position_mm;
-        let b = r.baseline_checked.unwrap().pose.unwrap().position_mm;
+        let c = r.model_combined.as_ref().unwrap().pose.unwrap().position_mm;
+        let b = r
+            .baseline_checked
+            .as_ref()
+            .unwrap()
+            .pose
+            .unwrap()
+            .position_mm;
         eprintln!("{}: sample {m:.2} mm, with the imprint's proposals {c:.2} mm, baseline + check {b:.2} mm", r.name);
         // Measured: 10-38 mm from the corner patch; 0.07-0.38 mm with the imprint's hypotheses (the baseline
         // with the check alone: 0.06-0.20 mm).

@@ -621,6 +621,30 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
     let csv = std::fs::read_to_string(dir.path().join("track/track.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), with_contact + 1);
+    // Every frame carries its posterior (modes, a positive-definite covariance), and the MCAP one message each.
+    let header: Vec<&str> = lines[0].split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    for line in &lines[1..] {
+        let cells: Vec<&str> = line.split(',').collect();
+        assert!(
+            cells[col("posterior_modes")].parse::<usize>().unwrap() >= 1,
+            "{line}"
+        );
+        let (xx, yy, tt): (f64, f64, f64) = (
+            cells[col("cov_xx")].parse().unwrap(),
+            cells[col("cov_yy")].parse().unwrap(),
+            cells[col("cov_thetatheta")].parse().unwrap(),
+        );
+        assert!(xx > 0.0 && yy > 0.0 && tt > 0.0, "{line}");
+    }
+    assert_eq!(
+        summary["pose_track"]["messages"].as_u64(),
+        Some(with_contact as u64),
+        "{summary}"
+    );
+    let mcap = std::fs::read(dir.path().join("track/track.mcap")).unwrap();
+    let has = |needle: &[u8]| mcap.windows(needle.len()).any(|w| w == needle);
+    assert!(has(b"geometry_msgs/msg/PoseWithCovarianceStamped") && has(b"/tnd/object_pose"));
     // The press found for each frame (never given: the sensor does not measure it) is the one simulated.
     for line in &lines[1..] {
         let cells: Vec<&str> = line.split(',').collect();

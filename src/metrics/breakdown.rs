@@ -220,6 +220,8 @@ mod tests {
                 theta_rad: None,
                 chamfer_m2: 0.0,
             }),
+            posterior: None,
+            truth_region: None,
         }
     }
 
@@ -229,6 +231,7 @@ mod tests {
             object: object.into(),
             truth: Se2::default(),
             contact_pixels,
+            symmetry: Default::default(),
             model: result(model),
             model_multi: None,
             model_combined: None,

@@ -137,6 +137,35 @@ impl EvalLog {
         Ok(log)
     }
 
+    /// The records of the log at `path`, whatever settings it was written with, in split and index order (failed
+    /// pairs left out), with its settings.
+    pub fn read(path: &Path) -> Result<(Value, Vec<PairRecord>), EvalLogError> {
+        let text = std::fs::read_to_string(path).map_err(|source| EvalLogError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let settings = text
+            .lines()
+            .next()
+            .and_then(|l| serde_json::from_str::<Value>(l).ok())
+            .and_then(|v| v.get("settings").cloned())
+            .ok_or_else(|| EvalLogError::Format {
+                path: path.to_path_buf(),
+                line: 1,
+                problem: "no settings line: not a records file of tnd eval".into(),
+            })?;
+        let log = Self::open(path, settings.clone())?;
+        let records = log
+            .pairs
+            .into_values()
+            .filter_map(|p| match p {
+                LoggedPair::Record(r) => Some(*r),
+                LoggedPair::Failed(_) => None,
+            })
+            .collect();
+        Ok((settings, records))
+    }
+
     /// The file.
     pub fn path(&self) -> &Path {
         &self.path

@@ -17,6 +17,7 @@ use crate::image::Image;
 use crate::mesh::{Mesh, RayCaster};
 use crate::objects::{ObjectError, ObjectSet, Symmetry};
 use crate::pose::from_depth::{anchor_to_signature, consensus_depth, SensorView};
+use crate::pose::posterior::{PosePosterior, PosteriorConfig};
 use crate::pose::signature_check::{SignatureCheckConfig, SignatureModel};
 use crate::pose::{
     sample_surface, threshold_contact, BaselineConfig, Hypothesis, InitStrategy, PoseError,
@@ -192,6 +193,8 @@ pub struct EvalConfig {
     /// imprint's own contact as further proposals; default true): where the imprint says more than one sample
     /// (small, shallow contacts) its pose can win. `tnd eval` then scores it as a row of its own.
     pub imprint_proposals: bool,
+    /// How the signature check's evidence becomes a pose posterior ([`crate::pose::posterior`]).
+    pub posterior: PosteriorConfig,
 }
 
 impl Default for EvalConfig {
@@ -210,6 +213,7 @@ impl Default for EvalConfig {
             check_signature: true,
             signature_check: SignatureCheckConfig::default(),
             imprint_proposals: true,
+            posterior: PosteriorConfig::default(),
         }
     }
 }
@@ -225,14 +229,24 @@ pub struct ObjectModel {
 }
 
 /// Scores of one method on one pair.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MethodResult {
     pub depth: DepthMetrics,
     /// Best registered pose; `None` when the method found no contact.
     pub estimate: Option<Se2>,
     /// Pose errors of `estimate`.
     pub pose: Option<PoseErrors>,
+    /// The pose posterior where the signature check ran ([`crate::pose::posterior`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub posterior: Option<PosePosterior>,
+    /// The probability mass of the posterior's smallest region holding the truth
+    /// ([`PosePosterior::region_mass`]): the truth is inside the reported p region when this is ≤ p.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth_region: Option<f64>,
 }
+
+/// Draws of the Monte Carlo integral of [`PosePosterior::region_mass`] in the evaluation (±0.5 % at 90 %).
+pub const REGION_DRAWS: usize = 4000;
 
 /// Both methods on one pair.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -243,6 +257,9 @@ pub struct PairRecord {
     /// Pixels in contact in the true X0 (the contact-size bins of the breakdown).
     #[serde(default)]
     pub contact_pixels: usize,
+    /// The object's symmetry (how its pose errors and posterior regions are reduced).
+    #[serde(default)]
+    pub symmetry: Symmetry,
     /// The model's first sample.
     pub model: MethodResult,
     /// The model's multi-sample estimate (with [`EvalConfig::pose_samples`] > 1).
@@ -288,6 +305,9 @@ pub struct MethodSummary {
     pub theta_excluded_symmetry: usize,
     /// Pairs whose position error excludes a translation axis (lying cylinders, prisms).
     pub position_axis_excluded: usize,
+    /// How often the truth lies inside the posterior's regions ([`super::coverage`]), where the method has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coverage: Option<super::coverage::Coverage>,
 }
 
 impl MethodSummary {
@@ -305,6 +325,9 @@ impl MethodSummary {
             no_contact: results.clone().filter(|r| r.pose.is_none()).count(),
             theta_excluded_symmetry: poses.clone().filter(|p| p.theta_rad.is_none()).count(),
             position_axis_excluded: poses.filter(|p| p.position_axis_excluded).count(),
+            coverage: super::coverage::Coverage::of(
+                results.filter_map(|r| Some((r.truth_region?, r.pose?.position_mm))),
+            ),
         }
     }
 }
@@ -513,8 +536,8 @@ impl Evaluator {
         check: bool,
     ) -> Result<MethodResult, EvalError> {
         let measured = Some((&pair.signature, &pair.imprint)).filter(|_| check);
-        let estimate = self
-            .choose(
+        let chosen = self
+            .choose_with_posterior(
                 &r.object,
                 &r.hypotheses,
                 ctx,
@@ -524,15 +547,23 @@ impl Evaluator {
             .map_err(|source| EvalError::Pose {
                 object: pair.object.clone(),
                 source,
-            })?
-            .map(|(pose, _)| pose);
+            })?;
+        let (estimate, posterior) = match chosen {
+            Some((pose, posterior)) => (Some(pose), posterior),
+            None => (None, None),
+        };
         let pose = estimate
             .map(|e| pose_errors(e, pair.object_pose, &r.object.symmetry, &r.object.cloud))
             .transpose()?;
+        let truth_region = posterior
+            .as_ref()
+            .and_then(|p| p.region_mass(pair.object_pose, &r.object.symmetry, REGION_DRAWS));
         Ok(MethodResult {
             depth: r.depth,
             estimate,
             pose,
+            posterior,
+            truth_region,
         })
     }
 
@@ -627,6 +658,7 @@ impl Evaluator {
             object: pair.object.clone(),
             truth: pair.object_pose,
             contact_pixels: pair.target.count_nonzero(),
+            symmetry: model_reg.object.symmetry,
             model,
             model_multi,
             model_combined,

@@ -6,6 +6,7 @@ use glam::DAffine3;
 
 use super::evaluate::{EvalContext, Evaluator, ObjectModel};
 use crate::image::Image;
+use crate::pose::posterior::PosePosterior;
 use crate::pose::signature_check::{measured_membrane, Checked, SignatureCheck};
 use crate::pose::{Hypothesis, InitStrategy, PoseError};
 use crate::sensor::Se2;
@@ -88,6 +89,22 @@ impl Evaluator {
             .or(best))
     }
 
+    /// [`Self::choose`] with the posterior of the check (`None` where the check does not run).
+    pub fn choose_with_posterior(
+        &self,
+        object: &ObjectModel,
+        hypotheses: &[Hypothesis],
+        ctx: &EvalContext,
+        t_world_camera: &DAffine3,
+        measured: Option<(&Image, &Image)>,
+    ) -> Result<Option<(Se2, Option<PosePosterior>)>, PoseError> {
+        let best = hypotheses.first().map(|h| (h.pose, None));
+        Ok(self
+            .check_with_posterior(object, hypotheses, ctx, t_world_camera, measured, true)?
+            .map(|(c, p)| (c.pose, p))
+            .or(best))
+    }
+
     /// The signature check's pick among `hypotheses` with its cost and its rival ([`Checked`]); `None` when the
     /// check does not run (no signature, no signature model, the check off) or there are no hypotheses.
     pub fn check(
@@ -98,6 +115,24 @@ impl Evaluator {
         t_world_camera: &DAffine3,
         measured: Option<(&Image, &Image)>,
     ) -> Result<Option<Checked>, PoseError> {
+        Ok(self
+            .check_with_posterior(object, hypotheses, ctx, t_world_camera, measured, false)?
+            .map(|(c, _)| c))
+    }
+
+    /// [`Self::check`] with the pose posterior of the check's refined candidates
+    /// ([`SignatureCheck::posterior`] with [`EvalConfig::posterior`]) when `posterior` is asked for.
+    ///
+    /// [`EvalConfig::posterior`]: super::evaluate::EvalConfig::posterior
+    pub fn check_with_posterior(
+        &self,
+        object: &ObjectModel,
+        hypotheses: &[Hypothesis],
+        ctx: &EvalContext,
+        t_world_camera: &DAffine3,
+        measured: Option<(&Image, &Image)>,
+        posterior: bool,
+    ) -> Result<Option<(Checked, Option<PosePosterior>)>, PoseError> {
         let measured = measured.filter(|_| self.config.check_signature);
         let (Some(model), Some((signature, imprint))) = (ctx.signature_model, measured) else {
             return Ok(None);
@@ -118,6 +153,12 @@ impl Evaluator {
             config: &self.config.signature_check,
         };
         let poses: Vec<Se2> = hypotheses.iter().map(|h| h.pose).collect();
-        check.select(&poses)
+        let Some((checked, candidates)) = check.select_all(&poses)? else {
+            return Ok(None);
+        };
+        let posterior = posterior
+            .then(|| check.posterior(&candidates, &object.symmetry, &self.config.posterior))
+            .transpose()?;
+        Ok(Some((checked, posterior)))
     }
 }

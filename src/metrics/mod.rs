@@ -6,6 +6,7 @@
 //! samples for analysis; [`eval_log`] keeps every pair's scores as they come, so that a killed run resumes.
 
 pub mod breakdown;
+pub mod coverage;
 pub mod depth;
 pub mod eval_log;
 pub mod evaluate;

@@ -134,6 +134,7 @@ mod tests {
             no_contact: 0,
             theta_excluded_symmetry: 0,
             position_axis_excluded: 0,
+            coverage: None,
         }
     }
 

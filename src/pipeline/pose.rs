@@ -9,6 +9,7 @@ use super::{LoadedObject, PipelineError, Progress};
 use crate::image::Image;
 use crate::metrics::evaluate::{EvalConfig, EvalContext, EvalError, Evaluator};
 use crate::objects::ObjectSet;
+use crate::pose::posterior::PosePosterior;
 use crate::pose::signature_check::Rival;
 use crate::pose::{threshold_contact, Hypothesis};
 use crate::recon::is_valid_depth;
@@ -59,6 +60,12 @@ pub struct PoseEstimate {
     pub with_contact: Vec<usize>,
     /// Every sample's, the baseline's and the multi-sample estimate's pose and errors, with the KDEs.
     pub report: UncertaintyReport,
+    /// What the signature supports ([`crate::pose::posterior`]): weighted modes with covariances, from the
+    /// hypotheses the check refined; `None` without the check.
+    pub posterior: Option<PosePosterior>,
+    /// The probability mass of the posterior's smallest region holding the true pose, when it is known
+    /// ([`PosePosterior::region_mass`]).
+    pub truth_region: Option<f64>,
     /// Per sample, the depth shift that anchored its contact onto the signature before registration (metres;
     /// [`EvalConfig::anchor_to_signature`]); empty when the samples were registered as generated.
     pub anchor_shift_m: Vec<f64>,
@@ -231,7 +238,7 @@ pub fn estimate_pose(
         .signature
         .map(|s| (s, input.imprint))
         .filter(|_| config.check_signature);
-    let (checked, checked_from_imprint) = match measured {
+    let (checked, checked_from_imprint, posterior) = match measured {
         Some(m) => {
             // The imprint's own contact proposes poses too; the check scores them beside the sample's.
             let mut pool = hypotheses.clone();
@@ -246,13 +253,23 @@ pub fn estimate_pose(
                     &strategy,
                 )?);
             }
-            match evaluator.check(&model, &pool, &ctx, &input.t_world_camera, Some(m))? {
-                Some(c) => (Some(c), c.from >= hypotheses.len()),
-                None => (None, false),
+            match evaluator.check_with_posterior(
+                &model,
+                &pool,
+                &ctx,
+                &input.t_world_camera,
+                Some(m),
+                true,
+            )? {
+                Some((c, p)) => (Some(c), c.from >= hypotheses.len(), p),
+                None => (None, false, None),
             }
         }
-        None => (None, false),
+        None => (None, false, None),
     };
+    let truth_region = posterior.as_ref().zip(input.truth).and_then(|(p, t)| {
+        p.region_mass(t, &model.symmetry, crate::metrics::evaluate::REGION_DRAWS)
+    });
     // A rival that is the pick turned by the object's symmetry is the same pose.
     let signature_rival = checked.and_then(|c| {
         c.rival
@@ -303,6 +320,8 @@ pub fn estimate_pose(
         signature_rival,
         with_contact,
         report,
+        posterior,
+        truth_region,
         anchor_shift_m,
     })
 }
@@ -466,6 +485,12 @@ pub fn write_fit_figure(
         .iter()
         .map(|p| [p.x, p.y])
         .collect();
+    let samples: Vec<[f64; 2]> = estimate
+        .report
+        .samples
+        .iter()
+        .map(|s| [s.pose.x, s.pose.y])
+        .collect();
     let fit = crate::pose::figure::FitFigure {
         object: &object.name,
         outline: &outline,
@@ -474,6 +499,8 @@ pub fn write_fit_figure(
         single: estimate.best(),
         multi: estimate.report.multi_sample.map(|m| m.pose),
         baseline: estimate.report.baseline.map(|b| b.pose),
+        samples: &samples,
+        posterior: estimate.posterior.as_ref(),
     };
     Ok(crate::io::figure::write_figure(dir, "fit", figure, &fit)?)
 }

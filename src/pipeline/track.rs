@@ -58,10 +58,16 @@ pub struct FrameTrack {
     pub estimate_error: Option<(f64, Option<f64>)>,
     pub multi_sample_error: Option<(f64, Option<f64>)>,
     pub baseline_error: Option<(f64, Option<f64>)>,
+    /// Modes of the pose posterior ([`crate::pose::posterior`]; 0: none), the weight of the one holding the
+    /// estimate, and the posterior's covariance about the estimate over (x m, y m, θ rad)
+    /// ([`crate::pose::export::covariance_about`]), as a `PoseWithCovariance` takes it.
+    pub posterior_modes: usize,
+    pub estimate_weight: Option<f64>,
+    pub covariance: Option<crate::pose::posterior::Mat3>,
 }
 
 /// Columns of [`FrameTrack::csv_row`].
-const CSV_COLUMNS: [&str; 28] = [
+const CSV_COLUMNS: [&str; 36] = [
     "frame",
     "stamp_ns",
     "contact_px",
@@ -90,7 +96,18 @@ const CSV_COLUMNS: [&str; 28] = [
     "multi_theta_err_deg",
     "baseline_position_err_mm",
     "baseline_theta_err_deg",
+    "posterior_modes",
+    "estimate_weight",
+    "cov_xx",
+    "cov_xy",
+    "cov_xtheta",
+    "cov_yy",
+    "cov_ytheta",
+    "cov_thetatheta",
 ];
+
+/// Columns of a track written before the posterior's (read back with none).
+const CSV_COLUMNS_V1: usize = 28;
 
 impl FrameTrack {
     /// A frame with nothing estimated yet.
@@ -113,6 +130,9 @@ impl FrameTrack {
             estimate_error: None,
             multi_sample_error: None,
             baseline_error: None,
+            posterior_modes: 0,
+            estimate_weight: None,
+            covariance: None,
         }
     }
 
@@ -161,6 +181,14 @@ impl FrameTrack {
             err(self.estimate_error),
             err(self.multi_sample_error),
             err(self.baseline_error),
+            self.posterior_modes.to_string(),
+            num(self.estimate_weight),
+            match self.covariance {
+                Some(c) => [c[0][0], c[0][1], c[0][2], c[1][1], c[1][2], c[2][2]]
+                    .map(|v| v.to_string())
+                    .join(","),
+                None => ",,,,,".into(),
+            },
         ]
         .join(",")
     }
@@ -168,6 +196,11 @@ impl FrameTrack {
     /// Read a row written by [`Self::csv_row`].
     pub fn from_csv_row(line: &str) -> Result<Self, String> {
         let cells: Vec<&str> = line.split(',').collect();
+        let mut cells = cells;
+        if cells.len() == CSV_COLUMNS_V1 {
+            // A track of an earlier version: no posterior.
+            cells.extend(["0", "", "", "", "", "", "", ""]);
+        }
         if cells.len() != CSV_COLUMNS.len() {
             return Err(format!(
                 "{} columns, a track row has {}",
@@ -216,6 +249,14 @@ impl FrameTrack {
             estimate_error: err(22)?,
             multi_sample_error: err(24)?,
             baseline_error: err(26)?,
+            posterior_modes: int(28)? as usize,
+            estimate_weight: num(29)?,
+            covariance: match [30, 31, 32, 33, 34, 35].map(num) {
+                [Ok(Some(xx)), Ok(Some(xy)), Ok(Some(xt)), Ok(Some(yy)), Ok(Some(yt)), Ok(Some(tt))] => {
+                    Some([[xx, xy, xt], [xy, yy, yt], [xt, yt, tt]])
+                }
+                _ => None,
+            },
         })
     }
 
@@ -342,6 +383,17 @@ pub fn track_frame(
     // θ of each sample against the reference (the estimate), reduced by the object's symmetry.
     let thetas: Option<Vec<f64>> = report.samples.iter().map(|e| e.theta_deg).collect();
     row.theta_spread_deg = thetas.as_deref().and_then(std_dev);
+    if let Some(p) = &estimate.posterior {
+        let symmetry = &ctx.object.symmetry;
+        row.posterior_modes = p.modes.len();
+        row.estimate_weight = row
+            .estimate
+            .and_then(|e| p.mode_of(e, symmetry))
+            .map(|m| m.weight);
+        row.covariance = row
+            .estimate
+            .and_then(|e| crate::pose::export::covariance_about(p, e, symmetry));
+    }
     row.pose_modes = if report.samples.len() >= 2 {
         report.major_modes().len()
     } else {
@@ -377,7 +429,16 @@ mod tests {
             (mm - 5f64.sqrt()).abs() < 1e-9 && (deg.unwrap() - 0.3f64.to_degrees()).abs() < 1e-9
         );
         assert_eq!(row.multi_sample_error, None);
-        assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row));
+        row.posterior_modes = 2;
+        row.estimate_weight = Some(0.75);
+        row.covariance = Some([[1e-6, 2e-7, 3e-5], [2e-7, 4e-6, -1e-5], [3e-5, -1e-5, 0.01]]);
+        assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
+        // A row of a track written before the posterior's columns reads back without one.
+        let full = row.csv_row();
+        let old = full.split(',').take(28).collect::<Vec<_>>().join(",");
+        let read = FrameTrack::from_csv_row(&old).unwrap();
+        assert_eq!((read.posterior_modes, read.covariance), (0, None));
+        assert_eq!(read.estimate, row.estimate);
         assert!(FrameTrack::from_csv_row("1,2,3")
             .unwrap_err()
             .contains("3 columns"));

@@ -21,7 +21,14 @@ pub struct FitFigure<'a> {
     pub single: Option<Se2>,
     pub multi: Option<Se2>,
     pub baseline: Option<Se2>,
+    /// The registered samples' positions `(x, y)`, world frame, metres.
+    pub samples: &'a [[f64; 2]],
+    /// The pose posterior: each mode's 90 % position ellipse.
+    pub posterior: Option<&'a super::posterior::PosePosterior>,
 }
+
+/// The probability of the posterior's position ellipses in the fit figure.
+pub const ELLIPSE_P: f64 = 0.9;
 
 impl Draw for FitFigure<'_> {
     fn draw<DB: DrawingBackend>(
@@ -44,10 +51,34 @@ impl Draw for FitFigure<'_> {
             .iter()
             .map(|[x, y]| (x * 1e3, y * 1e3))
             .collect();
+        let samples: Vec<(f64, f64)> = self
+            .samples
+            .iter()
+            .map(|[x, y]| (x * 1e3, y * 1e3))
+            .collect();
+        let ellipses: Vec<(Vec<(f64, f64)>, f64)> = self
+            .posterior
+            .map(|p| {
+                p.modes
+                    .iter()
+                    .map(|m| {
+                        let mut e: Vec<(f64, f64)> = m
+                            .ellipse_xy(ELLIPSE_P, 64)
+                            .iter()
+                            .map(|[x, y]| (x * 1e3, y * 1e3))
+                            .collect();
+                        e.extend(e.first().copied());
+                        (e, m.weight)
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
         let all = placed
             .iter()
             .flat_map(|(loops, _, _)| loops.iter().flatten().map(|p| (p[0], p[1])))
-            .chain(contacts.iter().copied());
+            .chain(contacts.iter().copied())
+            .chain(samples.iter().copied())
+            .chain(ellipses.iter().flat_map(|(e, _)| e.iter().copied()));
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
         for (x, y) in all {
             (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
@@ -55,12 +86,14 @@ impl Draw for FitFigure<'_> {
         if x0 > x1 {
             (x0, x1, y0, y1) = (-10.0, 10.0, -10.0, 10.0);
         }
-        // Equal scales on both axes: widen the narrower range to the plot's aspect.
+        // Equal scales on both axes: widen the narrower range to the plot's aspect. The drawing takes the left
+        // 60 % of the width, so that the legend (top right) covers none of it.
         let (w, h) = root.dim_in_pixel();
         let aspect = f64::from(w.max(1)) / f64::from(h.max(1));
-        let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
-        let half_h = ((y1 - y0) / 2.0).max((x1 - x0) / 2.0 / aspect) * 1.1 + 1.0;
+        let cy = (y0 + y1) / 2.0;
+        let half_h = ((y1 - y0) / 2.0).max((x1 - x0) / 0.6 / 2.0 / aspect) * 1.1 + 1.0;
         let half_w = half_h * aspect;
+        let cx = x0 - 0.05 * (x1 - x0) - 1.0 + half_w;
         let stroke = (2.0 * s).round().max(1.0) as u32;
         let mut chart = ChartBuilder::on(root)
             .caption(format!("SE(2) fits: {}", self.object), font(18.0, s))
@@ -80,6 +113,44 @@ impl Draw for FitFigure<'_> {
             .map_err(err)?
             .label(format!("contact points ({})", contacts.len()))
             .legend(move |(x, y)| Circle::new((x + 10, y), dot + 1, RGBColor(30, 30, 30).filled()));
+        if !samples.is_empty() {
+            let colour = RGBColor(160, 60, 200);
+            chart
+                .draw_series(
+                    samples
+                        .iter()
+                        .map(move |&p| Cross::new(p, dot + 2, colour.stroke_width(stroke))),
+                )
+                .map_err(err)?
+                .label(format!("registered samples ({})", samples.len()))
+                .legend(move |(x, y)| {
+                    Cross::new((x + 10, y), dot + 2, colour.stroke_width(stroke))
+                });
+        }
+        if !ellipses.is_empty() {
+            let colour = RGBColor(0, 170, 190);
+            let n = ellipses.len();
+            for (k, (e, weight)) in ellipses.iter().enumerate() {
+                // Heavier modes drawn bolder.
+                let width = ((1.0 + 3.0 * weight) * s).round().max(1.0) as u32;
+                let series = chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        e.clone(),
+                        colour.stroke_width(width),
+                    )))
+                    .map_err(err)?;
+                if k == 0 {
+                    series
+                        .label(format!(
+                            "posterior: {:.0} % region of {n} mode{} (top weight {:.2})",
+                            ELLIPSE_P * 100.0,
+                            if n == 1 { "" } else { "s" },
+                            weight
+                        ))
+                        .legend(swatch(colour, stroke));
+                }
+            }
+        }
         // Each outline edge on its own: a thick polyline's mitred joins shoot far out of the plot at the sharp
         // turns of a real mesh's outline (the bitmap backend has no miter limit).
         for (loops, colour, label) in placed {
@@ -113,6 +184,17 @@ mod tests {
             [-0.01, 0.005],
             [-0.01, -0.005],
         ]];
+        let cov = [[1e-6, 0.0, 0.0], [0.0, 4e-6, 0.0], [0.0, 0.0, 1e-3]];
+        let posterior = crate::pose::posterior::PosePosterior {
+            modes: vec![crate::pose::posterior::PosteriorMode {
+                weight: 1.0,
+                mean: [0.0012, 0.0001, 0.21],
+                cov,
+                nats: 0.0,
+                hessian: cov,
+            }],
+            contact_px: 100,
+        };
         let fig = FitFigure {
             object: "box",
             outline: &outline,
@@ -121,6 +203,8 @@ mod tests {
             single: Some(Se2::new(0.0012, 0.0001, 0.21)),
             multi: None,
             baseline: Some(Se2::new(0.002, 0.0, 0.3)),
+            samples: &[[0.0011, 0.0], [0.0013, 0.0002]],
+            posterior: Some(&posterior),
         };
         let size = FigureConfig {
             width_px: 900,
@@ -133,6 +217,8 @@ mod tests {
             "x, world frame [mm]",
             "contact points (2)",
             "threshold baseline",
+            "registered samples (2)",
+            "posterior: 90 % region of 1 mode",
         ] {
             assert!(text.contains(want), "no '{want}' in the SVG");
         }

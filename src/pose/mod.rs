@@ -7,9 +7,11 @@
 //! about the table normal, metres and radians.
 
 pub mod baseline;
+pub mod export;
 pub mod figure;
 pub mod from_depth;
 pub mod outline;
+pub mod posterior;
 pub mod register;
 pub mod sdf;
 pub mod sdf_grid;

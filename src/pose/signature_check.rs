@@ -14,6 +14,7 @@ use glam::DAffine3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::posterior::{same_pose, Mat3, ModeEvidence, PosePosterior, PosteriorConfig};
 use super::register::wrap_angle;
 use super::sdf_register::RobustLoss;
 use super::PoseError;
@@ -141,6 +142,9 @@ impl SignatureModel {
 }
 
 /// One signature to explain: the camera, the undeformed membrane and the measurement.
+/// A refined pose and its check cost.
+pub type Candidate = (Se2, f64);
+
 pub struct SignatureCheck<'a> {
     /// The object's ray caster, object frame (resting pose).
     pub caster: &'a RayCaster,
@@ -317,6 +321,14 @@ impl SignatureCheck<'_> {
     /// registration, which saw the de-rendered contact, keeps the say where the signature cannot tell the poses
     /// apart); `None` when `poses` is empty.
     pub fn select(&self, poses: &[Se2]) -> Result<Option<Checked>, PoseError> {
+        Ok(self.select_all(poses)?.map(|(c, _)| c))
+    }
+
+    /// [`Self::select`], with every refined candidate (pose, cost) beside the pick, for [`Self::posterior`].
+    pub fn select_all(
+        &self,
+        poses: &[Se2],
+    ) -> Result<Option<(Checked, Vec<Candidate>)>, PoseError> {
         self.validate()?;
         let mut scored: Vec<(usize, Se2, f64)> = Vec::with_capacity(poses.len());
         for (i, &p) in poses.iter().enumerate() {
@@ -363,8 +375,7 @@ impl SignatureCheck<'_> {
             .collect();
         evaluations += refined.iter().map(|c| c.evaluations).sum::<usize>();
         // A cost difference ΔC over n pixels is n·ΔC/σ² nats of Gaussian log-likelihood.
-        let n = self.measured_pixels().max(1) as f64;
-        let margin = self.config.margin_nats * self.model.noise_std * self.model.noise_std / n;
+        let margin = self.config.margin_nats / self.nats_per_cost();
         let registered = refined[0];
         let best = refined
             .iter()
@@ -372,7 +383,7 @@ impl SignatureCheck<'_> {
             .min_by(|a, b| a.cost.total_cmp(&b.cost))
             .filter(|b| b.cost < registered.cost - margin)
             .unwrap_or(registered);
-        let nats_per_cost = n / (self.model.noise_std * self.model.noise_std).max(1e-30);
+        let nats_per_cost = self.nats_per_cost();
         let rival = refined
             .iter()
             .filter(|c| {
@@ -387,11 +398,99 @@ impl SignatureCheck<'_> {
                 pose: c.pose,
                 nats: (c.cost - best.cost) * nats_per_cost,
             });
-        Ok(Some(Checked {
-            evaluations,
-            rival,
-            ..best
-        }))
+        let candidates = refined.iter().map(|c| (c.pose, c.cost)).collect();
+        Ok(Some((
+            Checked {
+                evaluations,
+                rival,
+                ..best
+            },
+            candidates,
+        )))
+    }
+
+    /// Nats of log-likelihood per unit of [`Self::cost`]: the measured pixels over the noise variance (the cost is a
+    /// mean of ρ ≈ r²/2).
+    pub fn nats_per_cost(&self) -> f64 {
+        self.measured_pixels().max(1) as f64
+            / (self.model.noise_std * self.model.noise_std).max(1e-30)
+    }
+
+    /// The pose posterior of refined `candidates` (pose, cost) from [`Self::select_all`] for an object with
+    /// `symmetry` ([`super::posterior`]): distinct candidates (at most `config.max_modes`, the best first) with
+    /// their Δ nats and the Hessian of the negative log-likelihood by central differences.
+    pub fn posterior(
+        &self,
+        candidates: &[(Se2, f64)],
+        symmetry: &crate::objects::Symmetry,
+        config: &PosteriorConfig,
+    ) -> Result<PosePosterior, PoseError> {
+        config.validate()?;
+        let scale = self.nats_per_cost();
+        let mut order: Vec<(Se2, f64)> = candidates
+            .iter()
+            .copied()
+            .filter(|c| c.1.is_finite())
+            .collect();
+        order.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let mut distinct: Vec<(Se2, f64)> = Vec::new();
+        for c in order {
+            if distinct.len() < config.max_modes
+                && !distinct.iter().any(|d| same_pose(c.0, d.0, symmetry))
+            {
+                distinct.push(c);
+            }
+        }
+        let best = distinct.first().map_or(0.0, |c| c.1);
+        let evidence: Vec<ModeEvidence> = distinct
+            .par_iter()
+            .map(|&(pose, cost)| ModeEvidence {
+                pose,
+                nats: (cost - best) * scale,
+                hessian: self.hessian(pose, cost, config.step_m, config.lever_m, scale),
+            })
+            .collect();
+        let contact_px = self
+            .signature
+            .data
+            .iter()
+            .zip(&self.membrane.data)
+            .filter(|(&s, &e)| {
+                s > 0.0 && s.is_finite() && e > 0.0 && f64::from(e - s) > config.contact_threshold_m
+            })
+            .count();
+        Ok(PosePosterior::from_evidence(
+            &evidence, contact_px, symmetry, config,
+        ))
+    }
+
+    /// Hessian of `scale · cost` at `pose` (whose cost is `at`) over (x m, y m, θ rad): central differences with
+    /// step `step_m` in x and y and `step_m / lever_m` in θ.
+    fn hessian(&self, pose: Se2, at: f64, step_m: f64, lever_m: f64, scale: f64) -> Mat3 {
+        let h = [step_m, step_m, step_m / lever_m];
+        let f = |d: [f64; 3]| self.cost(Se2::new(pose.x + d[0], pose.y + d[1], pose.theta + d[2]));
+        let unit = |i: usize, s: f64| {
+            let mut d = [0.0; 3];
+            d[i] = s * h[i];
+            d
+        };
+        let mut m = [[0.0; 3]; 3];
+        for i in 0..3 {
+            m[i][i] = (f(unit(i, 1.0)) - 2.0 * at + f(unit(i, -1.0))) / (h[i] * h[i]) * scale;
+            for j in 0..i {
+                let both = |si: f64, sj: f64| {
+                    let mut d = unit(i, si);
+                    d[j] = sj * h[j];
+                    f(d)
+                };
+                let v = (both(1.0, 1.0) - both(1.0, -1.0) - both(-1.0, 1.0) + both(-1.0, -1.0))
+                    / (4.0 * h[i] * h[j])
+                    * scale;
+                m[i][j] = v;
+                m[j][i] = v;
+            }
+        }
+        m
     }
 }
 

@@ -433,6 +433,29 @@ pub fn encode_pose_stamped(stamp_ns: u64, x: f64, y: f64, theta: f64, frame_id: 
     w.finish()
 }
 
+/// Encode a `geometry_msgs/PoseWithCovarianceStamped` (z = 0, rotation about z by `theta`; `covariance` row-major
+/// over x, y, z and the rotations about x, y, z) as ROS 2 CDR.
+pub fn encode_pose_with_covariance_stamped(
+    stamp_ns: u64,
+    frame_id: &str,
+    [x, y, theta]: [f64; 3],
+    covariance: &[f64; 36],
+) -> Vec<u8> {
+    let mut w = CdrWriter::new();
+    w.header(stamp_ns, frame_id)
+        .f64(x)
+        .f64(y)
+        .f64(0.0)
+        .f64(0.0)
+        .f64(0.0)
+        .f64((theta / 2.0).sin())
+        .f64((theta / 2.0).cos());
+    for &c in covariance {
+        w.f64(c);
+    }
+    w.finish()
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -456,6 +479,26 @@ mod tests {
         for n in 0..bytes.len() {
             assert!(decode_image(&bytes[..n], Encoding::Cdr).is_err(), "{n}");
         }
+    }
+
+    #[test]
+    fn pose_with_covariance_starts_as_a_pose_stamped_and_ends_with_its_covariance() {
+        // Invariant: PoseWithCovarianceStamped is PoseStamped's fields followed by 36 float64 (already 8-aligned), so
+        // the PoseStamped decoder reads its pose and the last 288 bytes are the covariance.
+        let cov: [f64; 36] = std::array::from_fn(|i| i as f64 * 0.5);
+        let bytes =
+            encode_pose_with_covariance_stamped(3_000_000_007, "bubble", [0.01, -0.02, 0.7], &cov);
+        let pose = decode_pose_stamped(&bytes, Encoding::Cdr).unwrap();
+        assert!((pose.x - 0.01).abs() < 1e-12 && (pose.y + 0.02).abs() < 1e-12);
+        assert!((pose.theta - 0.7).abs() < 1e-12);
+        let tail = &bytes[bytes.len() - 288..];
+        for (i, c) in tail.chunks(8).enumerate() {
+            assert_eq!(f64::from_le_bytes(c.try_into().unwrap()), cov[i]);
+        }
+        assert_eq!(
+            bytes.len() - 288,
+            encode_pose_stamped(3_000_000_007, 0.01, -0.02, 0.7, "bubble").len()
+        );
     }
 
     #[test]

@@ -253,6 +253,66 @@ pub fn point_cloud_schema() -> String {
 }
 
 /// `geometry_msgs/msg/PoseStamped`.
+/// The ros2msg schema of `geometry_msgs/msg/PoseWithCovarianceStamped` with its dependencies.
+pub fn pose_with_covariance_stamped_schema() -> String {
+    with_deps(
+        "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n",
+        &[
+            HEADER_DEPS,
+            TIME_DEPS,
+            "MSG: geometry_msgs/PoseWithCovariance\nPose pose\nfloat64[36] covariance\n",
+            "MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n",
+            "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n",
+            "MSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n",
+        ],
+    )
+}
+
+/// Write `poses` — (stamp ns, [x, y, θ], covariance) — as `geometry_msgs/msg/PoseWithCovarianceStamped` messages on
+/// `topic` in frame `frame_id`, into a new MCAP file at `path` (atomically): a track a ROS user replays or reads
+/// with any MCAP tool.
+pub fn write_pose_track(
+    path: &Path,
+    topic: &str,
+    frame_id: &str,
+    poses: &[(u64, [f64; 3], [f64; 36])],
+) -> Result<(), RecordingError> {
+    let mcap_err = |e: mcap::McapError| RecordingError::Format {
+        path: path.to_path_buf(),
+        message: format!("writing MCAP: {e}"),
+    };
+    let mut w = mcap::WriteOptions::new()
+        .profile("ros2")
+        .create(Cursor::new(Vec::new()))
+        .map_err(mcap_err)?;
+    let schema = w
+        .add_schema(
+            "geometry_msgs/msg/PoseWithCovarianceStamped",
+            "ros2msg",
+            pose_with_covariance_stamped_schema().as_bytes(),
+        )
+        .map_err(mcap_err)?;
+    let channel = w
+        .add_channel(schema, topic, "cdr", &BTreeMap::new())
+        .map_err(mcap_err)?;
+    for (sequence, (stamp, pose, cov)) in poses.iter().enumerate() {
+        let data = super::ros::encode_pose_with_covariance_stamped(*stamp, frame_id, *pose, cov);
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: channel,
+                sequence: sequence as u32,
+                log_time: *stamp,
+                publish_time: *stamp,
+            },
+            &data,
+        )
+        .map_err(mcap_err)?;
+    }
+    w.finish().map_err(mcap_err)?;
+    let bytes = w.into_inner().into_inner();
+    crate::io::atomic::write_atomic(path, &bytes).map_err(|e| RecordingError::io(path, e))
+}
+
 pub fn pose_stamped_schema() -> String {
     with_deps(
         "std_msgs/Header header\ngeometry_msgs/Pose pose\n",

@@ -92,7 +92,8 @@ fn panel<DB: DrawingBackend>(
         (0.0, 1.0)
     };
     let top = p.curve.iter().map(|c| c.1).fold(0.0, f64::max);
-    let top = if top > 0.0 { top * 1.15 } else { 1.0 };
+    // Headroom above the curve for the legend (top right), so that it covers none of the data.
+    let top = if top > 0.0 { top * 1.7 } else { 1.0 };
     let stroke = (2.0 * s).round().max(1.0) as u32;
     let mut chart = ChartBuilder::on(area)
         .caption(

@@ -168,17 +168,28 @@ pub struct UncertaintyReport {
 /// A KDE curve of `values` on `points` evenly spaced points spanning the values ± 3 bandwidths; empty when no KDE
 /// can be fitted.
 pub fn kde_curve(values: &[f64], points: usize) -> Vec<(f64, f64)> {
+    kde_curve_bounded(values, points, None)
+}
+
+/// [`kde_curve`] for values that cannot fall below `lower` (a distance cannot be negative): the kernel mass
+/// beyond the bound is reflected back inside it (the density stays normalised over the support), and the curve
+/// starts at the bound.
+pub fn kde_curve_bounded(values: &[f64], points: usize, lower: Option<f64>) -> Vec<(f64, f64)> {
     let Ok(kde) = GaussianKde::scott_1d(values) else {
         return Vec::new();
     };
     let bw = kde.bandwidth();
-    let lo = values.iter().copied().fold(f64::INFINITY, f64::min) - 3.0 * bw;
+    let mut lo = values.iter().copied().fold(f64::INFINITY, f64::min) - 3.0 * bw;
     let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max) + 3.0 * bw;
+    if let Some(b) = lower {
+        lo = lo.max(b);
+    }
     let n = points.max(2);
     (0..n)
         .map(|i| {
             let x = lo + (hi - lo) * i as f64 / (n - 1) as f64;
-            (x, kde.density(&[x]))
+            let reflected = lower.map_or(0.0, |b| kde.density(&[2.0 * b - x]));
+            (x, kde.density(&[x]) + reflected)
         })
         .collect()
 }
@@ -215,7 +226,7 @@ impl UncertaintyReport {
             reference,
             reference_is_truth,
             init,
-            position_kde: kde_curve(&pos, 200),
+            position_kde: kde_curve_bounded(&pos, 200, Some(0.0)),
             theta_kde: kde_curve(&theta, 200),
             samples,
             baseline,
@@ -390,6 +401,9 @@ mod tests {
             .map(|w| (w[1].0 - w[0].0) * w[0].1)
             .sum();
         assert!((area - 1.0).abs() < 0.01, "{area}");
+        // A distance cannot be negative: the curve starts at 0, its mass reflected inside.
+        assert_eq!(r.position_kde[0].0, 0.0);
+        assert!(r.position_kde.iter().all(|&(x, _)| x >= 0.0));
         let dir = tempfile::tempdir().unwrap();
         r.write(dir.path()).unwrap();
         let csv = std::fs::read_to_string(dir.path().join("samples.csv")).unwrap();

@@ -526,6 +526,8 @@ impl WorkbenchApp {
             signature_rival: r.signature_rival,
             with_contact: r.sample_index.clone(),
             report: r.report.clone(),
+            posterior: r.posterior.clone(),
+            truth_region: r.truth_region,
             anchor_shift_m: r.anchor_shift_m.clone(),
         };
         let input = tactile_derender::pipeline::PoseInput {

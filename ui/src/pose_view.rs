@@ -27,6 +27,13 @@ pub struct PoseAnalysis {
     pub checked_from_imprint: bool,
     /// The check's best other pose ([`tactile_derender::pipeline::PoseEstimate::signature_rival`]).
     pub signature_rival: Option<tactile_derender::pose::signature_check::Rival>,
+    /// What the signature supports: weighted modes with covariances
+    /// ([`tactile_derender::pipeline::PoseEstimate::posterior`]).
+    pub posterior: Option<tactile_derender::pose::posterior::PosePosterior>,
+    /// The object's symmetry (how the posterior's θ wraps).
+    pub symmetry: tactile_derender::objects::Symmetry,
+    /// The posterior's smallest region holding the truth, when it is known (≤ p: inside the p region).
+    pub truth_region: Option<f64>,
     /// Its contact points (back-projected X̂0), world frame, metres.
     pub contacts: Vec<[f64; 2]>,
     /// Per-sample errors (from the fixed start), baseline errors and KDE curves.

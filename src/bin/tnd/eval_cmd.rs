@@ -104,6 +104,10 @@ pub struct EvalArgs {
     /// scored again (a larger --limit extends it); a file of other settings is refused, naming them.
     #[arg(long)]
     pub records: Option<PathBuf>,
+    /// A posterior calibration (JSON, as `tnd posterior --fit` writes) instead of the bundled one: the regions
+    /// whose coverage the tables report.
+    #[arg(long, value_name = "FILE")]
+    pub posterior: Option<PathBuf>,
     /// Also save every scored pair's imprint, signature, true X0 and model samples (all --pose-samples of them) as
     /// DIR/<split>/<index>.npz, metres, for analysis in numpy (docs/evaluation.md).
     #[arg(long, value_name = "DIR")]
@@ -185,7 +189,17 @@ fn records_settings(a: &EvalArgs, dataset: &Dataset) -> Result<Value> {
         "seed": a.seed, "skip": a.skip, "pose_samples": a.pose_samples.max(1), "sampler": a.sampler,
         "guidance": a.guidance, "anchor": !a.no_anchor, "signature_check": !a.no_signature_check,
         "imprint_proposals": !a.no_imprint_proposals, "check_refine": a.check_refine, "inits": a.inits,
+        "posterior": posterior_config(a)?,
     }))
+}
+
+/// `--posterior FILE`, or the bundled calibration.
+fn posterior_config(a: &EvalArgs) -> Result<tactile_derender::pose::posterior::PosteriorConfig> {
+    Ok(a.posterior
+        .as_deref()
+        .map(crate::posterior_cmd::read_config)
+        .transpose()?
+        .unwrap_or_default())
 }
 
 fn splits(s: &str) -> Result<Vec<SplitName>> {
@@ -251,6 +265,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
             refine: a.check_refine,
             ..Default::default()
         },
+        posterior: posterior_config(&a)?,
         ..EvalConfig::default()
     });
     let rrd = a.rerun.open("tnd eval")?;

@@ -47,6 +47,48 @@ fn row(name: &str, s: &MethodSummary) -> String {
     )
 }
 
+/// How often the truth lies inside each method's posterior regions (empty when no method has a posterior).
+fn coverage_table(r: &EvalReport) -> String {
+    use tactile_derender::metrics::coverage::WRONG_MM;
+    let rows = [
+        (r.generator.clone(), Some(&r.model)),
+        (
+            format!("{} (multi-sample)", r.generator),
+            r.model_multi.as_ref(),
+        ),
+        (
+            format!("{} + imprint proposals (checked)", r.generator),
+            r.model_combined.as_ref(),
+        ),
+        (
+            "threshold baseline + signature check".into(),
+            r.baseline_checked.as_ref(),
+        ),
+    ];
+    let mut s = String::new();
+    for (name, m) in rows {
+        if let Some(c) = m.and_then(|m| m.coverage) {
+            let _ = writeln!(
+                s,
+                "| {name} | {} | {:.0} % | {:.0} % | {:.0} % | {} |",
+                c.pairs,
+                c.inside[0] * 100.0,
+                c.inside[1] * 100.0,
+                c.inside[2] * 100.0,
+                c.confidently_wrong
+            );
+        }
+    }
+    if s.is_empty() {
+        return s;
+    }
+    format!(
+        "Pose posterior: the truth inside its 50 / 90 / 95 % regions (a calibrated posterior: about 50 / 90 / 95 %); \
+         confidently wrong: > {WRONG_MM} mm off, outside the 95 % region.\n\n| method | pairs | inside 50 % | inside 90 % | \
+         inside 95 % | confidently wrong |\n| --- | --- | --- | --- | --- | --- |\n{s}\n"
+    )
+}
+
 /// Table I and II rows of one split as markdown.
 pub fn markdown_table(split: &str, r: &EvalReport) -> String {
     let failed = if r.failed.is_empty() {
@@ -72,6 +114,7 @@ pub fn markdown_table(split: &str, r: &EvalReport) -> String {
         s.push_str(&row("threshold baseline + signature check", b));
     }
     s.push('\n');
+    s.push_str(&coverage_table(r));
     let ratio = |m: &MethodSummary| m.position_mm.mean / r.baseline.position_mm.mean;
     for (what, m, ci) in [
         ("model", Some(&r.model), r.position_ratio_ci95),

@@ -10,6 +10,7 @@ mod measured;
 mod model_cmd;
 mod objects_cmd;
 mod pose_cmd;
+mod posterior_cmd;
 mod progress;
 mod recording_cmd;
 mod rerun_out;
@@ -64,6 +65,9 @@ enum Command {
     Calibrate(Box<calibrate_cmd::CalibrateArgs>),
     /// Real sensor recordings (MCAP, depth-frame folders): topics, reference, contact per frame; simulated ones.
     Recording(recording_cmd::RecordingArgs),
+    /// The pose posterior on `tnd eval --records`: how often its regions hold the truth, per contact size; fit its
+    /// calibration to your own labelled recordings (--fit FILE, then --posterior FILE).
+    Posterior(Box<posterior_cmd::PosteriorArgs>),
 }
 
 fn main() -> std::process::ExitCode {
@@ -96,6 +100,7 @@ fn main() -> std::process::ExitCode {
         Command::Sample(a) => sample_cmd::run(*a),
         Command::Recording(a) => recording_cmd::run(a),
         Command::Train(a) => train_cmd::run(*a),
+        Command::Posterior(a) => posterior_cmd::run(*a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

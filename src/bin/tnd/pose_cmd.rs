@@ -59,6 +59,9 @@ pub struct PoseArgs {
     pub press: PressChoice,
     #[command(flatten)]
     pub derender: DerenderConfig,
+    /// A posterior calibration (JSON, as `tnd posterior --fit` writes) instead of the bundled one.
+    #[arg(long, value_name = "FILE")]
+    pub posterior: Option<PathBuf>,
     /// Encoding of the PLY files (contact, free-space and consensus points, the object at each estimate).
     #[arg(long, value_enum, default_value_t = PlyEncoding::Binary)]
     pub ply: PlyEncoding,
@@ -95,6 +98,12 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let eval = EvalConfig {
         check_signature: !a.no_signature_check,
         imprint_proposals: !a.no_imprint_proposals,
+        posterior: a
+            .posterior
+            .as_deref()
+            .map(crate::posterior_cmd::read_config)
+            .transpose()?
+            .unwrap_or_default(),
         ..EvalConfig::default()
     };
     let (generator, samples, probability) = if a.model == "ground-truth" {
@@ -258,6 +267,18 @@ pub fn run(a: PoseArgs) -> Result<()> {
         let e = tactile_derender::uncertainty::SampleError::new(best, 0.0, t, &object.symmetry);
         json!({"position_mm": e.position_mm, "theta_deg": e.theta_deg})
     });
+    let located = crate::posterior_cmd::LocatedEstimate::new(
+        estimate.best(),
+        estimate.posterior.as_ref(),
+        &object.symmetry,
+        "world",
+        0,
+    );
+    if let Some(l) = &located {
+        let path = a.out.join("pose_with_covariance.json");
+        tactile_derender::io::write_atomic(&path, serde_json::to_string_pretty(&l.ros)?.as_bytes())
+            .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
+    }
     let summary = json!({"object": object.name, "generator": generator, "rerun": rerun.as_deref().map(crate::path_json), "samples": report.samples.len(),
         "seed": a.derender.seed, "press_m": press, "estimate": estimate.best(), "estimate_error": estimate_error,
         "signature_checked": estimate.checked.is_some(),
@@ -269,7 +290,10 @@ pub fn run(a: PoseArgs) -> Result<()> {
         "ambiguous": report.ambiguous() || estimate.signature_ambiguous(), "modes": report.major_modes(),
         "signature_rival": estimate.signature_rival, "anchor_shift_m": estimate.anchor_shift_m,
         "position_err_mm": report.samples.iter().map(|s| s.position_mm).collect::<Vec<_>>(),
-        "calibration": measured.calibration, "out": a.out});
+        "calibration": measured.calibration, "out": a.out,
+        "posterior": estimate.posterior, "truth_region": estimate.truth_region,
+        "transform": located.as_ref().map(|l| &l.transform),
+        "pose_with_covariance": located.as_ref().map(|l| &l.ros)});
     let path = a.out.join("pose.json");
     tactile_derender::io::write_atomic(&path, serde_json::to_string_pretty(&summary)?.as_bytes())
         .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;

@@ -61,6 +61,9 @@ pub struct TrackArgs {
     /// inflation and footprint, camera position, noise; see tnd calibrate).
     #[arg(long)]
     pub no_calibrate: bool,
+    /// A posterior calibration (JSON, as `tnd posterior --fit` writes) instead of the bundled one.
+    #[arg(long, value_name = "FILE")]
+    pub posterior: Option<PathBuf>,
     /// Output directory: track.csv (one row per frame) and track.json; a run killed part-way resumes into it.
     #[arg(long)]
     pub out: PathBuf,
@@ -83,13 +86,18 @@ fn settings(a: &TrackArgs, sim: &tactile_derender::sim::SimConfig) -> Value {
     } else {
         a.model.clone()
     };
-    json!({
+    let mut settings = json!({
         "recording": canonical(&a.recording), "topic": a.read.topic, "reference": a.read.reference,
         "contact_threshold_m": a.read.contact_threshold, "npy_scale": a.read.npy_scale,
         "png_scale": a.read.png_scale, "fps": a.read.fps,
         "object": object, "model": model, "derender": a.derender, "press": a.press.to_string(),
         "every": a.every, "min_contact_px": a.min_contact_px, "sim": sim, "calibrate": !a.no_calibrate,
-    })
+    });
+    // Only when given: a track made before the option resumes under the same settings.
+    if let Some(p) = &a.posterior {
+        settings["posterior"] = json!(canonical(p));
+    }
+    settings
 }
 
 /// What the recording's frames were when the track began: frame count, time stamps and contact areas (a recording
@@ -100,6 +108,32 @@ fn fingerprint(p: &ProcessedRecording) -> Value {
     std::hash::Hash::hash(&p.contact_px, &mut h);
     std::hash::Hash::hash(&p.reference_frames, &mut h);
     json!({"frames": p.len(), "hash": format!("{:016x}", std::hash::Hasher::finish(&h))})
+}
+
+/// The MCAP file of the tracked poses in the output folder, and its topic.
+const POSE_TRACK: &str = "track.mcap";
+const POSE_TOPIC: &str = "/tnd/object_pose";
+
+/// Write every row with an estimate and a posterior as a `geometry_msgs/PoseWithCovarianceStamped` (frame `bubble`,
+/// the sensor's, as the recording's own pose topic) into `out/track.mcap`; returns how many.
+fn write_pose_track(out: &Path, rows: &[FrameTrack]) -> Result<usize> {
+    use tactile_derender::pose::export::PoseWithCovarianceStamped;
+    let poses: Vec<(u64, [f64; 3], [f64; 36])> = rows
+        .iter()
+        .filter_map(|r| {
+            let (e, cov) = (r.estimate?, r.covariance?);
+            let msg = PoseWithCovarianceStamped::new(e, &cov, "bubble", r.stamp_ns);
+            let covariance: [f64; 36] = msg.pose.covariance.try_into().ok()?;
+            Some((r.stamp_ns, [e.x, e.y, e.theta], covariance))
+        })
+        .collect();
+    tactile_derender::recording::synth::write_pose_track(
+        &out.join(POSE_TRACK),
+        POSE_TOPIC,
+        "bubble",
+        &poses,
+    )?;
+    Ok(poses.len())
 }
 
 /// An earlier run into `out`: its settings file (`None`: none yet). A folder holding anything else is refused.
@@ -281,7 +315,15 @@ pub fn run(a: TrackArgs) -> Result<()> {
             todo.len()
         );
     }
-    let eval = EvalConfig::default();
+    let eval = EvalConfig {
+        posterior: a
+            .posterior
+            .as_deref()
+            .map(crate::posterior_cmd::read_config)
+            .transpose()?
+            .unwrap_or_default(),
+        ..EvalConfig::default()
+    };
     let ctx = TrackContext {
         model: &model,
         object: &object,
@@ -312,6 +354,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
     // Every row scored against the poses given now (an earlier run may have had none).
     rows.iter_mut().for_each(score);
     write_rows(&a.out, &rows)?;
+    let pose_messages = write_pose_track(&a.out, &rows)?;
 
     let column = |get: fn(&FrameTrack) -> Option<f64>| -> Value {
         mean_median(rows.iter().filter_map(get).collect())
@@ -320,6 +363,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
         "recording": crate::path_json(&a.recording), "depth_topic": stream.name, "object": object.name,
         "frames": processed.len(), "reference_frames": processed.reference_frames,
         "tracked": rows.len(), "this_run": this_run,
+        "pose_track": {"file": crate::path_json(a.out.join(POSE_TRACK)), "topic": POSE_TOPIC, "messages": pose_messages},
         "no_estimate": rows.iter().filter(|r| r.estimate.is_none()).count(),
         "scored_against": poses.as_ref().map(|p| match p {
             PoseSource::Csv(c) => c.display().to_string(),

@@ -1,0 +1,207 @@
+//! `tnd posterior`: how well the pose posterior's regions cover the truth on `tnd eval --records` files (per method
+//! and per contact-size bin, [`tactile_derender::metrics::coverage`]), and a calibration fitted to them (`--fit`)
+//! that `tnd eval`, `tnd pose` and `tnd recording track` take as `--posterior FILE`: a user with labelled
+//! recordings of their own sensor calibrates the uncertainty it reports.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context, Result};
+use clap::Args;
+use serde_json::json;
+use tactile_derender::metrics::breakdown::{bin_label, CONTACT_BINS};
+use tactile_derender::metrics::coverage::{
+    coverage_with, fit_posterior, Coverage, Scored, WRONG_MM,
+};
+use tactile_derender::metrics::eval_log::EvalLog;
+use tactile_derender::metrics::evaluate::{MethodResult, PairRecord, REGION_DRAWS};
+use tactile_derender::objects::Symmetry;
+use tactile_derender::pose::export::{covariance_about, transform_4x4, PoseWithCovarianceStamped};
+use tactile_derender::pose::posterior::{PosePosterior, PosteriorConfig};
+use tactile_derender::sensor::Se2;
+
+#[derive(Args, Debug)]
+pub struct PosteriorArgs {
+    /// Records files of `tnd eval --records` (pairs with a known true pose).
+    #[arg(long, required = true, num_args = 1..)]
+    pub records: Vec<PathBuf>,
+    /// The rows scored: combined (the default pipeline: the sample and the imprint's proposals, checked), model,
+    /// multi, baseline_checked, or all.
+    #[arg(long, default_value = "all")]
+    pub method: String,
+    /// Recalibrate the recorded posteriors with this calibration (JSON, as --fit writes) before scoring.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Fit the calibration (temperature and floors) to the chosen rows of these records, print their coverage
+    /// under it, and write it here (JSON) for `--posterior FILE`.
+    #[arg(long, value_name = "FILE")]
+    pub fit: Option<PathBuf>,
+    /// JSON lines only (no markdown table on stderr).
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One row of a record, by name.
+type Row = fn(&PairRecord) -> Option<&MethodResult>;
+
+/// The rows of a record by name.
+const METHODS: [(&str, Row); 4] = [
+    ("combined", |r| r.model_combined.as_ref()),
+    ("model", |r| Some(&r.model)),
+    ("multi", |r| r.model_multi.as_ref()),
+    ("baseline_checked", |r| r.baseline_checked.as_ref()),
+];
+
+/// A posterior calibration from a JSON file (every field optional, the defaults for the others).
+pub fn read_config(path: &Path) -> Result<PosteriorConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let config: PosteriorConfig = serde_json::from_str(&text)
+        .map_err(|e| anyhow!("{}: not a posterior calibration: {e}", path.display()))?;
+    config
+        .validate()
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    Ok(config)
+}
+
+pub fn run(a: PosteriorArgs) -> Result<()> {
+    let methods: Vec<_> = METHODS
+        .iter()
+        .filter(|(name, _)| a.method == "all" || a.method == *name)
+        .collect();
+    if methods.is_empty() {
+        bail!(
+            "--method {}: one of combined, model, multi, baseline_checked or all",
+            a.method
+        );
+    }
+    let _lock = a
+        .fit
+        .as_deref()
+        .map(tactile_derender::io::lock::OutputLock::acquire)
+        .transpose()?;
+    let config = a.config.as_deref().map(read_config).transpose()?;
+    let mut records = Vec::new();
+    for path in &a.records {
+        records.extend(EvalLog::read(path)?.1);
+    }
+    let scored = |name: &str, get: Row| -> Vec<Scored<'_>> {
+        let _ = name;
+        records
+            .iter()
+            .filter_map(|r| {
+                let m = get(r)?;
+                Some(Scored {
+                    posterior: m.posterior.as_ref()?,
+                    truth: r.truth,
+                    symmetry: r.symmetry,
+                    position_mm: m.pose?.position_mm,
+                    contact_pixels: r.contact_pixels,
+                })
+            })
+            .collect()
+    };
+    let all: Vec<Scored<'_>> = methods.iter().flat_map(|(n, g)| scored(n, *g)).collect();
+    if all.is_empty() {
+        bail!(
+            "no pair of {} has a posterior of the chosen rows (records of tnd eval with the signature check, from this \
+             version on)",
+            a.records.len()
+        );
+    }
+    let fitted = a
+        .fit
+        .as_ref()
+        .map(|_| fit_posterior(&all, &config.clone().unwrap_or_default()));
+    let used = fitted.as_ref().map(|f| &f.config).or(config.as_ref());
+    let mut table = String::from(
+        "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong |\n|---|---|---|---|---|---|---|\n",
+    );
+    for (name, get) in &methods {
+        let rows = scored(name, *get);
+        let mut groups: Vec<(String, Vec<Scored<'_>>)> = vec![("all".into(), rows.clone())];
+        for &(lo, hi) in &CONTACT_BINS {
+            let mine: Vec<Scored<'_>> = rows
+                .iter()
+                .filter(|s| (lo..hi).contains(&s.contact_pixels))
+                .cloned()
+                .collect();
+            if !mine.is_empty() {
+                groups.push((bin_label((lo, hi)), mine));
+            }
+        }
+        for (group, mine) in groups {
+            let Some(c) = coverage_with(&mine, used, REGION_DRAWS) else {
+                continue;
+            };
+            println!(
+                "{}",
+                json!({"rows": name, "contact": group, "coverage": c, "wrong_mm": WRONG_MM})
+            );
+            table.push_str(&row(name, &group, &c));
+        }
+    }
+    if !a.json {
+        eprintln!(
+            "\nThe truth inside the posterior's regions ({}; confidently wrong: > {WRONG_MM} mm off, outside the 95 % region)\n\n{table}",
+            match (&fitted, &a.config) {
+                (Some(_), _) => "calibration fitted to these records".to_string(),
+                (None, Some(p)) => format!("calibration {}", p.display()),
+                (None, None) => "as recorded".into(),
+            }
+        );
+    }
+    if let (Some(f), Some(path)) = (&fitted, &a.fit) {
+        tactile_derender::io::write_atomic(
+            path,
+            serde_json::to_string_pretty(&f.config)?.as_bytes(),
+        )
+        .with_context(|| format!("{}: cannot write", path.display()))?;
+        println!(
+            "{}",
+            json!({"fit": crate::path_json(path), "config": f.config, "mean_nll": f.mean_nll, "pairs": all.len()})
+        );
+    }
+    Ok(())
+}
+
+/// An estimate placed for other tools: its 4x4 transform with the frame convention named, and the
+/// `PoseWithCovarianceStamped` message with the posterior's covariance about it.
+#[derive(serde::Serialize)]
+pub struct LocatedEstimate {
+    pub transform: serde_json::Value,
+    pub ros: PoseWithCovarianceStamped,
+}
+
+impl LocatedEstimate {
+    /// `None` without an estimate or a posterior.
+    pub fn new(
+        estimate: Option<Se2>,
+        posterior: Option<&PosePosterior>,
+        symmetry: &Symmetry,
+        frame_id: &str,
+        stamp_ns: u64,
+    ) -> Option<Self> {
+        let estimate = estimate?;
+        let cov = covariance_about(posterior?, estimate, symmetry)?;
+        Some(Self {
+            transform: json!({
+                "t_world_object": transform_4x4(estimate),
+                "convention": "row-major 4x4; maps points of the object's mesh (its own frame, in its resting pose: \
+                    bounding-box centre over the origin, lowest point at z = 0) to the world frame (the table at z = 0, z up), \
+                    metres",
+            }),
+            ros: PoseWithCovarianceStamped::new(estimate, &cov, frame_id, stamp_ns),
+        })
+    }
+}
+
+fn row(name: &str, group: &str, c: &Coverage) -> String {
+    format!(
+        "| {name} | {group} | {} | {:.0} % | {:.0} % | {:.0} % | {} |\n",
+        c.pairs,
+        c.inside[0] * 100.0,
+        c.inside[1] * 100.0,
+        c.inside[2] * 100.0,
+        c.confidently_wrong
+    )
+}
