@@ -20,6 +20,8 @@ pub const LEVELS: [f64; 3] = [0.5, 0.9, 0.95];
 pub const WRONG_MM: f64 = 5.0;
 /// [`fit_posterior`] keeps settings whose 90 % coverage is within this of 0.9.
 pub const FIT_TOLERANCE: f64 = 0.03;
+/// [`fit_posterior`] measures the coverage of this many best-scoring settings.
+const FIT_CANDIDATES: usize = 60;
 
 /// Coverage of one method's posteriors over a set of pairs.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -139,7 +141,7 @@ pub fn fit_posterior(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
     scored_grid.sort_by(|a, b| a.0.total_cmp(&b.0));
     // The best scores whose 90 % coverage is close to 0.9; the one closest to it when none is.
     let mut closest: Option<Fit> = None;
-    for (nll, config) in scored_grid.into_iter().take(12) {
+    for (nll, config) in scored_grid.into_iter().take(FIT_CANDIDATES) {
         let coverage = coverage_with(scored, Some(&config), 1000);
         let fit = Fit {
             config,
