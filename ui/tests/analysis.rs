@@ -436,6 +436,12 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
         "{checked:?}"
     );
     assert!(h.query_by_label_contains("signature check: x").is_some());
+    // The posterior: modes with weights, σ about the estimate, and where the truth lies in it.
+    let post = r.posterior.as_ref().expect("pose posterior");
+    assert!(!post.modes.is_empty());
+    assert!(r.truth_region.is_some_and(|m| m <= 0.9), "{:?}", r.truth_region);
+    assert!(h.query_by_label_contains("posterior: ").is_some());
+    assert!(h.query_by_label_contains("the truth lies in its").is_some());
     // It says whose hypothesis won: the sample's or the imprint's threshold contact's.
     let source = if r.checked_from_imprint {
         "the imprint's proposal"
@@ -452,9 +458,9 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
                 .is_some()
     );
 
-    // Hovering the position KDE highlights the sample nearest to the pointer: near its left end (below every error:
-    // the curve extends past the samples; the first ~10 % of the widget is the y axis) it picks the smallest error,
-    // near its right end the largest.
+    // Hovering the position KDE highlights the sample nearest to the pointer: at the plot's left edge (the first
+    // point right of the y axis where hovering picks a sample: x ≤ 0, below every error) the smallest error, near its
+    // right end the largest.
     let by_error = |pick_max: bool| {
         let r = h.state().analysis.pose.result.as_ref().unwrap();
         let k = (0..r.report.samples.len())
@@ -479,11 +485,19 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     );
     let rect = h.get_by_label("position error (mm) KDE").rect();
     let at = |f: f32| rect.left() + f * rect.width();
-    for (x, want) in [(at(0.15), smallest), (at(0.95), largest)] {
-        h.hover_at(egui::pos2(x, rect.center().y));
+    let mut left_edge = None;
+    for step in 0..40 {
+        h.hover_at(egui::pos2(at(0.01 * step as f32), rect.center().y));
         h.run_ok();
-        assert_eq!(h.state().analysis.pose.highlight, want, "hover at x = {x}");
+        if h.state().analysis.pose.highlight.is_some() {
+            left_edge = h.state().analysis.pose.highlight;
+            break;
+        }
     }
+    assert_eq!(left_edge, smallest, "at the left edge");
+    h.hover_at(egui::pos2(at(0.95), rect.center().y));
+    h.run_ok();
+    assert_eq!(h.state().analysis.pose.highlight, largest, "near the right end");
 
     // Export: the evaluation stage's CSV and PNG.
     let mut v = h.state().state.view.clone();
