@@ -183,7 +183,10 @@ fn grid<'a>(imprint: &'a Image, out: &'a pipeline::Derendered, seed: u64) -> Ima
         ));
     }
     ImageGrid {
-        title: format!("{} samples of X0, seed {seed}", out.samples.len()),
+        title: match out.samples.len() {
+            n if n > 16 => format!("16 of {n} samples of X0 (all in samples.npy), seed {seed}"),
+            n => format!("{n} samples of X0, seed {seed}"),
+        },
         panels,
         columns: 4,
     }
