@@ -12,7 +12,9 @@ use tactile_derender::metrics::evaluate::{
 use tactile_derender::metrics::sources::{SimSource, SimSpec};
 use tactile_derender::metrics::DepthMetrics;
 use tactile_derender::objects::{ObjectSet, Symmetry};
-use tactile_derender::pose::posterior::{symmetric_eigen3, ModeEvidence, PosePosterior, PosteriorConfig};
+use tactile_derender::pose::posterior::{
+    symmetric_eigen3, ModeEvidence, PosePosterior, PosteriorConfig,
+};
 use tactile_derender::sensor::Se2;
 use tactile_derender::sim::SimConfig;
 
@@ -40,24 +42,38 @@ fn exact_samples_give_posteriors_that_hold_the_truth() {
         .evaluate(&src, &GroundTruthGenerator, 3, &mut |_, _| true)
         .unwrap();
     for r in &report.records {
-        assert!(r.baseline.posterior.is_none(), "the paper's baseline has no check");
+        assert!(
+            r.baseline.posterior.is_none(),
+            "the paper's baseline has no check"
+        );
         for (row, m) in [
             ("model", Some(&r.model)),
             ("combined", r.model_combined.as_ref()),
             ("baseline_checked", r.baseline_checked.as_ref()),
         ] {
             let m = m.unwrap();
-            let p = m.posterior.as_ref().unwrap_or_else(|| panic!("{}: {row}", r.name));
+            let p = m
+                .posterior
+                .as_ref()
+                .unwrap_or_else(|| panic!("{}: {row}", r.name));
             let total: f64 = p.modes.iter().map(|m| m.weight).sum();
             assert!((total - 1.0).abs() < 1e-9, "{}: {row}: {total}", r.name);
             for mode in &p.modes {
                 let (values, _) = symmetric_eigen3(&mode.cov);
-                assert!(values.iter().all(|&v| v > 0.0), "{}: {row}: {values:?}", r.name);
+                assert!(
+                    values.iter().all(|&v| v > 0.0),
+                    "{}: {row}: {values:?}",
+                    r.name
+                );
             }
             assert!(p.mode_of(m.estimate.unwrap(), &r.symmetry).is_some());
             if row != "baseline_checked" {
                 let region = m.truth_region.unwrap();
-                assert!(region <= 0.9, "{}: {row}: truth in the {region} region", r.name);
+                assert!(
+                    region <= 0.9,
+                    "{}: {row}: truth in the {region} region",
+                    r.name
+                );
             }
         }
     }
@@ -152,7 +168,10 @@ fn tnd_posterior_scores_records_and_fits_a_calibration_that_covers_them() {
             .map(|l| serde_json::from_str(l).unwrap())
             .collect()
     };
-    let o = tnd_in(dir.path(), &["posterior", "--records", "r.jsonl", "--method", "combined"]);
+    let o = tnd_in(
+        dir.path(),
+        &["posterior", "--records", "r.jsonl", "--method", "combined"],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let before = &lines(&o)[0];
     assert_eq!(before["rows"], "combined");
@@ -161,10 +180,22 @@ fn tnd_posterior_scores_records_and_fits_a_calibration_that_covers_them() {
     // 13 of the 40 offsets (0, 0.1, …, 1.2 mm).
     let inside90 = before["coverage"]["inside"][1].as_f64().unwrap();
     assert!((inside90 - 13.0 / 40.0).abs() < 0.03, "{before}");
-    assert!(stderr(&o).contains("| combined | all | 40 |"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("| combined | all | 40 |"),
+        "{}",
+        stderr(&o)
+    );
     let o = tnd_in(
         dir.path(),
-        &["posterior", "--records", "r.jsonl", "--method", "combined", "--fit", "fit.json"],
+        &[
+            "posterior",
+            "--records",
+            "r.jsonl",
+            "--method",
+            "combined",
+            "--fit",
+            "fit.json",
+        ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
     let after = &lines(&o)[0];
@@ -173,7 +204,15 @@ fn tnd_posterior_scores_records_and_fits_a_calibration_that_covers_them() {
     // The fitted file is a calibration the other commands take, and scores the same.
     let o = tnd_in(
         dir.path(),
-        &["posterior", "--records", "r.jsonl", "--method", "combined", "--config", "fit.json"],
+        &[
+            "posterior",
+            "--records",
+            "r.jsonl",
+            "--method",
+            "combined",
+            "--config",
+            "fit.json",
+        ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(lines(&o)[0]["coverage"], after["coverage"]);
@@ -184,9 +223,15 @@ fn tnd_posterior_scores_records_and_fits_a_calibration_that_covers_them() {
         &["posterior", "--records", "r.jsonl", "--config", "bad.json"],
     );
     let err = stderr(&o);
-    assert!(!o.status.success() && err.contains("bad.json") && err.contains("temperature"), "{err}");
+    assert!(
+        !o.status.success() && err.contains("bad.json") && err.contains("temperature"),
+        "{err}"
+    );
     std::fs::write(dir.path().join("notes.txt"), "hello\n").unwrap();
     let o = tnd_in(dir.path(), &["posterior", "--records", "notes.txt"]);
     let err = stderr(&o);
-    assert!(!o.status.success() && err.contains("notes.txt") && err.lines().count() == 1, "{err}");
+    assert!(
+        !o.status.success() && err.contains("notes.txt") && err.lines().count() == 1,
+        "{err}"
+    );
 }

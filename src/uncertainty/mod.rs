@@ -90,12 +90,7 @@ impl PoseMode {
     }
 }
 
-/// Whether `a` and `b` are one pose of an object with `symmetry`: within [`MODE_POSITION_MM`] and
-/// [`MODE_THETA_DEG`], both reduced by the symmetry.
-pub fn same_pose(a: Se2, b: Se2, symmetry: &Symmetry) -> bool {
-    let e = SampleError::new(a, 0.0, b, symmetry);
-    e.position_mm <= MODE_POSITION_MM && e.theta_deg.is_none_or(|t| t.abs() <= MODE_THETA_DEG)
-}
+pub use crate::pose::posterior::same_pose;
 
 /// The distinct poses among `samples` for an object with `symmetry`: each sample, lowest registration cost first,
 /// joins the first mode within [`MODE_POSITION_MM`] and [`MODE_THETA_DEG`] of its pose, or starts a new one; most

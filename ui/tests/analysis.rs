@@ -439,7 +439,11 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     // The posterior: modes with weights, σ about the estimate, and where the truth lies in it.
     let post = r.posterior.as_ref().expect("pose posterior");
     assert!(!post.modes.is_empty());
-    assert!(r.truth_region.is_some_and(|m| m <= 0.9), "{:?}", r.truth_region);
+    assert!(
+        r.truth_region.is_some_and(|m| m <= 0.9),
+        "{:?}",
+        r.truth_region
+    );
     assert!(h.query_by_label_contains("posterior: ").is_some());
     assert!(h.query_by_label_contains("the truth lies in its").is_some());
     // It says whose hypothesis won: the sample's or the imprint's threshold contact's.
@@ -497,7 +501,11 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     assert_eq!(left_edge, smallest, "at the left edge");
     h.hover_at(egui::pos2(at(0.95), rect.center().y));
     h.run_ok();
-    assert_eq!(h.state().analysis.pose.highlight, largest, "near the right end");
+    assert_eq!(
+        h.state().analysis.pose.highlight,
+        largest,
+        "near the right end"
+    );
 
     // Export: the evaluation stage's CSV and PNG.
     let mut v = h.state().state.view.clone();
