@@ -48,9 +48,14 @@ pub fn covariance_about(
         let (e, _) = reduced_difference(m.pose(), estimate, &no_axis);
         let d = [e[0], e[1], e.get(2).copied().unwrap_or(0.0)];
         for i in 0..3 {
-            for j in 0..3 {
+            for j in 0..=i {
                 cov[i][j] += m.weight * (m.cov[i][j] + d[i] * d[j]);
             }
+        }
+    }
+    for i in 0..3 {
+        for j in 0..i {
+            cov[j][i] = cov[i][j];
         }
     }
     Some(cov)

@@ -356,9 +356,15 @@ fn laplace_covariance(hessian: &Mat3, floor_scale: f64, config: &PosteriorConfig
     for k in 0..3 {
         let var = config.temperature / values[k].max(floor);
         for i in 0..3 {
-            for j in 0..3 {
+            for j in 0..=i {
                 cov[i][j] += var * vectors[i][k] * vectors[j][k] / (s[i] * s[j]);
             }
+        }
+    }
+    // Exactly symmetric (the products above are not commutative in floating point).
+    for i in 0..3 {
+        for j in 0..i {
+            cov[j][i] = cov[i][j];
         }
     }
     let floors = [
@@ -520,6 +526,25 @@ mod tests {
         let flat = laplace_covariance(&diag(1e6, 0.0, -5.0), 1.0, &config);
         assert!((flat[1][1] - (0.03f64.powi(2) + 1e-6)).abs() < 1e-12);
         assert!((flat[2][2] - ((0.03f64 / 0.02).powi(2) + 1e-4)).abs() < 1e-9);
+        // A coupled Hessian gives an exactly symmetric covariance whose inverse (less the floors) is H / τ.
+        let h = [[2e6, 3e5, 1e4], [3e5, 1e6, -2e3], [1e4, -2e3, 300.0]];
+        let bare = PosteriorConfig {
+            floor_position_m: 0.0,
+            floor_theta_rad: 0.0,
+            ..config.clone()
+        };
+        let c = laplace_covariance(&h, 1.0, &bare);
+        for i in 0..3 {
+            for j in 0..3 {
+                assert_eq!(c[i][j], c[j][i]);
+                let product: f64 =
+                    (0..3).map(|k| c[i][k] * h[k][j]).sum::<f64>() / bare.temperature;
+                assert!(
+                    (product - f64::from(u8::from(i == j))).abs() < 1e-9,
+                    "{i} {j}: {product}"
+                );
+            }
+        }
         // A contact a quarter the reference size with exponent ½ doubles the floors.
         let small = PosePosterior::from_evidence(
             &[ModeEvidence {
