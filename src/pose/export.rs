@@ -31,6 +31,7 @@ pub fn transform_4x4(pose: Se2) -> [[f64; 4]; 4] {
 /// The covariance of `posterior` about `estimate` (x m, y m, θ rad): every mode's covariance plus the outer
 /// product of its mean's offset from the estimate (θ wrapped by the symmetry period), weighted: a single Gaussian
 /// that keeps the other modes' spread. `None` without modes.
+#[allow(clippy::needless_range_loop)] // a matrix's indices read best as indices
 pub fn covariance_about(
     posterior: &PosePosterior,
     estimate: Se2,
@@ -53,11 +54,7 @@ pub fn covariance_about(
             }
         }
     }
-    for i in 0..3 {
-        for j in 0..i {
-            cov[j][i] = cov[i][j];
-        }
-    }
+    super::posterior::mirror_lower(&mut cov);
     Some(cov)
 }
 

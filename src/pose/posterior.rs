@@ -362,11 +362,7 @@ fn laplace_covariance(hessian: &Mat3, floor_scale: f64, config: &PosteriorConfig
         }
     }
     // Exactly symmetric (the products above are not commutative in floating point).
-    for i in 0..3 {
-        for j in 0..i {
-            cov[j][i] = cov[i][j];
-        }
-    }
+    mirror_lower(&mut cov);
     let floors = [
         config.floor_position_m,
         config.floor_position_m,
@@ -376,6 +372,13 @@ fn laplace_covariance(hessian: &Mat3, floor_scale: f64, config: &PosteriorConfig
         cov[i][i] += (f * floor_scale).powi(2);
     }
     cov
+}
+
+/// Copy the lower triangle of `m` onto its upper one: a symmetric matrix, exactly.
+pub(crate) fn mirror_lower(m: &mut Mat3) {
+    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+        m[i][j] = m[j][i];
+    }
 }
 
 /// Eigenvalues and eigenvectors (columns) of a symmetric 3x3 matrix, by cyclic Jacobi rotations.
@@ -510,6 +513,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)] // a matrix's indices read best as indices
     fn laplace_covariance_inverts_the_tempered_hessian() {
         // Analytic: H = diag(1e6, 4e6, 1e2) nats per (m², m², rad²), τ = 4: variances τ/H, plus the floors squared.
         let config = PosteriorConfig {
