@@ -4,8 +4,9 @@
 //! [`RrdLog::create`] says how to get it instead of writing anything.
 //!
 //! Entity layout (world frame = the table, metres): `world/object` (the object at its true pose), `world/estimate/...`
-//! (the object at estimated poses), `world/sensor/camera` (camera pose + pinhole) with the depth images under it,
-//! `world/points/...` (back-projected contact points), `world/membrane`.
+//! (the object at estimated poses), `world/posterior` (the pose posterior's 90 % position regions on the table),
+//! `world/sensor/camera` (camera pose + pinhole) with the depth images under it, `world/points/...` (back-projected
+//! contact points), `world/membrane`.
 
 use std::path::{Path, PathBuf};
 
@@ -162,6 +163,30 @@ impl RrdLog {
         #[cfg(not(feature = "rerun"))]
         {
             let _ = (entity, points, rgb);
+            Ok(())
+        }
+    }
+
+    /// Polylines in the parent's frame, one colour (RGB), e.g. the pose posterior's region outlines.
+    pub fn line_strips(
+        &self,
+        entity: &str,
+        strips: &[Vec<glam::DVec3>],
+        rgb: [u8; 3],
+    ) -> Result<(), RrdError> {
+        #[cfg(feature = "rerun")]
+        {
+            let l = rerun::LineStrips3D::new(
+                strips
+                    .iter()
+                    .map(|strip| strip.iter().map(|&q| f32x3(q)).collect::<Vec<_>>()),
+            )
+            .with_colors([rerun::Color::from_rgb(rgb[0], rgb[1], rgb[2])]);
+            self.rec.log(entity, &l).map_err(|e| self.err(e))
+        }
+        #[cfg(not(feature = "rerun"))]
+        {
+            let _ = (entity, strips, rgb);
             Ok(())
         }
     }

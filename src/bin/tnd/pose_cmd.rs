@@ -222,6 +222,23 @@ pub fn run(a: PoseArgs) -> Result<()> {
         if let Some(best) = estimate.best() {
             object_at(log, "world/estimate/best", &object.mesh, best, ESTIMATE_RGB)?;
         }
+        if let Some(p) = &estimate.posterior {
+            // Each mode's 90 % position region, on the table.
+            let strips: Vec<Vec<glam::DVec3>> = p
+                .modes
+                .iter()
+                .map(|m| {
+                    let mut ring: Vec<glam::DVec3> = m
+                        .ellipse_xy(0.9, 64)
+                        .iter()
+                        .map(|[x, y]| glam::DVec3::new(*x, *y, 0.0))
+                        .collect();
+                    ring.extend(ring.first().copied());
+                    ring
+                })
+                .collect();
+            log.line_strips("world/posterior", &strips, [0, 170, 190])?;
+        }
         if let Some(m) = &report.multi_sample {
             object_at(
                 log,

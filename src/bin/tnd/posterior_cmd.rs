@@ -84,8 +84,7 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
     for path in &a.records {
         records.extend(EvalLog::read(path)?.1);
     }
-    let scored = |name: &str, get: Row| -> Vec<Scored<'_>> {
-        let _ = name;
+    let scored = |get: Row| -> Vec<Scored<'_>> {
         records
             .iter()
             .filter_map(|r| {
@@ -100,7 +99,7 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
             })
             .collect()
     };
-    let all: Vec<Scored<'_>> = methods.iter().flat_map(|(n, g)| scored(n, *g)).collect();
+    let all: Vec<Scored<'_>> = methods.iter().flat_map(|(_, g)| scored(*g)).collect();
     if all.is_empty() {
         bail!(
             "no pair of {} has a posterior of the chosen rows (records of tnd eval with the signature check, from this \
@@ -117,7 +116,7 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
         "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong |\n|---|---|---|---|---|---|---|\n",
     );
     for (name, get) in &methods {
-        let rows = scored(name, *get);
+        let rows = scored(*get);
         let mut groups: Vec<(String, Vec<Scored<'_>>)> = vec![("all".into(), rows.clone())];
         for &(lo, hi) in &CONTACT_BINS {
             let mine: Vec<Scored<'_>> = rows
