@@ -22,6 +22,8 @@ struct Panel<'a> {
     baseline: Option<f64>,
     estimate: Option<f64>,
     multi: Option<f64>,
+    /// Draw a histogram of the samples under the KDE (θ: a KDE alone hides how the samples split).
+    histogram: bool,
 }
 
 impl Draw for KdeFigure<'_> {
@@ -44,6 +46,7 @@ impl Draw for KdeFigure<'_> {
             baseline: r.baseline.map(|b| b.position_mm),
             estimate: r.estimate.map(|e| e.position_mm),
             multi: r.multi_sample.map(|m| m.position_mm),
+            histogram: false,
         }];
         let theta: Vec<f64> = r.samples.iter().filter_map(|s| s.theta_deg).collect();
         if !theta.is_empty() {
@@ -55,6 +58,7 @@ impl Draw for KdeFigure<'_> {
                 baseline: r.baseline.and_then(|b| b.theta_deg),
                 estimate: r.estimate.and_then(|e| e.theta_deg),
                 multi: r.multi_sample.and_then(|m| m.theta_deg),
+                histogram: true,
             });
         }
         let areas = root.split_evenly((1, panels.len()));
@@ -91,7 +95,36 @@ fn panel<DB: DrawingBackend>(
     } else {
         (0.0, 1.0)
     };
-    let top = p.curve.iter().map(|c| c.1).fold(0.0, f64::max);
+    // The samples' θ errors (already wrapped to the symmetry period) as a histogram in density units, under the KDE:
+    // how many samples fall each side, without the KDE's smoothing. Bars (from, to, density).
+    let bars: Vec<(f64, f64, f64)> = if p.histogram && !p.samples.is_empty() {
+        let bins = 12usize;
+        let lo_v = p.samples.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi_v = p.samples.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let width = ((hi_v - lo_v) / bins as f64).max(0.5);
+        let n = p.samples.len() as f64;
+        let mut counts = vec![0usize; bins + 1];
+        for &v in &p.samples {
+            counts[(((v - lo_v) / width) as usize).min(bins)] += 1;
+        }
+        counts
+            .iter()
+            .enumerate()
+            .filter(|(_, &c)| c > 0)
+            .map(|(k, &c)| {
+                let x0 = lo_v + k as f64 * width;
+                (x0, x0 + width, c as f64 / (n * width))
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let top = p
+        .curve
+        .iter()
+        .map(|c| c.1)
+        .chain(bars.iter().map(|b| b.2))
+        .fold(0.0, f64::max);
     // Headroom above the curve for the legend (top right), so that it covers none of the data.
     let top = if top > 0.0 { top * 1.7 } else { 1.0 };
     let stroke = (2.0 * s).round().max(1.0) as u32;
@@ -115,6 +148,18 @@ fn panel<DB: DrawingBackend>(
             .map_err(err)?
             .label(format!("KDE of {} samples", p.samples.len()))
             .legend(swatch(BLUE, stroke));
+    }
+    if !bars.is_empty() {
+        let fill = RGBColor(150, 170, 230).mix(0.5).filled();
+        let width = bars[0].1 - bars[0].0;
+        chart
+            .draw_series(
+                bars.iter()
+                    .map(|&(x0, x1, d)| Rectangle::new([(x0, 0.0), (x1, d)], fill)),
+            )
+            .map_err(err)?
+            .label(format!("histogram, {width:.1}° bins"))
+            .legend(move |(x, y)| Rectangle::new([(x + 4, y - 5), (x + 16, y + 5)], fill));
     }
     let rug = top * 0.05;
     chart
