@@ -1,6 +1,6 @@
 //! End-to-end registration: simulated contacts of an asymmetric object (a lying prism with a scalene triangular
 //! profile, pressed near one end) are back-projected and registered from random starts; the estimate must match the
-//! simulated pose.
+//! simulated pose. Also the press the sensor is placed at, found from a contact (the registration's other unknown).
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -219,4 +219,60 @@ fn cost_is_minimal_at_the_true_pose() {
             && angle_diff(hyps[0].pose.theta, truth.theta) < 0.01
     );
     assert_eq!(reg.name(), "sdf-lm");
+}
+
+#[test]
+fn press_from_the_true_contact_puts_its_highest_point_on_the_object_s_top() {
+    // Independent truth: the press the simulator placed the sensor at. The object's top is under the sensor at these
+    // poses, so the highest point of the true in-contact depth lies on it and the press comes back; a press is
+    // never over-estimated (no contact point lies above the top).
+    use tactile_derender::pipeline::press::press_from_samples;
+    let mut quiet = SimConfig::default();
+    quiet.signature.noise_std = 0.0;
+    let sim = Simulator::new(quiet).unwrap();
+    let cross = PreparedObject::new(
+        tactile_derender::objects::ObjectSet::builtin()
+            .mesh("cross_w12_s50")
+            .unwrap(),
+    )
+    .unwrap();
+    let eval = tactile_derender::metrics::evaluate::EvalConfig::default();
+    for (pose, press) in [
+        (Se2::new(0.003, -0.002, 0.4), 0.002),
+        (Se2::new(0.003, -0.002, 0.4), 0.006),
+        (Se2::new(-0.005, 0.004, 1.2), 0.004),
+    ] {
+        let scene = Scene {
+            object: pose,
+            sensor: sim.pressing_pose(&cross, 0.0, 0.0, 0.0, press),
+        };
+        let out = sim.simulate(&cross, &scene, 0);
+        let got = press_from_samples(
+            &sim,
+            &cross,
+            std::slice::from_ref(&out.target),
+            Some(&out.signature),
+            &out.imprint,
+            &eval,
+            0.03,
+        )
+        .unwrap()
+        .unwrap();
+        assert!(
+            (got - press).abs() < 3e-4,
+            "press {press} at {pose:?}: estimated {got}"
+        );
+    }
+    // No contact, no press.
+    let empty = tactile_derender::image::Image::filled(64, 64, 0.0);
+    let none = press_from_samples(
+        &sim,
+        &cross,
+        std::slice::from_ref(&empty),
+        Some(&empty),
+        &empty,
+        &eval,
+        0.03,
+    );
+    assert_eq!(none.unwrap(), None);
 }

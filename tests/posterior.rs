@@ -103,12 +103,6 @@ fn record(name: &str, off_m: f64) -> PairRecord {
         &raw,
     );
     let result = MethodResult {
-        depth: DepthMetrics {
-            l1_mm: 1.0,
-            l1_union_mm: None,
-            psnr_db: 20.0,
-            ssim: 0.5,
-        },
         estimate: Some(estimate),
         pose: Some(tactile_derender::metrics::pose::PoseErrors {
             position_mm: off_m * 1e3,
@@ -117,7 +111,7 @@ fn record(name: &str, off_m: f64) -> PairRecord {
             chamfer_m2: 0.0,
         }),
         posterior: Some(posterior),
-        truth_region: None,
+        ..record_base()
     };
     PairRecord {
         name: name.into(),
@@ -128,14 +122,12 @@ fn record(name: &str, off_m: f64) -> PairRecord {
         model: result.clone(),
         model_multi: None,
         model_combined: Some(result),
-        baseline: MethodResult {
-            posterior: None,
-            ..record_base()
-        },
+        baseline: record_base(),
         baseline_checked: None,
     }
 }
 
+/// A method's scores with nothing estimated.
 fn record_base() -> MethodResult {
     MethodResult {
         depth: DepthMetrics {

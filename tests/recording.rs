@@ -498,55 +498,6 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
 }
 
 #[test]
-fn press_from_the_true_contact_puts_its_highest_point_on_the_object_s_top() {
-    // Independent truth: the press the simulator placed the sensor at. The object's top is under the sensor at these
-    // poses, so the highest point of the true in-contact depth lies on it and the press comes back; a press is
-    // never over-estimated (no contact point lies above the top).
-    use tactile_derender::pipeline::press::press_from_samples;
-    let sim = Simulator::new(quiet_sim()).unwrap();
-    let cross = PreparedObject::new(ObjectSet::builtin().mesh("cross_w12_s50").unwrap()).unwrap();
-    let eval = EvalConfig::default();
-    for (pose, press) in [
-        (Se2::new(0.003, -0.002, 0.4), 0.002),
-        (Se2::new(0.003, -0.002, 0.4), 0.006),
-        (Se2::new(-0.005, 0.004, 1.2), 0.004),
-    ] {
-        let scene = Scene {
-            object: pose,
-            sensor: sim.pressing_pose(&cross, 0.0, 0.0, 0.0, press),
-        };
-        let out = sim.simulate(&cross, &scene, 0);
-        let got = press_from_samples(
-            &sim,
-            &cross,
-            std::slice::from_ref(&out.target),
-            Some(&out.signature),
-            &out.imprint,
-            &eval,
-            0.03,
-        )
-        .unwrap()
-        .unwrap();
-        assert!(
-            (got - press).abs() < 3e-4,
-            "press {press} at {pose:?}: estimated {got}"
-        );
-    }
-    // No contact, no press.
-    let empty = Image::filled(64, 64, 0.0);
-    let none = press_from_samples(
-        &sim,
-        &cross,
-        std::slice::from_ref(&empty),
-        Some(&empty),
-        &empty,
-        &eval,
-        0.03,
-    );
-    assert_eq!(none.unwrap(), None);
-}
-
-#[test]
 fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
     // As a user would: tnd recording simulate -> tnd recording track (bundled model, two samples a frame); the
     // recorded pose topic is the truth the rows are scored against, never an input.

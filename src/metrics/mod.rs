@@ -14,6 +14,7 @@ pub mod hypotheses;
 pub mod model_generator;
 pub mod paper_table;
 pub mod pose;
+pub mod report;
 pub mod saved_samples;
 pub mod sources;
 pub mod ssim;

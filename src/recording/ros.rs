@@ -422,15 +422,20 @@ pub fn encode_point_cloud(m: &PointCloudMsg, frame_id: &str) -> Vec<u8> {
 /// Encode a `geometry_msgs/PoseStamped` (z = 0, rotation about z by `theta`) as ROS 2 CDR.
 pub fn encode_pose_stamped(stamp_ns: u64, x: f64, y: f64, theta: f64, frame_id: &str) -> Vec<u8> {
     let mut w = CdrWriter::new();
-    w.header(stamp_ns, frame_id)
-        .f64(x)
+    w.header(stamp_ns, frame_id);
+    planar_pose(&mut w, x, y, theta);
+    w.finish()
+}
+
+/// A `geometry_msgs/Pose` in the table plane: position (x, y, 0), rotation about z by `theta`.
+fn planar_pose(w: &mut CdrWriter, x: f64, y: f64, theta: f64) {
+    w.f64(x)
         .f64(y)
         .f64(0.0)
         .f64(0.0)
         .f64(0.0)
         .f64((theta / 2.0).sin())
         .f64((theta / 2.0).cos());
-    w.finish()
 }
 
 /// Encode a `geometry_msgs/PoseWithCovarianceStamped` (z = 0, rotation about z by `theta`; `covariance` row-major
@@ -442,14 +447,8 @@ pub fn encode_pose_with_covariance_stamped(
     covariance: &[f64; 36],
 ) -> Vec<u8> {
     let mut w = CdrWriter::new();
-    w.header(stamp_ns, frame_id)
-        .f64(x)
-        .f64(y)
-        .f64(0.0)
-        .f64(0.0)
-        .f64(0.0)
-        .f64((theta / 2.0).sin())
-        .f64((theta / 2.0).cos());
+    w.header(stamp_ns, frame_id);
+    planar_pose(&mut w, x, y, theta);
     for &c in covariance {
         w.f64(c);
     }

@@ -76,14 +76,8 @@ pub fn write_press_recording(
 ) -> Result<usize, RecordingError> {
     let sim = Simulator::native(sim_config.clone())?;
     let k = *sim.intrinsics();
-    let mcap_err = |e: mcap::McapError| RecordingError::Format {
-        path: path.to_path_buf(),
-        message: format!("writing MCAP: {e}"),
-    };
-    let mut w = mcap::WriteOptions::new()
-        .profile("ros2")
-        .create(Cursor::new(Vec::new()))
-        .map_err(mcap_err)?;
+    let mcap_err = mcap_error(path);
+    let mut w = new_mcap(path)?;
     let no_meta = BTreeMap::new();
     let (schema_name, schema_text) = match seq.encoding {
         DepthEncoding::Cloud => ("sensor_msgs/msg/PointCloud2", point_cloud_schema()),
@@ -198,10 +192,31 @@ pub fn write_press_recording(
                 .map_err(mcap_err)?;
         }
     }
-    w.finish().map_err(mcap_err)?;
-    let bytes = w.into_inner().into_inner();
-    crate::io::atomic::write_atomic(path, &bytes).map_err(|e| RecordingError::io(path, e))?;
+    save_mcap(path, w)?;
     Ok(seq.presses.len())
+}
+
+/// The error of writing the MCAP file at `path`.
+fn mcap_error(path: &Path) -> impl Fn(mcap::McapError) -> RecordingError + Copy + '_ {
+    move |e| RecordingError::Format {
+        path: path.to_path_buf(),
+        message: format!("writing MCAP: {e}"),
+    }
+}
+
+/// A ROS 2 MCAP file for `path`, written in memory until [`save_mcap`].
+fn new_mcap(path: &Path) -> Result<mcap::Writer<Cursor<Vec<u8>>>, RecordingError> {
+    mcap::WriteOptions::new()
+        .profile("ros2")
+        .create(Cursor::new(Vec::new()))
+        .map_err(mcap_error(path))
+}
+
+/// Finish `w` and write it to `path` atomically.
+fn save_mcap(path: &Path, mut w: mcap::Writer<Cursor<Vec<u8>>>) -> Result<(), RecordingError> {
+    w.finish().map_err(mcap_error(path))?;
+    let bytes = w.into_inner().into_inner();
+    crate::io::atomic::write_atomic(path, &bytes).map_err(|e| RecordingError::io(path, e))
 }
 
 /// A depth in metres as a 16UC1 value: millimetres, 0 where unmeasured or beyond 65.534 m.
@@ -277,14 +292,8 @@ pub fn write_pose_track(
     frame_id: &str,
     poses: &[(u64, [f64; 3], [f64; 36])],
 ) -> Result<(), RecordingError> {
-    let mcap_err = |e: mcap::McapError| RecordingError::Format {
-        path: path.to_path_buf(),
-        message: format!("writing MCAP: {e}"),
-    };
-    let mut w = mcap::WriteOptions::new()
-        .profile("ros2")
-        .create(Cursor::new(Vec::new()))
-        .map_err(mcap_err)?;
+    let mcap_err = mcap_error(path);
+    let mut w = new_mcap(path)?;
     let schema = w
         .add_schema(
             "geometry_msgs/msg/PoseWithCovarianceStamped",
@@ -308,9 +317,7 @@ pub fn write_pose_track(
         )
         .map_err(mcap_err)?;
     }
-    w.finish().map_err(mcap_err)?;
-    let bytes = w.into_inner().into_inner();
-    crate::io::atomic::write_atomic(path, &bytes).map_err(|e| RecordingError::io(path, e))
+    save_mcap(path, w)
 }
 
 pub fn pose_stamped_schema() -> String {

@@ -189,17 +189,8 @@ fn records_settings(a: &EvalArgs, dataset: &Dataset) -> Result<Value> {
         "seed": a.seed, "skip": a.skip, "pose_samples": a.pose_samples.max(1), "sampler": a.sampler,
         "guidance": a.guidance, "anchor": !a.no_anchor, "signature_check": !a.no_signature_check,
         "imprint_proposals": !a.no_imprint_proposals, "check_refine": a.check_refine, "inits": a.inits,
-        "posterior": posterior_config(a)?,
+        "posterior": crate::posterior_cmd::config_or_default(a.posterior.as_deref())?,
     }))
-}
-
-/// `--posterior FILE`, or the bundled calibration.
-fn posterior_config(a: &EvalArgs) -> Result<tactile_derender::pose::posterior::PosteriorConfig> {
-    Ok(a.posterior
-        .as_deref()
-        .map(crate::posterior_cmd::read_config)
-        .transpose()?
-        .unwrap_or_default())
 }
 
 fn splits(s: &str) -> Result<Vec<SplitName>> {
@@ -265,7 +256,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
             refine: a.check_refine,
             ..Default::default()
         },
-        posterior: posterior_config(&a)?,
+        posterior: crate::posterior_cmd::config_or_default(a.posterior.as_deref())?,
         ..EvalConfig::default()
     });
     let rrd = a.rerun.open("tnd eval")?;

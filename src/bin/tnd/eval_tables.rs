@@ -70,12 +70,8 @@ fn coverage_table(r: &EvalReport) -> String {
         if let Some(c) = m.and_then(|m| m.coverage) {
             let _ = writeln!(
                 s,
-                "| {name} | {} | {:.0} % | {:.0} % | {:.0} % | {} |",
-                c.pairs,
-                c.inside[0] * 100.0,
-                c.inside[1] * 100.0,
-                c.inside[2] * 100.0,
-                c.confidently_wrong
+                "| {name} | {} |",
+                crate::posterior_cmd::coverage_cells(&c)
             );
         }
     }

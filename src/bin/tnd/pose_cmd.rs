@@ -98,12 +98,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let eval = EvalConfig {
         check_signature: !a.no_signature_check,
         imprint_proposals: !a.no_imprint_proposals,
-        posterior: a
-            .posterior
-            .as_deref()
-            .map(crate::posterior_cmd::read_config)
-            .transpose()?
-            .unwrap_or_default(),
+        posterior: crate::posterior_cmd::config_or_default(a.posterior.as_deref())?,
         ..EvalConfig::default()
     };
     let (generator, samples, probability) = if a.model == "ground-truth" {

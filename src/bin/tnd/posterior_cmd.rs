@@ -51,6 +51,11 @@ const METHODS: [(&str, Row); 4] = [
     ("baseline_checked", |r| r.baseline_checked.as_ref()),
 ];
 
+/// The calibration of `--posterior FILE` (eval, pose, track), or the bundled one without it.
+pub fn config_or_default(file: Option<&Path>) -> Result<PosteriorConfig> {
+    Ok(file.map(read_config).transpose()?.unwrap_or_default())
+}
+
 /// A posterior calibration from a JSON file (every field optional, the defaults for the others).
 pub fn read_config(path: &Path) -> Result<PosteriorConfig> {
     let text = std::fs::read_to_string(path)
@@ -195,8 +200,13 @@ impl LocatedEstimate {
 }
 
 fn row(name: &str, group: &str, c: &Coverage) -> String {
+    format!("| {name} | {group} | {} |\n", coverage_cells(c))
+}
+
+/// A coverage's markdown cells: pairs, inside 50 / 90 / 95 %, confidently wrong (this table's and `tnd eval`'s).
+pub fn coverage_cells(c: &Coverage) -> String {
     format!(
-        "| {name} | {group} | {} | {:.0} % | {:.0} % | {:.0} % | {} |\n",
+        "{} | {:.0} % | {:.0} % | {:.0} % | {}",
         c.pairs,
         c.inside[0] * 100.0,
         c.inside[1] * 100.0,

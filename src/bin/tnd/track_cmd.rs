@@ -316,12 +316,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
         );
     }
     let eval = EvalConfig {
-        posterior: a
-            .posterior
-            .as_deref()
-            .map(crate::posterior_cmd::read_config)
-            .transpose()?
-            .unwrap_or_default(),
+        posterior: crate::posterior_cmd::config_or_default(a.posterior.as_deref())?,
         ..EvalConfig::default()
     };
     let ctx = TrackContext {
