@@ -87,8 +87,13 @@ pub fn draw_axes<DB: DrawingBackend>(
     y_desc: &str,
     scale: f64,
 ) -> Result<(), String> {
+    // As many tick labels as fit side by side without touching (a label such as "-2.5" is ~3 em wide).
+    let (w, h) = chart.plotting_area().dim_in_pixel();
+    let fit = |px: u32, per: f64| ((f64::from(px) / (per * scale)) as usize).clamp(2, 12);
     chart
         .configure_mesh()
+        .x_labels(fit(w, 45.0))
+        .y_labels(fit(h, 30.0))
         .x_desc(x_desc)
         .y_desc(y_desc)
         .label_style(font(13.0, scale))
@@ -104,12 +109,21 @@ pub fn draw_legend<'a, DB: DrawingBackend + 'a>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     scale: f64,
 ) -> Result<(), String> {
+    draw_legend_at(chart, scale, SeriesLabelPosition::UpperRight)
+}
+
+/// [`draw_legend`] at `position`.
+pub fn draw_legend_at<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    scale: f64,
+    position: SeriesLabelPosition,
+) -> Result<(), String> {
     chart
         .configure_series_labels()
         .label_font(font(13.0, scale))
         .background_style(WHITE.mix(0.85))
         .border_style(RGBColor(160, 160, 160))
-        .position(SeriesLabelPosition::UpperRight)
+        .position(position)
         .draw()
         .map_err(err)
 }

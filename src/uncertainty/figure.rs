@@ -1,18 +1,24 @@
 //! The uncertainty figure (paper V.D, Fig. "uncertainty"): one panel per pose-error variable (position in mm, θ in
 //! degrees) with the KDE of the samples' errors, the samples as a rug, and the threshold baseline's, the single-sample
-//! estimate's (the pose reported) and the multi-sample estimate's errors as vertical lines; axes, units and a legend. SVG and PNG through
-//! [`crate::io::figure`].
+//! estimate's (the pose reported) and the multi-sample estimate's errors as vertical lines; axes, units and a legend;
+//! and a circular histogram of the θ errors (θ is an angle: an error of +170° and one of −170° lie 20° apart, which
+//! only a circle shows). SVG and PNG through [`crate::io::figure`].
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::UncertaintyReport;
-use crate::io::figure::{draw_axes, draw_legend, err, font, swatch, Draw};
+use crate::io::figure::{draw_axes, draw_legend, draw_legend_at, err, font, swatch, Draw};
 
 /// The KDE figure of one report.
 pub struct KdeFigure<'a> {
     pub report: &'a UncertaintyReport,
 }
+
+/// Colours of the single-sample and the multi-sample estimates' lines.
+const ESTIMATE: RGBColor = RGBColor(230, 140, 0);
+const MULTI: RGBColor = RGBColor(0, 150, 60);
 
 struct Panel<'a> {
     title: &'a str,
@@ -40,7 +46,7 @@ impl Draw for KdeFigure<'_> {
         };
         let mut panels = vec![Panel {
             title: "position error",
-            axis: "position error against the reference [mm]",
+            axis: "position error [mm]",
             curve: &r.position_kde,
             samples: r.samples.iter().map(|s| s.position_mm).collect(),
             baseline: r.baseline.map(|b| b.position_mm),
@@ -52,7 +58,7 @@ impl Draw for KdeFigure<'_> {
         if !theta.is_empty() {
             panels.push(Panel {
                 title: "θ error",
-                axis: "θ error against the reference [deg]",
+                axis: "θ error [deg]",
                 curve: &r.theta_kde,
                 samples: theta,
                 baseline: r.baseline.and_then(|b| b.theta_deg),
@@ -61,9 +67,31 @@ impl Draw for KdeFigure<'_> {
                 histogram: true,
             });
         }
-        let areas = root.split_evenly((1, panels.len()));
+        let rose = panels.get(1).map(|theta| Rose {
+            period_deg: r.theta_period_deg.unwrap_or(360.0),
+            errors: &theta.samples,
+            lines: [
+                (theta.baseline, RED, "threshold baseline"),
+                (theta.estimate, ESTIMATE, "single-sample estimate"),
+                (theta.multi, MULTI, "multi-sample estimate"),
+            ],
+        });
+        // One title names the reference; three panels side by side get text a little smaller than two.
+        let count = panels.len() + usize::from(rose.is_some());
+        let body = root
+            .margin((6.0 * scale) as u32, 0, 0, 0)
+            .titled(
+                &format!("pose errors of the registered samples against the {truth}"),
+                font(18.0, scale),
+            )
+            .map_err(err)?;
+        let s = if count > 2 { scale * 0.85 } else { scale };
+        let areas = body.split_evenly((1, count));
         for (area, p) in areas.iter().zip(&panels) {
-            panel(area, p, truth, scale)?;
+            panel(area, p, s)?;
+        }
+        if let (Some(rose), Some(area)) = (rose, areas.get(panels.len())) {
+            rose.draw(area, s)?;
         }
         Ok(())
     }
@@ -72,7 +100,6 @@ impl Draw for KdeFigure<'_> {
 fn panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     p: &Panel<'_>,
-    reference: &str,
     s: f64,
 ) -> Result<(), String> {
     let xs = p
@@ -129,10 +156,7 @@ fn panel<DB: DrawingBackend>(
     let top = if top > 0.0 { top * 1.7 } else { 1.0 };
     let stroke = (2.0 * s).round().max(1.0) as u32;
     let mut chart = ChartBuilder::on(area)
-        .caption(
-            format!("{} (reference: {reference})", p.title),
-            font(18.0, s),
-        )
+        .caption(p.title, font(18.0, s))
         .margin((12.0 * s) as i32)
         .x_label_area_size((46.0 * s) as i32)
         .y_label_area_size((64.0 * s) as i32)
@@ -179,8 +203,8 @@ fn panel<DB: DrawingBackend>(
         });
     for (value, colour, label) in [
         (p.baseline, RED, "threshold baseline"),
-        (p.estimate, RGBColor(230, 140, 0), "single-sample estimate"),
-        (p.multi, RGBColor(0, 150, 60), "multi-sample estimate"),
+        (p.estimate, ESTIMATE, "single-sample estimate"),
+        (p.multi, MULTI, "multi-sample estimate"),
     ] {
         if let Some(v) = value {
             chart
@@ -195,4 +219,188 @@ fn panel<DB: DrawingBackend>(
     }
     draw_legend(&mut chart, s)?;
     Ok(())
+}
+
+/// A circular histogram (rose) of the θ errors: the symmetry period once round the circle, no error at the top,
+/// positive (counter-clockwise) errors to the left; wedge *areas* proportional to the samples in them, and the
+/// estimates' errors as rays.
+struct Rose<'a> {
+    period_deg: f64,
+    errors: &'a [f64],
+    lines: [(Option<f64>, RGBColor, &'static str); 3],
+}
+
+/// Wedges of the rose.
+const ROSE_BINS: usize = 24;
+
+impl Rose<'_> {
+    /// The point at radius `r` in the direction of a θ error of `deg`.
+    fn at(&self, deg: f64, r: f64) -> (f64, f64) {
+        let phi = std::f64::consts::FRAC_PI_2 + std::f64::consts::TAU * deg / self.period_deg;
+        (r * phi.cos(), r * phi.sin())
+    }
+
+    fn draw<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+        s: f64,
+    ) -> Result<(), String> {
+        let stroke = (2.0 * s).round().max(1.0) as u32;
+        let margin = (12.0 * s) as u32;
+        let inner = area
+            .titled("θ error, circular", font(18.0, s))
+            .map_err(err)?
+            .margin(margin, margin, margin, margin);
+        // Equal units on both axes (a circle on unequal ones is an ellipse): the rose (radius 1, labels out to
+        // 1.45) at the top, centred, and room below it for the legend.
+        let (w, h) = inner.dim_in_pixel();
+        let legend_px = 115.0 * s;
+        let side = f64::from(w).min(f64::from(h) - legend_px).max(1.0);
+        let unit = side / 2.9;
+        let half_w = f64::from(w) / unit / 2.0;
+        let mut chart = ChartBuilder::on(&inner)
+            .build_cartesian_2d(-half_w..half_w, (1.45 - f64::from(h) / unit)..1.45)
+            .map_err(err)?;
+        let grey = RGBColor(190, 190, 190).stroke_width(stroke.div_ceil(2));
+        for r in [0.5, 1.0] {
+            let ring: Vec<(f64, f64)> = (0..=96)
+                .map(|k| self.at(self.period_deg * k as f64 / 96.0, r))
+                .collect();
+            chart
+                .draw_series(std::iter::once(PathElement::new(ring, grey)))
+                .map_err(err)?;
+        }
+        let half = self.period_deg / 2.0;
+        for deg in [0.0, half / 2.0, half, -half / 2.0] {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    [(0.0, 0.0), self.at(deg, 1.0)],
+                    grey,
+                )))
+                .map_err(err)?;
+            let (x, y) = self.at(deg, 1.22);
+            // Whole degrees where they are whole (a 4-fold object's quarter period is 22.5°).
+            let digits = usize::from(deg.fract() != 0.0);
+            let label = if deg == half {
+                format!("±{half:.digits$}°")
+            } else {
+                format!("{deg:+.digits$}°")
+            };
+            chart
+                .draw_series(std::iter::once(Text::new(
+                    label,
+                    (x, y),
+                    TextStyle::from(font(13.0, s)).pos(Pos::new(HPos::Center, VPos::Center)),
+                )))
+                .map_err(err)?;
+        }
+        let width = self.period_deg / ROSE_BINS as f64;
+        let mut counts = [0usize; ROSE_BINS];
+        for &e in self.errors.iter().filter(|e| e.is_finite()) {
+            let k = ((e + half) / width).floor().rem_euclid(ROSE_BINS as f64) as usize;
+            counts[k.min(ROSE_BINS - 1)] += 1;
+        }
+        let most = counts.iter().copied().max().unwrap_or(0).max(1) as f64;
+        let fill = RGBColor(150, 170, 230).mix(0.7).filled();
+        let wedges = counts
+            .iter()
+            .enumerate()
+            .filter(|(_, &c)| c > 0)
+            .map(|(k, &c)| {
+                let r = (c as f64 / most).sqrt();
+                let from = -half + k as f64 * width;
+                let mut points = vec![(0.0, 0.0)];
+                points.extend((0..=8).map(|j| self.at(from + width * j as f64 / 8.0, r)));
+                Polygon::new(points, fill)
+            });
+        chart
+            .draw_series(wedges)
+            .map_err(err)?
+            .label(format!(
+                "{} samples, {width:.0}° wedges (area: share)",
+                self.errors.len()
+            ))
+            .legend(move |(x, y)| Rectangle::new([(x + 4, y - 5), (x + 16, y + 5)], fill));
+        for (value, colour, label) in self.lines {
+            if let Some(v) = value.filter(|v| v.is_finite()) {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        [(0.0, 0.0), self.at(v, 1.1)],
+                        colour.stroke_width(stroke),
+                    )))
+                    .map_err(err)?
+                    .label(label)
+                    .legend(swatch(colour, stroke));
+            }
+        }
+        draw_legend_at(&mut chart, s, SeriesLabelPosition::LowerMiddle)?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rose(period_deg: f64, errors: &[f64]) -> Rose<'_> {
+        Rose {
+            period_deg,
+            errors,
+            lines: [(None, RED, "a"), (None, RED, "b"), (None, RED, "c")],
+        }
+    }
+
+    #[test]
+    fn the_rose_puts_no_error_at_the_top_and_goes_round_once_per_period() {
+        for period in [360.0, 180.0, 90.0] {
+            let r = rose(period, &[]);
+            let close = |(x, y): (f64, f64), (a, b): (f64, f64)| {
+                (x - a).abs() < 1e-12 && (y - b).abs() < 1e-12
+            };
+            assert!(close(r.at(0.0, 1.0), (0.0, 1.0)));
+            // A quarter period counter-clockwise is to the left; ± half a period meet at the bottom.
+            assert!(close(r.at(period / 4.0, 1.0), (-1.0, 0.0)));
+            assert!(close(r.at(period / 2.0, 2.0), r.at(-period / 2.0, 2.0)));
+            assert!(close(r.at(period / 2.0, 1.0), (0.0, -1.0)));
+        }
+    }
+
+    #[test]
+    fn the_figure_has_the_rose_only_with_theta_errors() {
+        use crate::sensor::Se2;
+        let sample = |theta: Option<f64>| super::super::SampleError {
+            pose: Se2::default(),
+            cost: 0.0,
+            position_mm: 1.0,
+            theta_deg: theta,
+        };
+        let svg = |theta: Option<f64>| {
+            let mut report = super::super::UncertaintyReport::new(
+                Se2::default(),
+                true,
+                Se2::default(),
+                vec![sample(theta.map(|t| t + 3.0)), sample(theta)],
+                None,
+            );
+            report.theta_period_deg = theta.map(|_| 180.0);
+            let dir = tempfile::tempdir().unwrap();
+            let size = crate::io::figure::FigureConfig {
+                width_px: 1200,
+                height_px: 500,
+            };
+            let [svg, _] = crate::io::figure::write_figure(
+                dir.path(),
+                "u",
+                &size,
+                &KdeFigure { report: &report },
+            )
+            .unwrap();
+            std::fs::read_to_string(svg).unwrap()
+        };
+        let with = svg(Some(170.0));
+        assert!(with.contains("θ error, circular"), "no rose");
+        // The rose's labels name the period: ± 90° at the bottom for a 2-fold object.
+        assert!(with.contains("±90°"));
+        assert!(!svg(None).contains("circular"));
+    }
 }

@@ -158,6 +158,10 @@ pub struct UncertaintyReport {
     pub position_kde: Vec<(f64, f64)>,
     /// KDE of the θ errors, `(deg, density)`; empty when it cannot be fitted or θ is excluded.
     pub theta_kde: Vec<(f64, f64)>,
+    /// The object's symmetry period the θ errors are wrapped to, degrees (360 for none; `None`: continuous symmetry,
+    /// or a report written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub theta_period_deg: Option<f64>,
 }
 
 /// A KDE curve of `values` on `points` evenly spaced points spanning the values ± 3 bandwidths; empty when no KDE
@@ -229,6 +233,7 @@ impl UncertaintyReport {
             estimate: None,
             failed: Vec::new(),
             modes: Vec::new(),
+            theta_period_deg: None,
         }
     }
 
