@@ -436,6 +436,26 @@ pub fn write_pose_geometry(
             write_points(&dir.join(name), &points, &comment, encoding),
         )?;
     }
+    if let Some(posterior) = &estimate.posterior {
+        // Each mode's 90 % position region on the table (z = 0), 64 points a ring; the modes themselves in words.
+        let rings: Vec<glam::DVec3> = posterior
+            .modes
+            .iter()
+            .flat_map(|m| m.ellipse_xy(0.9, 64))
+            .map(|[x, y]| glam::DVec3::new(x, y, 0.0))
+            .collect();
+        let name = "posterior_region_points.ply";
+        let comment = format!(
+            "90 % position region of each pose-posterior mode (64 points each, in the order below) on the table \
+             z = 0, {frame}\n{}",
+            posterior_comment(posterior)
+        );
+        done(
+            name,
+            rings.len(),
+            write_points(&dir.join(name), &rings, &comment, encoding),
+        )?;
+    }
     let poses = [
         (
             "object_estimate.ply",
@@ -451,10 +471,14 @@ pub fn write_pose_geometry(
     ];
     for (name, what, pose) in poses {
         if let Some(p) = pose {
-            let comment = format!(
+            let mut comment = format!(
                 "{} at the {what} x={} y={} theta={}, {frame}",
                 object.name, p.x, p.y, p.theta
             );
+            if let (true, Some(posterior)) = (name == "object_estimate.ply", &estimate.posterior) {
+                comment.push('\n');
+                comment.push_str(&posterior_comment(posterior));
+            }
             let r = write_mesh(
                 &dir.join(name),
                 &object.mesh,
@@ -466,6 +490,27 @@ pub fn write_pose_geometry(
         }
     }
     Ok(files)
+}
+
+/// The pose posterior as PLY comment lines: one per mode, `posterior mode K weight W mean X Y THETA cov C00 C01 C02
+/// C10 … C22` (metres, radians, the world frame; θ circular).
+fn posterior_comment(posterior: &crate::pose::posterior::PosePosterior) -> String {
+    let mut lines = vec![format!(
+        "posterior modes {} (weight, mean x y theta, 3x3 covariance row by row; metres, radians)",
+        posterior.modes.len()
+    )];
+    for (k, m) in posterior.modes.iter().enumerate() {
+        let cov: Vec<String> = m.cov.iter().flatten().map(|c| format!("{c:e}")).collect();
+        lines.push(format!(
+            "posterior mode {k} weight {} mean {} {} {} cov {}",
+            m.weight,
+            m.mean[0],
+            m.mean[1],
+            m.mean[2],
+            cov.join(" ")
+        ));
+    }
+    lines.join("\n")
 }
 
 /// Write the SE(2) fit figure of `estimate` (`fit.svg`, `fit.png`: the object's top-view outline at the true pose and
