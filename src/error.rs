@@ -41,6 +41,59 @@ pub fn with_path(path: &std::path::Path, error: &dyn std::fmt::Display) -> Strin
     }
 }
 
+/// A setting, or a value given as text, that cannot be used: which one (`"guidance.step"`, `"resolution"`; a UI
+/// can mark that field) and a message saying what it may be and what it was.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{message}")]
+pub struct InvalidSetting {
+    /// The setting's name, dotted as in the config files (`sampler.steps`).
+    pub setting: &'static str,
+    /// What is wrong and what to change, one line.
+    pub message: String,
+}
+
+impl InvalidSetting {
+    pub fn new(setting: &'static str, message: impl Into<String>) -> Self {
+        Self {
+            setting,
+            message: message.into(),
+        }
+    }
+}
+
+/// Input that cannot be used as given: bytes or text that do not hold what their format says, an image of a size
+/// the sensor does not make, frames that cannot calibrate: what it is (`"PLY"`, `"sensor_msgs/Image"`, `"reference
+/// frames"`) and what is wrong, one line (the caller names the file).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{message}")]
+pub struct InvalidInput {
+    /// What the input is: a format or a kind of data.
+    pub what: &'static str,
+    /// What is wrong with it, one line.
+    pub message: String,
+}
+
+impl InvalidInput {
+    pub fn new(what: &'static str, message: impl Into<String>) -> Self {
+        Self {
+            what,
+            message: message.into(),
+        }
+    }
+
+    /// Run a check written with text errors, typing its error as `what`'s.
+    pub fn wrap<T>(what: &'static str, f: impl FnOnce() -> Result<T, String>) -> Result<T, Self> {
+        f().map_err(|message| Self { what, message })
+    }
+}
+
+/// The message alone, for code that reports in text.
+impl From<InvalidInput> for String {
+    fn from(e: InvalidInput) -> Self {
+        e.message
+    }
+}
+
 /// [`render`] for an `anyhow::Error` (its context lines and the library error beneath them).
 pub fn render_anyhow(err: &anyhow::Error) -> String {
     render(err.as_ref())

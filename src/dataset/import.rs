@@ -411,9 +411,9 @@ fn read_table(from: &Path) -> Result<(PathBuf, Vec<Row>), DatasetError> {
     let json = from.join("pairs.json");
     if csv.is_file() {
         let text = std::fs::read_to_string(&csv).map_err(|e| DatasetError::io(&csv, e))?;
-        let rows = parse_csv(&text).map_err(|message| DatasetError::Import {
+        let rows = parse_csv(&text).map_err(|e| DatasetError::Import {
             path: csv.clone(),
-            message,
+            message: e.into(),
         })?;
         Ok((csv, rows))
     } else if json.is_file() {
@@ -457,37 +457,39 @@ fn read_table(from: &Path) -> Result<(PathBuf, Vec<Row>), DatasetError> {
 
 /// `pairs.csv` text: a header line and comma-separated rows (no quoting; `#` starts a comment line), as rows of
 /// trimmed strings keyed by the lower-case header.
-pub fn parse_csv(text: &str) -> Result<Vec<BTreeMap<String, String>>, String> {
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
-    let (_, header) = lines.next().ok_or("empty CSV")?;
-    let keys: Vec<String> = header
-        .split(',')
-        .map(|k| k.trim().to_ascii_lowercase())
-        .collect();
-    lines
-        .map(|(n, line)| {
-            if line.contains('"') {
-                return Err(format!("line {}: quoted fields are not supported", n + 1));
-            }
-            let values: Vec<&str> = line.split(',').collect();
-            if values.len() != keys.len() {
-                return Err(format!(
-                    "line {}: {} fields, the header has {}",
-                    n + 1,
-                    values.len(),
-                    keys.len()
-                ));
-            }
-            Ok(keys
-                .iter()
-                .cloned()
-                .zip(values.iter().map(|v| v.trim().to_string()))
-                .collect())
-        })
-        .collect()
+pub fn parse_csv(text: &str) -> Result<Vec<BTreeMap<String, String>>, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("CSV", || {
+        let mut lines = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+        let (_, header) = lines.next().ok_or("empty CSV")?;
+        let keys: Vec<String> = header
+            .split(',')
+            .map(|k| k.trim().to_ascii_lowercase())
+            .collect();
+        lines
+            .map(|(n, line)| {
+                if line.contains('"') {
+                    return Err(format!("line {}: quoted fields are not supported", n + 1));
+                }
+                let values: Vec<&str> = line.split(',').collect();
+                if values.len() != keys.len() {
+                    return Err(format!(
+                        "line {}: {} fields, the header has {}",
+                        n + 1,
+                        values.len(),
+                        keys.len()
+                    ));
+                }
+                Ok(keys
+                    .iter()
+                    .cloned()
+                    .zip(values.iter().map(|v| v.trim().to_string()))
+                    .collect())
+            })
+            .collect()
+    })
 }
 
 /// `reference.npy`, `reference.npz` or `reference.png` in `from`, relative.

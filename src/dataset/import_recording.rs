@@ -360,7 +360,7 @@ fn csv_poses(
         path: path.to_path_buf(),
         message,
     };
-    let rows = parse_csv(&text).map_err(bad)?;
+    let rows = parse_csv(&text).map_err(|e| bad(e.into()))?;
     let mut out = vec![None; stamps_ns.len()];
     // Frames by time, for rows that name a stamp.
     let mut order: Vec<usize> = (0..stamps_ns.len()).collect();

@@ -87,31 +87,33 @@ impl ArrayData {
 }
 
 /// Encode arrays as uncompressed `.npz` bytes (members `<name>.npy` in the given order, fixed 1980-01-01 timestamp).
-pub fn encode(arrays: &[ArrayData]) -> Result<Vec<u8>, String> {
-    let mut zip = ZipWriter::new(Cursor::new(Vec::new()));
-    let options = SimpleFileOptions::default()
-        .compression_method(CompressionMethod::Stored)
-        .last_modified_time(DateTime::default())
-        .unix_permissions(0o644)
-        .large_file(false);
-    for a in arrays {
-        let count: usize = a.shape.iter().product();
-        if count * a.dtype.size() != a.bytes.len() {
-            return Err(format!(
-                "array '{}': {} bytes do not match shape {:?} of {}",
-                a.name,
-                a.bytes.len(),
-                a.shape,
-                a.dtype.descr()
-            ));
+pub fn encode(arrays: &[ArrayData]) -> Result<Vec<u8>, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("npz", || {
+        let mut zip = ZipWriter::new(Cursor::new(Vec::new()));
+        let options = SimpleFileOptions::default()
+            .compression_method(CompressionMethod::Stored)
+            .last_modified_time(DateTime::default())
+            .unix_permissions(0o644)
+            .large_file(false);
+        for a in arrays {
+            let count: usize = a.shape.iter().product();
+            if count * a.dtype.size() != a.bytes.len() {
+                return Err(format!(
+                    "array '{}': {} bytes do not match shape {:?} of {}",
+                    a.name,
+                    a.bytes.len(),
+                    a.shape,
+                    a.dtype.descr()
+                ));
+            }
+            zip.start_file(format!("{}.npy", a.name), options)
+                .map_err(|e| e.to_string())?;
+            zip.write_all(&crate::io::npy::header(a.dtype.descr(), &a.shape))
+                .map_err(|e| e.to_string())?;
+            zip.write_all(&a.bytes).map_err(|e| e.to_string())?;
         }
-        zip.start_file(format!("{}.npy", a.name), options)
-            .map_err(|e| e.to_string())?;
-        zip.write_all(&crate::io::npy::header(a.dtype.descr(), &a.shape))
-            .map_err(|e| e.to_string())?;
-        zip.write_all(&a.bytes).map_err(|e| e.to_string())?;
-    }
-    Ok(zip.finish().map_err(|e| e.to_string())?.into_inner())
+        Ok(zip.finish().map_err(|e| e.to_string())?.into_inner())
+    })
 }
 
 /// Where one stored `.npy` member's data lies in the shard file.
@@ -217,40 +219,42 @@ fn read_npy_header<R: Read + Seek>(
 }
 
 /// `(descr, shape)` from a numpy header dict; Fortran order is rejected.
-pub fn parse_header_dict(text: &str) -> Result<(String, Vec<usize>), String> {
-    let value = |key: &str| -> Option<&str> {
-        let pos = text.find(&format!("'{key}':"))? + key.len() + 3;
-        let rest = text[pos..].trim_start();
-        let mut depth = 0i32;
-        for (i, c) in rest.char_indices() {
-            match c {
-                '(' => depth += 1,
-                ')' => depth -= 1,
-                ',' | '}' if depth == 0 => return Some(rest[..i].trim()),
-                _ => {}
+pub fn parse_header_dict(text: &str) -> Result<(String, Vec<usize>), crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("npy header", || {
+        let value = |key: &str| -> Option<&str> {
+            let pos = text.find(&format!("'{key}':"))? + key.len() + 3;
+            let rest = text[pos..].trim_start();
+            let mut depth = 0i32;
+            for (i, c) in rest.char_indices() {
+                match c {
+                    '(' => depth += 1,
+                    ')' => depth -= 1,
+                    ',' | '}' if depth == 0 => return Some(rest[..i].trim()),
+                    _ => {}
+                }
             }
+            None
+        };
+        let descr = value("descr")
+            .ok_or("header has no 'descr'")?
+            .trim_matches(|c| c == '\'' || c == '"')
+            .to_string();
+        if value("fortran_order").is_some_and(|v| v.starts_with("True")) {
+            return Err("Fortran-order arrays are not supported".into());
         }
-        None
-    };
-    let descr = value("descr")
-        .ok_or("header has no 'descr'")?
-        .trim_matches(|c| c == '\'' || c == '"')
-        .to_string();
-    if value("fortran_order").is_some_and(|v| v.starts_with("True")) {
-        return Err("Fortran-order arrays are not supported".into());
-    }
-    let shape = value("shape")
-        .ok_or("header has no 'shape'")?
-        .trim_matches(|c| c == '(' || c == ')')
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| {
-            s.parse::<usize>()
-                .map_err(|_| format!("bad shape entry '{s}'"))
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    Ok((descr, shape))
+        let shape = value("shape")
+            .ok_or("header has no 'shape'")?
+            .trim_matches(|c| c == '(' || c == ')')
+            .split(',')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .map(|s| {
+                s.parse::<usize>()
+                    .map_err(|_| format!("bad shape entry '{s}'"))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok((descr, shape))
+    })
 }
 
 /// Read `len` bytes at `offset` of `path`'s open file.

@@ -112,75 +112,81 @@ pub fn shard_file(split: SplitName, chunk: usize) -> String {
 }
 
 /// Encode records (all of one resolution) as shard bytes.
-pub fn encode(records: &[&Record], width: usize, height: usize) -> Result<Vec<u8>, String> {
-    let n = records.len();
-    let mut arrays: Vec<ArrayData> = IMAGE_ARRAYS
-        .iter()
-        .map(|&name| {
-            ArrayData::f32(
-                name,
-                vec![n, height, width],
-                records
-                    .iter()
-                    .flat_map(|r| r.image(name).data.iter().copied()),
-            )
-        })
-        .collect();
-    if let Some(r) = records.iter().find(|r| {
-        IMAGE_ARRAYS
+pub fn encode(
+    records: &[&Record],
+    width: usize,
+    height: usize,
+) -> Result<Vec<u8>, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("dataset shard", || {
+        let n = records.len();
+        let mut arrays: Vec<ArrayData> = IMAGE_ARRAYS
             .iter()
-            .any(|a| (r.image(a).width, r.image(a).height) != (width, height))
-    }) {
-        return Err(format!("pair {} is not {width}x{height}", r.index));
-    }
-    arrays.push(ArrayData::u64(
-        "index",
-        vec![n],
-        records.iter().map(|r| r.index as u64),
-    ));
-    arrays.push(ArrayData::u64(
-        "seed",
-        vec![n],
-        records.iter().map(|r| r.seed),
-    ));
-    arrays.push(ArrayData::i32(
-        "object",
-        vec![n],
-        records.iter().map(|r| r.object as i32),
-    ));
-    arrays.push(ArrayData::f64(
-        "pose",
-        vec![n, 3],
-        records
-            .iter()
-            .flat_map(|r| [r.pose.x, r.pose.y, r.pose.theta]),
-    ));
-    arrays.push(ArrayData::f64(
-        "press",
-        vec![n],
-        records.iter().map(|r| r.press),
-    ));
-    arrays.push(ArrayData::f64(
-        "sensor",
-        vec![n, 6],
-        records.iter().flat_map(|r| {
-            let p = r.sensor.position;
-            [
-                p[0],
-                p[1],
-                p[2],
-                r.sensor.yaw,
-                r.sensor.tilt[0],
-                r.sensor.tilt[1],
-            ]
-        }),
-    ));
-    arrays.push(ArrayData::i32(
-        "contact_pixels",
-        vec![n],
-        records.iter().map(|r| r.contact_pixels as i32),
-    ));
-    npz::encode(&arrays)
+            .map(|&name| {
+                ArrayData::f32(
+                    name,
+                    vec![n, height, width],
+                    records
+                        .iter()
+                        .flat_map(|r| r.image(name).data.iter().copied()),
+                )
+            })
+            .collect();
+        if let Some(r) = records.iter().find(|r| {
+            IMAGE_ARRAYS
+                .iter()
+                .any(|a| (r.image(a).width, r.image(a).height) != (width, height))
+        }) {
+            return Err(format!("pair {} is not {width}x{height}", r.index));
+        }
+        arrays.push(ArrayData::u64(
+            "index",
+            vec![n],
+            records.iter().map(|r| r.index as u64),
+        ));
+        arrays.push(ArrayData::u64(
+            "seed",
+            vec![n],
+            records.iter().map(|r| r.seed),
+        ));
+        arrays.push(ArrayData::i32(
+            "object",
+            vec![n],
+            records.iter().map(|r| r.object as i32),
+        ));
+        arrays.push(ArrayData::f64(
+            "pose",
+            vec![n, 3],
+            records
+                .iter()
+                .flat_map(|r| [r.pose.x, r.pose.y, r.pose.theta]),
+        ));
+        arrays.push(ArrayData::f64(
+            "press",
+            vec![n],
+            records.iter().map(|r| r.press),
+        ));
+        arrays.push(ArrayData::f64(
+            "sensor",
+            vec![n, 6],
+            records.iter().flat_map(|r| {
+                let p = r.sensor.position;
+                [
+                    p[0],
+                    p[1],
+                    p[2],
+                    r.sensor.yaw,
+                    r.sensor.tilt[0],
+                    r.sensor.tilt[1],
+                ]
+            }),
+        ));
+        arrays.push(ArrayData::i32(
+            "contact_pixels",
+            vec![n],
+            records.iter().map(|r| r.contact_pixels as i32),
+        ));
+        npz::encode(&arrays).map_err(String::from)
+    })
 }
 
 /// Lower-case hex sha256 of bytes.
@@ -243,9 +249,9 @@ pub fn write(
 ) -> Result<ShardEntry, DatasetError> {
     let file = shard_file(split, chunk);
     let path = dir.join(&file);
-    let bytes = encode(records, width, height).map_err(|message| DatasetError::Npz {
+    let bytes = encode(records, width, height).map_err(|e| DatasetError::Npz {
         path: path.clone(),
-        message,
+        message: e.into(),
     })?;
     let sha256 = sha256_hex(&bytes);
     crate::io::write_atomic(&path, &bytes).map_err(|e| DatasetError::io(&path, e))?;

@@ -23,22 +23,27 @@ pub fn read(path: &Path) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), MeshError> {
         source,
     })?;
     let dir = path.parent().unwrap_or(Path::new("."));
-    decode(&bytes, Some(dir)).map_err(|message| MeshError::Parse {
+    decode(&bytes, Some(dir)).map_err(|e| MeshError::Parse {
         path: path.to_path_buf(),
         format: "glTF",
-        message,
+        message: e.into(),
     })
 }
 
 /// Decode glTF or GLB bytes; external buffers are looked up in `dir` (refused when `None`).
-pub fn decode(bytes: &[u8], dir: Option<&Path>) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
-    // gltf-json 1.4.1's validation indexes some references before checking them (a POSITION accessor index out of
-    // range panics; found by tests/fuzz_loaders.rs): a panic inside the crate becomes an error naming the file.
-    std::panic::catch_unwind(|| decode_unguarded(bytes, dir)).unwrap_or_else(|_| {
-        Err(
+pub fn decode(
+    bytes: &[u8],
+    dir: Option<&Path>,
+) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("glTF", || {
+        // gltf-json 1.4.1's validation indexes some references before checking them (a POSITION accessor index out of
+        // range panics; found by tests/fuzz_loaders.rs): a panic inside the crate becomes an error naming the file.
+        std::panic::catch_unwind(|| decode_unguarded(bytes, dir)).unwrap_or_else(|_| {
+            Err(
             "the file's JSON refers to objects it does not define (the glTF library stopped on it)"
                 .into(),
         )
+        })
     })
 }
 
@@ -283,7 +288,8 @@ mod tests {
         let v1 = br#"{"asset":{"version":"1.0"},"scene":"defaultScene","scenes":{"defaultScene":{"nodes":[]}}}"#;
         let err = decode(v1, None).unwrap_err();
         assert!(
-            err.starts_with("glTF 1.0 file; only glTF 2.0 is read"),
+            err.message
+                .starts_with("glTF 1.0 file; only glTF 2.0 is read"),
             "{err}"
         );
         let quantised = triangle_gltf(&triangle_buffer(), 42).replacen(
@@ -292,7 +298,7 @@ mod tests {
             1,
         );
         let err = decode(quantised.as_bytes(), None).unwrap_err();
-        assert!(err.contains("gltfpack -noq"), "{err}");
+        assert!(err.message.contains("gltfpack -noq"), "{err}");
     }
 
     #[test]
@@ -317,7 +323,8 @@ mod tests {
         );
         let err = decode(draco.as_bytes(), None).unwrap_err();
         assert!(
-            err.contains("requires the glTF extension KHR_draco_mesh_compression"),
+            err.message
+                .contains("requires the glTF extension KHR_draco_mesh_compression"),
             "{err}"
         );
         // Used but not required: read as usual.

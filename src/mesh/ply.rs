@@ -19,78 +19,80 @@ pub fn read(path: &Path) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), MeshError> {
         path: path.to_path_buf(),
         source,
     })?;
-    decode(&bytes).map_err(|message| MeshError::Parse {
+    decode(&bytes).map_err(|e| MeshError::Parse {
         path: path.to_path_buf(),
         format: "PLY",
-        message,
+        message: e.into(),
     })
 }
 
 /// Decode PLY bytes.
-pub fn decode(bytes: &[u8]) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
-    let parser = Parser::<DefaultElement>::new();
-    let mut reader = bytes;
-    // The parser's error is a multi-line dump (the input line, a parser state); its first line says the problem.
-    let ply = parser.read_ply(&mut reader).map_err(|e| {
-        let text = e.to_string();
-        text.lines()
-            .map(str::trim)
-            .find(|l| !l.is_empty())
-            .unwrap_or("not a PLY file")
-            .to_string()
-    })?;
-    let vertex_elements = ply
-        .payload
-        .get("vertex")
-        .ok_or("no 'vertex' element in the header")?;
-    let mut vertices = Vec::with_capacity(vertex_elements.len());
-    for (i, v) in vertex_elements.iter().enumerate() {
-        let coord = |name: &str| {
-            v.get(name)
-                .and_then(scalar)
-                .ok_or_else(|| format!("vertex {i} has no numeric '{name}' property"))
-        };
-        vertices.push(Vec3::new(
-            coord("x")? as f32,
-            coord("y")? as f32,
-            coord("z")? as f32,
-        ));
-    }
-    let faces = ply.payload.get("face").map(Vec::as_slice).unwrap_or(&[]);
-    if faces.is_empty() {
-        return Err(format!(
-            "{} vertices but no faces: a point cloud, not a surface mesh",
-            vertices.len()
-        ));
-    }
-    let mut triangles = Vec::with_capacity(faces.len());
-    for (f, face) in faces.iter().enumerate() {
-        let list = face
-            .get("vertex_indices")
-            .or_else(|| face.get("vertex_index"))
-            .ok_or_else(|| format!("face {f} has no 'vertex_indices' list"))?;
-        let indices = index_list(list)
-            .ok_or_else(|| format!("face {f}: 'vertex_indices' is not a list of integers"))?;
-        if indices.len() < 3 {
-            return Err(format!(
-                "face {f} has {} vertices (at least 3 needed)",
-                indices.len()
+pub fn decode(bytes: &[u8]) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("PLY", || {
+        let parser = Parser::<DefaultElement>::new();
+        let mut reader = bytes;
+        // The parser's error is a multi-line dump (the input line, a parser state); its first line says the problem.
+        let ply = parser.read_ply(&mut reader).map_err(|e| {
+            let text = e.to_string();
+            text.lines()
+                .map(str::trim)
+                .find(|l| !l.is_empty())
+                .unwrap_or("not a PLY file")
+                .to_string()
+        })?;
+        let vertex_elements = ply
+            .payload
+            .get("vertex")
+            .ok_or("no 'vertex' element in the header")?;
+        let mut vertices = Vec::with_capacity(vertex_elements.len());
+        for (i, v) in vertex_elements.iter().enumerate() {
+            let coord = |name: &str| {
+                v.get(name)
+                    .and_then(scalar)
+                    .ok_or_else(|| format!("vertex {i} has no numeric '{name}' property"))
+            };
+            vertices.push(Vec3::new(
+                coord("x")? as f32,
+                coord("y")? as f32,
+                coord("z")? as f32,
             ));
         }
-        if let Some(&bad) = indices
-            .iter()
-            .find(|&&i| i < 0 || i >= vertices.len() as i64)
-        {
+        let faces = ply.payload.get("face").map(Vec::as_slice).unwrap_or(&[]);
+        if faces.is_empty() {
             return Err(format!(
-                "face {f} uses vertex {bad}, but the file has {} vertices",
+                "{} vertices but no faces: a point cloud, not a surface mesh",
                 vertices.len()
             ));
         }
-        for k in 1..indices.len() - 1 {
-            triangles.push([indices[0] as u32, indices[k] as u32, indices[k + 1] as u32]);
+        let mut triangles = Vec::with_capacity(faces.len());
+        for (f, face) in faces.iter().enumerate() {
+            let list = face
+                .get("vertex_indices")
+                .or_else(|| face.get("vertex_index"))
+                .ok_or_else(|| format!("face {f} has no 'vertex_indices' list"))?;
+            let indices = index_list(list)
+                .ok_or_else(|| format!("face {f}: 'vertex_indices' is not a list of integers"))?;
+            if indices.len() < 3 {
+                return Err(format!(
+                    "face {f} has {} vertices (at least 3 needed)",
+                    indices.len()
+                ));
+            }
+            if let Some(&bad) = indices
+                .iter()
+                .find(|&&i| i < 0 || i >= vertices.len() as i64)
+            {
+                return Err(format!(
+                    "face {f} uses vertex {bad}, but the file has {} vertices",
+                    vertices.len()
+                ));
+            }
+            for k in 1..indices.len() - 1 {
+                triangles.push([indices[0] as u32, indices[k] as u32, indices[k + 1] as u32]);
+            }
         }
-    }
-    Ok((vertices, triangles))
+        Ok((vertices, triangles))
+    })
 }
 
 /// A scalar property as f64.
@@ -186,9 +188,13 @@ mod tests {
             end_header\n0 0 0\n";
         assert!(decode(cloud.as_bytes())
             .unwrap_err()
+            .message
             .contains("point cloud"));
         let bad = ASCII_QUAD_PYRAMID.replace("3 3 0 4\n", "3 3 0 9\n");
-        assert!(decode(bad.as_bytes()).unwrap_err().contains("vertex 9"));
+        assert!(decode(bad.as_bytes())
+            .unwrap_err()
+            .message
+            .contains("vertex 9"));
         // A header claiming 2^62 vertices is an error, not an allocation.
         let huge = "ply\nformat binary_little_endian 1.0\nelement vertex 4611686018427387904\nproperty float x\n\
             property float y\nproperty float z\nend_header\n";

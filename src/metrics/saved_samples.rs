@@ -63,7 +63,7 @@ pub fn save_samples(dir: &Path, pair: &EvalPair, samples: &[Image]) -> Result<Pa
         ),
         ArrayData::f64("object_pose", vec![3], [pose.x, pose.y, pose.theta]),
     ];
-    let bytes = npz::encode(&arrays).map_err(fail)?;
+    let bytes = npz::encode(&arrays).map_err(|e| fail(e.into()))?;
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent)
             .map_err(|e| fail(format!("cannot create the folder: {e}")))?;

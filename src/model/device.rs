@@ -7,8 +7,10 @@ use candle_core::Device;
 use super::ModelError;
 
 /// Check the syntax of a device name without opening the device.
-pub fn check_device_name(spec: &str) -> Result<(), String> {
-    parse(spec).map(|_| ())
+pub fn check_device_name(spec: &str) -> Result<(), crate::error::InvalidSetting> {
+    parse(spec)
+        .map(|_| ())
+        .map_err(|m| crate::error::InvalidSetting::new("device", m))
 }
 
 enum Spec {

@@ -2,6 +2,7 @@
 //! reverse-diffusion run, with what every front end shows beside them — the per-pixel mean and standard deviation,
 //! the contact probability and the samples' consensus (what the multi-sample pose registers).
 
+use crate::error::InvalidSetting;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
@@ -65,15 +66,16 @@ impl Default for DerenderConfig {
 impl DerenderConfig {
     /// Check the numbers (sessions and command lines may carry anything); `train_steps` is the model's T when known.
     pub fn validate(&self, train_steps: Option<usize>) -> Result<(), PipelineError> {
-        self.sampler
-            .validate(train_steps)
-            .map_err(PipelineError::Settings)?;
-        crate::model::device::check_device_name(&self.device).map_err(PipelineError::Settings)?;
-        self.guidance.validate().map_err(PipelineError::Settings)?;
+        self.sampler.validate(train_steps)?;
+        crate::model::device::check_device_name(&self.device)?;
+        self.guidance.validate()?;
         if !(1..=MAX_SAMPLES).contains(&self.samples) {
-            return Err(PipelineError::Settings(format!(
-                "number of samples must be 1..={MAX_SAMPLES}, got {}",
-                self.samples
+            return Err(PipelineError::Settings(InvalidSetting::new(
+                "samples",
+                format!(
+                    "number of samples must be 1..={MAX_SAMPLES}, got {}",
+                    self.samples
+                ),
             )));
         }
         Ok(())
@@ -135,8 +137,12 @@ pub fn derender(
             e => e.into(),
         })?;
     let seconds = t0.elapsed().as_secs_f64();
-    let (mean, std) = mean_std(&samples)
-        .ok_or_else(|| PipelineError::Settings("the sampler returned no samples".into()))?;
+    let (mean, std) = mean_std(&samples).ok_or_else(|| {
+        PipelineError::Settings(InvalidSetting::new(
+            "samples",
+            "the sampler returned no samples",
+        ))
+    })?;
     Ok(Derendered {
         contact_probability: contact_probability(&samples)?,
         consensus: consensus_depth(&samples, consensus_probability)?,

@@ -75,7 +75,7 @@ pub enum PipelineError {
         h: usize,
     },
     #[error("settings: {0}")]
-    Settings(String),
+    Settings(#[from] crate::error::InvalidSetting),
     /// An object whose size says its units are wrong ([`object::LoadedObject::check_scale`]).
     #[error("{0}")]
     Scale(String),

@@ -194,69 +194,71 @@ impl FrameTrack {
     }
 
     /// Read a row written by [`Self::csv_row`].
-    pub fn from_csv_row(line: &str) -> Result<Self, String> {
-        let cells: Vec<&str> = line.split(',').collect();
-        let mut cells = cells;
-        if cells.len() == CSV_COLUMNS_V1 {
-            // A track of an earlier version: no posterior.
-            cells.extend(["0", "", "", "", "", "", "", ""]);
-        }
-        if cells.len() != CSV_COLUMNS.len() {
-            return Err(format!(
-                "{} columns, a track row has {}",
-                cells.len(),
-                CSV_COLUMNS.len()
-            ));
-        }
-        let num = |k: usize| -> Result<Option<f64>, String> {
-            match cells[k] {
-                "" => Ok(None),
-                c => c
-                    .parse::<f64>()
-                    .map(Some)
-                    .map_err(|_| format!("{} '{c}' is not a number", CSV_COLUMNS[k])),
+    pub fn from_csv_row(line: &str) -> Result<Self, crate::error::InvalidInput> {
+        crate::error::InvalidInput::wrap("track.csv row", || {
+            let cells: Vec<&str> = line.split(',').collect();
+            let mut cells = cells;
+            if cells.len() == CSV_COLUMNS_V1 {
+                // A track of an earlier version: no posterior.
+                cells.extend(["0", "", "", "", "", "", "", ""]);
             }
-        };
-        let int = |k: usize| -> Result<u64, String> {
-            cells[k]
-                .parse::<u64>()
-                .map_err(|_| format!("{} '{}' is not a whole number", CSV_COLUMNS[k], cells[k]))
-        };
-        let pose = |k: usize| -> Result<Option<Se2>, String> {
-            Ok(match (num(k)?, num(k + 1)?, num(k + 2)?) {
-                (Some(x), Some(y), Some(t)) => Some(Se2::new(x, y, t)),
-                _ => None,
-            })
-        };
-        let err = |k: usize| -> Result<Option<(f64, Option<f64>)>, String> {
-            Ok(num(k)?.map(|mm| (mm, num(k + 1).ok().flatten())))
-        };
-        Ok(Self {
-            frame: int(0)? as usize,
-            stamp_ns: int(1)?,
-            contact_px: int(2)? as usize,
-            press_m: num(3)?,
-            samples: int(4)? as usize,
-            registered: int(5)? as usize,
-            estimate: pose(6)?,
-            multi_sample: pose(9)?,
-            baseline: pose(12)?,
-            spread_mm: num(15)?,
-            theta_spread_deg: num(16)?,
-            pose_modes: int(17)? as usize,
-            recorded: pose(18)?,
-            recorded_press_m: num(21)?,
-            estimate_error: err(22)?,
-            multi_sample_error: err(24)?,
-            baseline_error: err(26)?,
-            posterior_modes: int(28)? as usize,
-            estimate_weight: num(29)?,
-            covariance: match [30, 31, 32, 33, 34, 35].map(num) {
-                [Ok(Some(xx)), Ok(Some(xy)), Ok(Some(xt)), Ok(Some(yy)), Ok(Some(yt)), Ok(Some(tt))] => {
-                    Some([[xx, xy, xt], [xy, yy, yt], [xt, yt, tt]])
+            if cells.len() != CSV_COLUMNS.len() {
+                return Err(format!(
+                    "{} columns, a track row has {}",
+                    cells.len(),
+                    CSV_COLUMNS.len()
+                ));
+            }
+            let num = |k: usize| -> Result<Option<f64>, String> {
+                match cells[k] {
+                    "" => Ok(None),
+                    c => c
+                        .parse::<f64>()
+                        .map(Some)
+                        .map_err(|_| format!("{} '{c}' is not a number", CSV_COLUMNS[k])),
                 }
-                _ => None,
-            },
+            };
+            let int = |k: usize| -> Result<u64, String> {
+                cells[k]
+                    .parse::<u64>()
+                    .map_err(|_| format!("{} '{}' is not a whole number", CSV_COLUMNS[k], cells[k]))
+            };
+            let pose = |k: usize| -> Result<Option<Se2>, String> {
+                Ok(match (num(k)?, num(k + 1)?, num(k + 2)?) {
+                    (Some(x), Some(y), Some(t)) => Some(Se2::new(x, y, t)),
+                    _ => None,
+                })
+            };
+            let err = |k: usize| -> Result<Option<(f64, Option<f64>)>, String> {
+                Ok(num(k)?.map(|mm| (mm, num(k + 1).ok().flatten())))
+            };
+            Ok(Self {
+                frame: int(0)? as usize,
+                stamp_ns: int(1)?,
+                contact_px: int(2)? as usize,
+                press_m: num(3)?,
+                samples: int(4)? as usize,
+                registered: int(5)? as usize,
+                estimate: pose(6)?,
+                multi_sample: pose(9)?,
+                baseline: pose(12)?,
+                spread_mm: num(15)?,
+                theta_spread_deg: num(16)?,
+                pose_modes: int(17)? as usize,
+                recorded: pose(18)?,
+                recorded_press_m: num(21)?,
+                estimate_error: err(22)?,
+                multi_sample_error: err(24)?,
+                baseline_error: err(26)?,
+                posterior_modes: int(28)? as usize,
+                estimate_weight: num(29)?,
+                covariance: match [30, 31, 32, 33, 34, 35].map(num) {
+                    [Ok(Some(xx)), Ok(Some(xy)), Ok(Some(xt)), Ok(Some(yy)), Ok(Some(yt)), Ok(Some(tt))] => {
+                        Some([[xx, xy, xt], [xy, yy, yt], [xt, yt, tt]])
+                    }
+                    _ => None,
+                },
+            })
         })
     }
 
@@ -329,9 +331,12 @@ pub fn track_frame(
         recording.imprints.get(frame),
         recording.signatures.get(frame),
     ) else {
-        return Err(PipelineError::Settings(format!(
-            "the recording has {} frames; there is no frame {frame}",
-            recording.len()
+        return Err(PipelineError::Settings(crate::error::InvalidSetting::new(
+            "frame",
+            format!(
+                "the recording has {} frames; there is no frame {frame}",
+                recording.len()
+            ),
         )));
     };
     let mut derender = ctx.derender.clone();
@@ -441,6 +446,7 @@ mod tests {
         assert_eq!(read.estimate, row.estimate);
         assert!(FrameTrack::from_csv_row("1,2,3")
             .unwrap_err()
+            .message
             .contains("3 columns"));
     }
 

@@ -340,30 +340,32 @@ pub fn calibrate_references(
     frames: Vec<Image>,
     given: &SimConfig,
     config: &CalibrateConfig,
-) -> Result<(SensorCalibration, CalibrationImages), String> {
-    if frames.is_empty() {
-        return Err("no reference frames".into());
-    }
-    let mut model = Vec::with_capacity(frames.len());
-    for (i, f) in frames.iter().enumerate() {
-        if (f.width, f.height) != (frames[0].width, frames[0].height) {
-            return Err(format!(
-                "reference {i} is {}x{} but reference 0 is {}x{}",
-                f.width, f.height, frames[0].width, frames[0].height
-            ));
+) -> Result<(SensorCalibration, CalibrationImages), crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("reference frames", || {
+        if frames.is_empty() {
+            return Err("no reference frames".into());
         }
-        model.push(resample::to_model(&given.camera, f)?);
-    }
-    let all: Vec<usize> = (0..frames.len()).collect();
-    calibrate_frames(
-        &frames,
-        &model,
-        all.clone(),
-        &all,
-        frames.len(),
-        given,
-        config,
-    )
+        let mut model = Vec::with_capacity(frames.len());
+        for (i, f) in frames.iter().enumerate() {
+            if (f.width, f.height) != (frames[0].width, frames[0].height) {
+                return Err(format!(
+                    "reference {i} is {}x{} but reference 0 is {}x{}",
+                    f.width, f.height, frames[0].width, frames[0].height
+                ));
+            }
+            model.push(resample::to_model(&given.camera, f)?);
+        }
+        let all: Vec<usize> = (0..frames.len()).collect();
+        calibrate_frames(
+            &frames,
+            &model,
+            all.clone(),
+            &all,
+            frames.len(),
+            given,
+            config,
+        )
+    })
 }
 
 /// The calibration from frames already read (`native` at their own resolution, `model` resampled), `quiet` the

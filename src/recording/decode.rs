@@ -10,12 +10,13 @@ use crate::sensor::Intrinsics;
 const MAX_PIXELS: usize = 4096 * 4096;
 
 /// The depth image of an `Image` message, metres.
-pub fn image_depth(m: &ImageMsg) -> Result<Image, String> {
-    let (w, h) = (m.width as usize, m.height as usize);
-    if w == 0 || h == 0 || w.saturating_mul(h) > MAX_PIXELS {
-        return Err(format!("image is {w}x{h}"));
-    }
-    let (bytes_per_px, scale, float) = match m.encoding.as_str() {
+pub fn image_depth(m: &ImageMsg) -> Result<Image, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("depth image message", || {
+        let (w, h) = (m.width as usize, m.height as usize);
+        if w == 0 || h == 0 || w.saturating_mul(h) > MAX_PIXELS {
+            return Err(format!("image is {w}x{h}"));
+        }
+        let (bytes_per_px, scale, float) = match m.encoding.as_str() {
         "16UC1" | "mono16" => (2, 0.001f32, false),
         "32FC1" => (4, 1.0f32, true),
         other => {
@@ -24,135 +25,139 @@ pub fn image_depth(m: &ImageMsg) -> Result<Image, String> {
             ))
         }
     };
-    let step = m.step as usize;
-    if step < w * bytes_per_px {
-        return Err(format!(
-            "row step {step} bytes is shorter than {w} pixels of {bytes_per_px} bytes"
-        ));
-    }
-    let needed = step * (h - 1) + w * bytes_per_px;
-    if m.data.len() < needed {
-        return Err(format!(
-            "image data is {} bytes; {w}x{h} with step {step} needs {needed}",
-            m.data.len()
-        ));
-    }
-    let mut data = Vec::with_capacity(w * h);
-    for v in 0..h {
-        let row = &m.data[v * step..v * step + w * bytes_per_px];
-        for px in row.chunks_exact(bytes_per_px) {
-            let d = if float {
-                let b = [px[0], px[1], px[2], px[3]];
-                if m.is_bigendian {
-                    f32::from_be_bytes(b)
-                } else {
-                    f32::from_le_bytes(b)
-                }
-            } else {
-                let b = [px[0], px[1]];
-                let raw = if m.is_bigendian {
-                    u16::from_be_bytes(b)
-                } else {
-                    u16::from_le_bytes(b)
-                };
-                raw as f32
-            } * scale;
-            data.push(if d.is_finite() && d > 0.0 { d } else { 0.0 });
+        let step = m.step as usize;
+        if step < w * bytes_per_px {
+            return Err(format!(
+                "row step {step} bytes is shorter than {w} pixels of {bytes_per_px} bytes"
+            ));
         }
-    }
-    Image::from_vec(w, h, data).ok_or_else(|| "image size".to_string())
+        let needed = step * (h - 1) + w * bytes_per_px;
+        if m.data.len() < needed {
+            return Err(format!(
+                "image data is {} bytes; {w}x{h} with step {step} needs {needed}",
+                m.data.len()
+            ));
+        }
+        let mut data = Vec::with_capacity(w * h);
+        for v in 0..h {
+            let row = &m.data[v * step..v * step + w * bytes_per_px];
+            for px in row.chunks_exact(bytes_per_px) {
+                let d = if float {
+                    let b = [px[0], px[1], px[2], px[3]];
+                    if m.is_bigendian {
+                        f32::from_be_bytes(b)
+                    } else {
+                        f32::from_le_bytes(b)
+                    }
+                } else {
+                    let b = [px[0], px[1]];
+                    let raw = if m.is_bigendian {
+                        u16::from_be_bytes(b)
+                    } else {
+                        u16::from_le_bytes(b)
+                    };
+                    raw as f32
+                } * scale;
+                data.push(if d.is_finite() && d > 0.0 { d } else { 0.0 });
+            }
+        }
+        Image::from_vec(w, h, data).ok_or_else(|| "image size".to_string())
+    })
 }
 
 /// The depth image of a point cloud seen by a camera with intrinsics `k` (points in its optical frame); the nearest
 /// point wins where several fall into one pixel.
-pub fn cloud_depth(m: &PointCloudMsg, k: &Intrinsics) -> Result<Image, String> {
-    let field = |name: &str| {
-        m.fields
-            .iter()
-            .find(|f| f.name == name)
-            .ok_or_else(|| format!("point cloud has no '{name}' field"))
-    };
-    let (fx, fy, fz) = (field("x")?, field("y")?, field("z")?);
-    let size = |datatype: u8| match datatype {
-        7 => Ok(4usize),
-        8 => Ok(8usize),
-        t => Err(format!(
-            "point field datatype {t} is not a float (7 float32, 8 float64)"
-        )),
-    };
-    let step = m.point_step as usize;
-    let n = (m.width as usize).saturating_mul(m.height as usize);
-    for f in [fx, fy, fz] {
-        if f.offset as usize + size(f.datatype)? > step {
+pub fn cloud_depth(m: &PointCloudMsg, k: &Intrinsics) -> Result<Image, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("point cloud message", || {
+        let field = |name: &str| {
+            m.fields
+                .iter()
+                .find(|f| f.name == name)
+                .ok_or_else(|| format!("point cloud has no '{name}' field"))
+        };
+        let (fx, fy, fz) = (field("x")?, field("y")?, field("z")?);
+        let size = |datatype: u8| match datatype {
+            7 => Ok(4usize),
+            8 => Ok(8usize),
+            t => Err(format!(
+                "point field datatype {t} is not a float (7 float32, 8 float64)"
+            )),
+        };
+        let step = m.point_step as usize;
+        let n = (m.width as usize).saturating_mul(m.height as usize);
+        for f in [fx, fy, fz] {
+            if f.offset as usize + size(f.datatype)? > step {
+                return Err(format!(
+                    "field '{}' at offset {} does not fit in a {step}-byte point",
+                    f.name, f.offset
+                ));
+            }
+        }
+        let row_step = (m.row_step as usize).max(step * m.width as usize);
+        let rows_needed = (m.height as usize)
+            .saturating_sub(1)
+            .saturating_mul(row_step);
+        if n > 0 && m.data.len() < rows_needed.saturating_add(step.saturating_mul(m.width as usize))
+        {
             return Err(format!(
-                "field '{}' at offset {} does not fit in a {step}-byte point",
-                f.name, f.offset
+                "point data is {} bytes, too short for {}x{} points of {step} bytes",
+                m.data.len(),
+                m.width,
+                m.height
             ));
         }
-    }
-    let row_step = (m.row_step as usize).max(step * m.width as usize);
-    let rows_needed = (m.height as usize)
-        .saturating_sub(1)
-        .saturating_mul(row_step);
-    if n > 0 && m.data.len() < rows_needed.saturating_add(step.saturating_mul(m.width as usize)) {
-        return Err(format!(
-            "point data is {} bytes, too short for {}x{} points of {step} bytes",
-            m.data.len(),
-            m.width,
-            m.height
-        ));
-    }
-    let read = |p: &[u8], f: &super::ros::PointField| -> f64 {
-        let o = f.offset as usize;
-        if f.datatype == 8 {
-            let b: [u8; 8] = [
-                p[o],
-                p[o + 1],
-                p[o + 2],
-                p[o + 3],
-                p[o + 4],
-                p[o + 5],
-                p[o + 6],
-                p[o + 7],
-            ];
-            if m.is_bigendian {
-                f64::from_be_bytes(b)
+        let read = |p: &[u8], f: &super::ros::PointField| -> f64 {
+            let o = f.offset as usize;
+            if f.datatype == 8 {
+                let b: [u8; 8] = [
+                    p[o],
+                    p[o + 1],
+                    p[o + 2],
+                    p[o + 3],
+                    p[o + 4],
+                    p[o + 5],
+                    p[o + 6],
+                    p[o + 7],
+                ];
+                if m.is_bigendian {
+                    f64::from_be_bytes(b)
+                } else {
+                    f64::from_le_bytes(b)
+                }
             } else {
-                f64::from_le_bytes(b)
+                let b = [p[o], p[o + 1], p[o + 2], p[o + 3]];
+                (if m.is_bigendian {
+                    f32::from_be_bytes(b)
+                } else {
+                    f32::from_le_bytes(b)
+                }) as f64
             }
-        } else {
-            let b = [p[o], p[o + 1], p[o + 2], p[o + 3]];
-            (if m.is_bigendian {
-                f32::from_be_bytes(b)
-            } else {
-                f32::from_le_bytes(b)
-            }) as f64
-        }
-    };
-    let mut image = Image::filled(k.width, k.height, 0.0);
-    for v in 0..m.height as usize {
-        for u in 0..m.width as usize {
-            let start = v * row_step + u * step;
-            let p = &m.data[start..start + step];
-            let p_cam = glam::DVec3::new(read(p, fx), read(p, fy), read(p, fz));
-            if !p_cam.is_finite() {
-                continue;
-            }
-            let Some((pu, pv, z)) = k.project(p_cam) else {
-                continue;
-            };
-            let (iu, iv) = (pu.round(), pv.round());
-            if iu < 0.0 || iv < 0.0 || iu >= k.width as f64 || iv >= k.height as f64 {
-                continue;
-            }
-            let px = image.get_mut(iu as usize, iv as usize);
-            let z = z as f32;
-            if *px == 0.0 || z < *px {
-                *px = z;
+        };
+        let mut image = Image::filled(k.width, k.height, 0.0);
+        for v in 0..m.height as usize {
+            for u in 0..m.width as usize {
+                let start = v * row_step + u * step;
+                let p = &m.data[start..start + step];
+                let p_cam = glam::DVec3::new(read(p, fx), read(p, fy), read(p, fz));
+                if !p_cam.is_finite() {
+                    continue;
+                }
+                let Some((pu, pv, z)) = k.project(p_cam) else {
+                    continue;
+                };
+                let (iu, iv) = (pu.round(), pv.round());
+                if iu < 0.0 || iv < 0.0 || iu >= k.width as f64 || iv >= k.height as f64 {
+                    continue;
+                }
+                let px = image.get_mut(iu as usize, iv as usize);
+                let z = z as f32;
+                if *px == 0.0 || z < *px {
+                    *px = z;
+                }
             }
         }
-    }
-    Ok(image)
+        Ok(image)
+    })
 }
 
 #[cfg(test)]
@@ -196,7 +201,7 @@ mod tests {
             encoding: "rgb8".into(),
             ..be.clone()
         };
-        assert!(image_depth(&rgb).unwrap_err().contains("rgb8"));
+        assert!(image_depth(&rgb).unwrap_err().message.contains("rgb8"));
         let short = ImageMsg {
             data: vec![0; 7],
             ..be

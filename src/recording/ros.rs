@@ -210,105 +210,125 @@ impl<'a> Reader<'a> {
 }
 
 /// Decode a `sensor_msgs/Image`.
-pub fn decode_image(buf: &[u8], encoding: Encoding) -> Result<ImageMsg, String> {
-    let mut r = Reader::new(buf, encoding)?;
-    let stamp_ns = r.header()?;
-    let height = r.u32("height")?;
-    let width = r.u32("width")?;
-    let enc = r.string("encoding")?;
-    let is_bigendian = r.u8("is_bigendian")? != 0;
-    let step = r.u32("step")?;
-    let data = r.bytes("data")?;
-    Ok(ImageMsg {
-        stamp_ns,
-        height,
-        width,
-        encoding: enc,
-        is_bigendian,
-        step,
-        data,
+pub fn decode_image(
+    buf: &[u8],
+    encoding: Encoding,
+) -> Result<ImageMsg, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("sensor_msgs/Image", || {
+        let mut r = Reader::new(buf, encoding)?;
+        let stamp_ns = r.header()?;
+        let height = r.u32("height")?;
+        let width = r.u32("width")?;
+        let enc = r.string("encoding")?;
+        let is_bigendian = r.u8("is_bigendian")? != 0;
+        let step = r.u32("step")?;
+        let data = r.bytes("data")?;
+        Ok(ImageMsg {
+            stamp_ns,
+            height,
+            width,
+            encoding: enc,
+            is_bigendian,
+            step,
+            data,
+        })
     })
 }
 
 /// Decode a `sensor_msgs/PointCloud2`.
-pub fn decode_point_cloud(buf: &[u8], encoding: Encoding) -> Result<PointCloudMsg, String> {
-    let mut r = Reader::new(buf, encoding)?;
-    let stamp_ns = r.header()?;
-    let height = r.u32("height")?;
-    let width = r.u32("width")?;
-    let n = r.u32("fields")? as usize;
-    // A field takes at least 13 bytes: refuse counts the buffer cannot hold before allocating.
-    if n > buf.len() / 13 + 1 {
-        return Err(format!("claims {n} point fields in {} bytes", buf.len()));
-    }
-    let mut fields = Vec::with_capacity(n);
-    for _ in 0..n {
-        fields.push(PointField {
-            name: r.string("field name")?,
-            offset: r.u32("field offset")?,
-            datatype: r.u8("field datatype")?,
-            count: r.u32("field count")?,
-        });
-    }
-    let is_bigendian = r.u8("is_bigendian")? != 0;
-    let point_step = r.u32("point_step")?;
-    let row_step = r.u32("row_step")?;
-    let data = r.bytes("data")?;
-    Ok(PointCloudMsg {
-        stamp_ns,
-        height,
-        width,
-        fields,
-        is_bigendian,
-        point_step,
-        row_step,
-        data,
+pub fn decode_point_cloud(
+    buf: &[u8],
+    encoding: Encoding,
+) -> Result<PointCloudMsg, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("sensor_msgs/PointCloud2", || {
+        let mut r = Reader::new(buf, encoding)?;
+        let stamp_ns = r.header()?;
+        let height = r.u32("height")?;
+        let width = r.u32("width")?;
+        let n = r.u32("fields")? as usize;
+        // A field takes at least 13 bytes: refuse counts the buffer cannot hold before allocating.
+        if n > buf.len() / 13 + 1 {
+            return Err(format!("claims {n} point fields in {} bytes", buf.len()));
+        }
+        let mut fields = Vec::with_capacity(n);
+        for _ in 0..n {
+            fields.push(PointField {
+                name: r.string("field name")?,
+                offset: r.u32("field offset")?,
+                datatype: r.u8("field datatype")?,
+                count: r.u32("field count")?,
+            });
+        }
+        let is_bigendian = r.u8("is_bigendian")? != 0;
+        let point_step = r.u32("point_step")?;
+        let row_step = r.u32("row_step")?;
+        let data = r.bytes("data")?;
+        Ok(PointCloudMsg {
+            stamp_ns,
+            height,
+            width,
+            fields,
+            is_bigendian,
+            point_step,
+            row_step,
+            data,
+        })
     })
 }
 
 /// Decode a `geometry_msgs/PoseStamped` into its SE(2) part (x, y and the yaw about z of its orientation).
-pub fn decode_pose_stamped(buf: &[u8], encoding: Encoding) -> Result<Pose2dMsg, String> {
-    let mut r = Reader::new(buf, encoding)?;
-    let stamp_ns = r.header()?;
-    let x = r.f64("position.x")?;
-    let y = r.f64("position.y")?;
-    r.f64("position.z")?;
-    let (qx, qy, qz, qw) = (
-        r.f64("orientation.x")?,
-        r.f64("orientation.y")?,
-        r.f64("orientation.z")?,
-        r.f64("orientation.w")?,
-    );
-    // A zero or far-from-unit quaternion is no rotation (an uninitialised message); its "yaw" would be arbitrary.
-    let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
-    if !(0.9..=1.1).contains(&norm) {
-        return Err(format!(
-            "orientation ({qx}, {qy}, {qz}, {qw}) is not a unit quaternion (norm {norm:.3})"
-        ));
-    }
-    // Normalised only when it is not unit already (a division by 1 ± ulp would move an exact yaw by an ulp).
-    let (qx, qy, qz, qw) = if (norm - 1.0).abs() > 1e-9 {
-        (qx / norm, qy / norm, qz / norm, qw / norm)
-    } else {
-        (qx, qy, qz, qw)
-    };
-    let theta = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
-    finite_pose(Pose2dMsg {
-        stamp_ns: Some(stamp_ns),
-        x,
-        y,
-        theta,
+pub fn decode_pose_stamped(
+    buf: &[u8],
+    encoding: Encoding,
+) -> Result<Pose2dMsg, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("geometry_msgs/PoseStamped", || {
+        let mut r = Reader::new(buf, encoding)?;
+        let stamp_ns = r.header()?;
+        let x = r.f64("position.x")?;
+        let y = r.f64("position.y")?;
+        r.f64("position.z")?;
+        let (qx, qy, qz, qw) = (
+            r.f64("orientation.x")?,
+            r.f64("orientation.y")?,
+            r.f64("orientation.z")?,
+            r.f64("orientation.w")?,
+        );
+        // A zero or far-from-unit quaternion is no rotation (an uninitialised message); its "yaw" would be arbitrary.
+        let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+        if !(0.9..=1.1).contains(&norm) {
+            return Err(format!(
+                "orientation ({qx}, {qy}, {qz}, {qw}) is not a unit quaternion (norm {norm:.3})"
+            ));
+        }
+        // Normalised only when it is not unit already (a division by 1 ± ulp would move an exact yaw by an ulp).
+        let (qx, qy, qz, qw) = if (norm - 1.0).abs() > 1e-9 {
+            (qx / norm, qy / norm, qz / norm, qw / norm)
+        } else {
+            (qx, qy, qz, qw)
+        };
+        let theta = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
+        finite_pose(Pose2dMsg {
+            stamp_ns: Some(stamp_ns),
+            x,
+            y,
+            theta,
+        })
     })
 }
 
 /// Decode a `geometry_msgs/Pose2D`.
-pub fn decode_pose2d(buf: &[u8], encoding: Encoding) -> Result<Pose2dMsg, String> {
-    let mut r = Reader::new(buf, encoding)?;
-    finite_pose(Pose2dMsg {
-        stamp_ns: None,
-        x: r.f64("x")?,
-        y: r.f64("y")?,
-        theta: r.f64("theta")?,
+pub fn decode_pose2d(
+    buf: &[u8],
+    encoding: Encoding,
+) -> Result<Pose2dMsg, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("geometry_msgs/Pose2D", || {
+        let mut r = Reader::new(buf, encoding)?;
+        finite_pose(Pose2dMsg {
+            stamp_ns: None,
+            x: r.f64("x")?,
+            y: r.f64("y")?,
+            theta: r.f64("theta")?,
+        })
     })
 }
 
@@ -560,7 +580,7 @@ mod tests {
         let n = zero.len();
         zero[n - 32..].fill(0);
         let e = decode_pose_stamped(&zero, Encoding::Cdr).unwrap_err();
-        assert!(e.contains("not a unit quaternion"), "{e}");
+        assert!(e.message.contains("not a unit quaternion"), "{e}");
         let pc = PointCloudMsg {
             stamp_ns: 3,
             height: 1,

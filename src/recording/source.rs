@@ -341,11 +341,11 @@ impl Recording {
                     .messages
                     .get(index)
                     .ok_or_else(|| self.no_frame(stream, index))?;
-                let at = |message: String| RecordingError::Message {
+                let at = |message: crate::error::InvalidInput| RecordingError::Message {
                     path: self.path.clone(),
                     topic: stream.name.clone(),
                     index,
-                    message,
+                    message: message.into(),
                 };
                 let (stamp, depth) = match topic.kind {
                     StreamKind::DepthImage => {
@@ -359,7 +359,12 @@ impl Recording {
                             super::decode::cloud_depth(&m, native).map_err(at)?,
                         )
                     }
-                    _ => return Err(at(format!("{} is not a depth stream", topic.schema))),
+                    _ => {
+                        return Err(at(crate::error::InvalidInput::new(
+                            "depth stream",
+                            format!("{} is not a depth stream", topic.schema),
+                        )))
+                    }
                 };
                 Ok(DepthFrame {
                     stamp_ns: if stamp == 0 { *log_time } else { stamp },
@@ -388,11 +393,11 @@ impl Recording {
                 } else {
                     ros::decode_pose2d(bytes, topic.encoding)
                 }
-                .map_err(|message| RecordingError::Message {
+                .map_err(|e| RecordingError::Message {
                     path: self.path.clone(),
                     topic: stream.name.clone(),
                     index,
-                    message,
+                    message: e.into(),
                 })?;
                 let stamp = p.stamp_ns.filter(|&s| s != 0).unwrap_or(*log_time);
                 Ok((stamp, [p.x, p.y, p.theta]))

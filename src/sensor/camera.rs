@@ -4,6 +4,7 @@
 //! Convention (OpenCV): pixel `(u, v)` (column, row) has its centre at image coordinates `(u, v)`, and the ray through
 //! it is `((u - cx) / fx, (v - cy) / fy, 1)` in the camera frame, so a hit at ray parameter `t` has z-depth `t`.
 
+use crate::error::InvalidSetting;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
@@ -131,26 +132,36 @@ impl CameraConfig {
     }
 
     /// Check the configuration, with a message saying what to change.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidSetting> {
         let (w, h) = self.resolution;
         if w == 0 || h == 0 || w % 8 != 0 || h % 8 != 0 {
-            return Err(format!(
-                "resolution {w}x{h} must be a positive multiple of 8 in both directions"
+            return Err(InvalidSetting::new(
+                "camera.resolution",
+                format!("resolution {w}x{h} must be a positive multiple of 8 in both directions"),
             ));
         }
         if w > 4096 || h > 4096 {
-            return Err(format!("resolution {w}x{h} is larger than 4096 pixels"));
+            return Err(InvalidSetting::new(
+                "camera.resolution",
+                format!("resolution {w}x{h} is larger than 4096 pixels"),
+            ));
         }
         let n = &self.native;
         if !(n.fx > 0.0 && n.fy > 0.0 && n.cx.is_finite() && n.cy.is_finite()) {
-            return Err("focal lengths must be positive and the principal point finite".into());
+            return Err(InvalidSetting::new(
+                "camera.native",
+                "focal lengths must be positive and the principal point finite",
+            ));
         }
         let (r0, r1) = self.crop_rows;
         let (c0, c1) = self.crop_cols;
         if r0 >= r1 || c0 >= c1 || r1 > n.height || c1 > n.width {
-            return Err(format!(
-                "crop rows {r0}..{r1}, cols {c0}..{c1} must be non-empty and inside the {}x{} native image",
-                n.width, n.height
+            return Err(InvalidSetting::new(
+                "camera.crop",
+                format!(
+                    "crop rows {r0}..{r1}, cols {c0}..{c1} must be non-empty and inside the {}x{} native image",
+                    n.width, n.height
+                ),
             ));
         }
         Ok(())
@@ -158,15 +169,15 @@ impl CameraConfig {
 }
 
 /// Parse `"WxH"` (e.g. `64x64`).
-pub fn parse_resolution(s: &str) -> Result<(usize, usize), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("resolution '{s}' must look like 64x64"))?;
-    let parse = |t: &str| {
-        t.trim()
-            .parse::<usize>()
-            .map_err(|_| format!("resolution '{s}' must look like 64x64"))
+pub fn parse_resolution(s: &str) -> Result<(usize, usize), InvalidSetting> {
+    let bad = || {
+        InvalidSetting::new(
+            "resolution",
+            format!("resolution '{s}' must look like 64x64"),
+        )
     };
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let parse = |t: &str| t.trim().parse::<usize>().map_err(|_| bad());
     Ok((parse(w)?, parse(h)?))
 }
 
@@ -207,10 +218,10 @@ mod tests {
         let mut c = CameraConfig::default();
         assert!(c.validate().is_ok());
         c.resolution = (60, 64);
-        assert!(c.validate().unwrap_err().contains("multiple of 8"));
+        assert!(c.validate().unwrap_err().message.contains("multiple of 8"));
         c.resolution = (64, 64);
         c.crop_rows = (20, 400);
-        assert!(c.validate().unwrap_err().contains("inside"));
+        assert!(c.validate().unwrap_err().message.contains("inside"));
         assert_eq!(parse_resolution("128x96"), Ok((128, 96)));
         assert!(parse_resolution("128").is_err());
     }

@@ -46,15 +46,22 @@ impl Se2 {
     }
 
     /// Parse `"X,Y,THETA"` (metres, metres, radians).
-    pub fn parse(s: &str) -> Result<Self, String> {
+    pub fn parse(s: &str) -> Result<Self, crate::error::InvalidSetting> {
+        let bad = |m: String| crate::error::InvalidSetting::new("pose", m);
         let parts: Vec<f64> = s
             .split(',')
             .map(|p| p.trim().parse::<f64>())
             .collect::<Result<_, _>>()
-            .map_err(|_| format!("pose '{s}' must be X,Y,THETA in metres, metres, radians"))?;
+            .map_err(|_| {
+                bad(format!(
+                    "pose '{s}' must be X,Y,THETA in metres, metres, radians"
+                ))
+            })?;
         match parts.as_slice() {
             [x, y, t] if parts.iter().all(|v| v.is_finite()) => Ok(Self::new(*x, *y, *t)),
-            _ => Err(format!("pose '{s}' must be three finite numbers X,Y,THETA")),
+            _ => Err(bad(format!(
+                "pose '{s}' must be three finite numbers X,Y,THETA"
+            ))),
         }
     }
 }

@@ -22,16 +22,21 @@ pub enum InputSize {
 }
 
 /// Classify a `width x height` frame against the camera, or say which sizes are accepted.
-pub fn classify(camera: &CameraConfig, width: usize, height: usize) -> Result<InputSize, String> {
-    let crop = camera.crop();
-    if (width, height) == camera.resolution {
-        Ok(InputSize::Model)
-    } else if (width, height) == (camera.native.width, camera.native.height) {
-        Ok(InputSize::Native)
-    } else if (width, height) == (crop.width, crop.height) {
-        Ok(InputSize::Cropped)
-    } else {
-        Err(format!(
+pub fn classify(
+    camera: &CameraConfig,
+    width: usize,
+    height: usize,
+) -> Result<InputSize, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("depth image size", || {
+        let crop = camera.crop();
+        if (width, height) == camera.resolution {
+            Ok(InputSize::Model)
+        } else if (width, height) == (camera.native.width, camera.native.height) {
+            Ok(InputSize::Native)
+        } else if (width, height) == (crop.width, crop.height) {
+            Ok(InputSize::Cropped)
+        } else {
+            Err(format!(
             "image is {width}x{height}; expected the native {}x{}, the crop {}x{} or the model resolution {}x{}",
             camera.native.width,
             camera.native.height,
@@ -40,7 +45,8 @@ pub fn classify(camera: &CameraConfig, width: usize, height: usize) -> Result<In
             camera.resolution.0,
             camera.resolution.1
         ))
-    }
+        }
+    })
 }
 
 /// Crop rows `rows.0..rows.1`, columns `cols.0..cols.1`.
@@ -90,17 +96,19 @@ pub fn resample_depth(image: &Image, width: usize, height: usize) -> Image {
 }
 
 /// Bring a depth frame to the model resolution: crop if native, resample if not at the model size.
-pub fn to_model(camera: &CameraConfig, image: &Image) -> Result<Image, String> {
-    let (w, h) = camera.resolution;
-    match classify(camera, image.width, image.height)? {
-        InputSize::Model => Ok(image.clone()),
-        InputSize::Cropped => Ok(resample_depth(image, w, h)),
-        InputSize::Native => Ok(resample_depth(
-            &crop(image, camera.crop_rows, camera.crop_cols),
-            w,
-            h,
-        )),
-    }
+pub fn to_model(camera: &CameraConfig, image: &Image) -> Result<Image, crate::error::InvalidInput> {
+    crate::error::InvalidInput::wrap("depth image size", || {
+        let (w, h) = camera.resolution;
+        match classify(camera, image.width, image.height)? {
+            InputSize::Model => Ok(image.clone()),
+            InputSize::Cropped => Ok(resample_depth(image, w, h)),
+            InputSize::Native => Ok(resample_depth(
+                &crop(image, camera.crop_rows, camera.crop_cols),
+                w,
+                h,
+            )),
+        }
+    })
 }
 
 #[cfg(test)]
@@ -147,7 +155,10 @@ mod tests {
         assert_eq!(classify(&cam, 224, 171), Ok(InputSize::Native));
         assert_eq!(classify(&cam, 175, 140), Ok(InputSize::Cropped));
         assert_eq!(classify(&cam, 64, 64), Ok(InputSize::Model));
-        assert!(classify(&cam, 100, 100).unwrap_err().contains("224x171"));
+        assert!(classify(&cam, 100, 100)
+            .unwrap_err()
+            .message
+            .contains("224x171"));
         let img = Image::from_vec(4, 3, (0..12).map(|x| x as f32).collect()).unwrap();
         assert_eq!(crop(&img, (1, 3), (1, 3)).data, vec![5.0, 6.0, 9.0, 10.0]);
     }

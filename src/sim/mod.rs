@@ -35,9 +35,9 @@ pub const DEFAULT_PRESS_M: f64 = 0.006;
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {
     #[error("camera: {0}")]
-    Camera(String),
+    Camera(#[source] crate::error::InvalidSetting),
     #[error("signature: {0}")]
-    Signature(String),
+    Signature(#[source] crate::error::InvalidSetting),
     #[error(transparent)]
     Elastomer(#[from] ElastomerError),
     #[error(transparent)]

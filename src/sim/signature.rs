@@ -31,17 +31,18 @@ impl Default for SignatureConfig {
 }
 
 impl SignatureConfig {
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), crate::error::InvalidSetting> {
+        use crate::error::InvalidSetting;
         if !(self.shadow_px.is_finite() && self.shadow_px >= 0.0) {
-            return Err(format!(
-                "shadow_px must be >= 0 pixels, got {}",
-                self.shadow_px
+            return Err(InvalidSetting::new(
+                "signature.shadow_px",
+                format!("shadow_px must be >= 0 pixels, got {}", self.shadow_px),
             ));
         }
         if !(self.noise_std.is_finite() && self.noise_std >= 0.0) {
-            return Err(format!(
-                "noise_std must be >= 0 metres, got {}",
-                self.noise_std
+            return Err(InvalidSetting::new(
+                "signature.noise_std",
+                format!("noise_std must be >= 0 metres, got {}", self.noise_std),
             ));
         }
         Ok(())

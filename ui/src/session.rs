@@ -91,8 +91,8 @@ pub fn validate(state: &State) -> Result<(), String> {
     if s.press < 0.0 {
         return Err(format!("press depth must be >= 0 m, got {}", s.press));
     }
-    state.sim.camera.validate()?;
-    state.sim.signature.validate()?;
+    state.sim.camera.validate().map_err(|e| e.to_string())?;
+    state.sim.signature.validate().map_err(|e| e.to_string())?;
     state.sim.elastomer.validate().map_err(|e| e.to_string())?;
     let c = &state.calibration;
     tactile_derender::sim::calibration::inflation_values(c.lo, c.hi, c.steps)

@@ -6,6 +6,7 @@
 pub mod ddim;
 pub mod ddpm;
 
+use crate::error::InvalidSetting;
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
@@ -88,21 +89,25 @@ impl SamplerConfig {
 
     /// Check the numbers (sessions and command lines may carry anything); `train_steps` is the model's T when
     /// known.
-    pub fn validate(&self, train_steps: Option<usize>) -> Result<(), String> {
+    pub fn validate(&self, train_steps: Option<usize>) -> Result<(), InvalidSetting> {
         if self.kind == SamplerName::Ddim {
             let max = train_steps.unwrap_or(usize::MAX);
             if self.steps == 0 || self.steps > max {
-                return Err(match train_steps {
+                let message = match train_steps {
                     Some(t) => format!(
                         "DDIM steps must be 1..={t} (the model's training steps), got {}",
                         self.steps
                     ),
                     None => format!("DDIM steps must be at least 1, got {}", self.steps),
-                });
+                };
+                return Err(InvalidSetting::new("sampler.steps", message));
             }
         }
         if !(self.eta.is_finite() && (0.0..=1.0).contains(&self.eta)) {
-            return Err(format!("DDIM eta must be in [0, 1], got {}", self.eta));
+            return Err(InvalidSetting::new(
+                "sampler.eta",
+                format!("DDIM eta must be in [0, 1], got {}", self.eta),
+            ));
         }
         Ok(())
     }
@@ -304,13 +309,14 @@ mod tests {
         assert!(bad_steps
             .validate(Some(250))
             .unwrap_err()
+            .message
             .contains("1..=250"));
         assert!(bad_steps.validate(None).is_ok());
         let bad_eta = SamplerConfig {
             eta: 1.5,
             ..SamplerConfig::default()
         };
-        assert!(bad_eta.validate(None).unwrap_err().contains("eta"));
+        assert_eq!(bad_eta.validate(None).unwrap_err().setting, "sampler.eta");
         // DDPM ignores the DDIM settings.
         let ddpm = SamplerConfig {
             kind: SamplerName::Ddpm,
