@@ -184,6 +184,37 @@ fn sampling_api_batches_seeds_and_cancels() {
 }
 
 #[test]
+fn a_batch_larger_than_one_forward_chunk_gives_each_sample_as_drawn_alone() {
+    // Deterministic DDIM: a sample depends only on its own initial noise, and the first k samples of a batch of n
+    // draw the same noise as a batch of k. Across the U-Net's forward chunks (16 samples) no sample may see another.
+    use tactile_derender::model::diffusion::FORWARD_CHUNK;
+    let model = DiffusionModel::load(Path::new(MODEL)).unwrap();
+    let imprint = Image::filled(8, 8, 0.001);
+    let kind = SamplerKind::Ddim {
+        steps: 3,
+        eta: 0.0,
+        spacing: Default::default(),
+    };
+    let n = FORWARD_CHUNK + 3;
+    let many = model
+        .sample(&imprint, n, kind, 5, &mut |_, _| true)
+        .unwrap();
+    let few = model
+        .sample(&imprint, FORWARD_CHUNK + 1, kind, 5, &mut |_, _| true)
+        .unwrap();
+    assert_eq!(many.len(), n);
+    for (k, (a, b)) in many.iter().zip(&few).enumerate() {
+        let worst = a
+            .data
+            .iter()
+            .zip(&b.data)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-6, "sample {k} differs by {worst} m");
+    }
+}
+
+#[test]
 fn model_can_move_to_a_worker_thread() {
     fn assert_send_sync<T: Send + Sync>() {}
     assert_send_sync::<DiffusionModel>();

@@ -11,6 +11,10 @@ use crate::pose::from_depth::consensus_depth;
 use crate::pose::{Hypothesis, InitStrategy, PoseError};
 use crate::sensor::Se2;
 
+/// The most samples whose own registrations propose poses to the multi-sample estimate's signature check (the
+/// consensus of them all proposes too).
+pub const MULTI_PROPOSALS: usize = 16;
+
 /// Inputs of one analysis.
 pub struct Signature<'a> {
     /// `t_world_camera` of the sensor camera.
@@ -188,6 +192,7 @@ pub fn analyse_with_progress(
     report.multi_sample = multi_sample;
     report.failed = failed;
     report.modes = super::pose_modes(&report.samples, &object.symmetry);
+    report.theta_period_deg = object.symmetry.rotation.period_rad().map(f64::to_degrees);
     Ok(report)
 }
 
@@ -207,7 +212,10 @@ pub fn multi_sample_estimate(
     let checked = evaluator.config.check_signature && sig.measured.is_some();
     let mut registered = vec![consensus];
     if checked {
-        registered.extend(sig.samples.iter().cloned());
+        // Each proposing sample is registered from every start, the bulk of the estimate's time; samples beyond the
+        // first MULTI_PROPOSALS add to the consensus only (their poses repeat the first ones': a 50-sample
+        // posterior then costs what a 16-sample one does here).
+        registered.extend(sig.samples.iter().take(MULTI_PROPOSALS).cloned());
         // The imprint's threshold contact proposes too (its depths are the signature's: nothing to anchor).
         if let (true, Some(b)) = (evaluator.config.imprint_proposals, sig.baseline) {
             registered.push(b.clone());

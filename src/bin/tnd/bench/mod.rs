@@ -3,6 +3,7 @@
 
 mod gemm;
 mod pose;
+mod posterior;
 mod unet;
 
 use std::path::{Path, PathBuf};
@@ -35,6 +36,8 @@ pub enum BenchCommand {
     Sim(SimBenchArgs),
     /// SE(2) registration from K starts: wall time and pose errors (optionally the peer's saved problem).
     Pose(pose::PoseBenchArgs),
+    /// The N-sample pose posterior of `tnd pose`'s pipeline (sampling, press, registration, check), stage by stage.
+    Posterior(posterior::PosteriorBenchArgs),
     /// U-Net forward and training step against `../shared/peers/unet_torch.py`.
     Unet(unet::UnetBenchArgs),
     /// The tiled convolution's three GEMM patterns, our AVX-512 kernels against the `gemm` crate (GFLOP/s).
@@ -64,6 +67,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     match a.command {
         BenchCommand::Sim(s) => bench_sim(&s),
         BenchCommand::Pose(p) => pose::run(&p),
+        BenchCommand::Posterior(p) => posterior::run(&p),
         BenchCommand::Unet(u) => unet::run(&u),
         BenchCommand::Gemm(g) => gemm::run(&g),
     }
