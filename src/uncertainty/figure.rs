@@ -8,6 +8,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
+use super::rose::{rose_point, rose_wedges, ROSE_BINS};
 use super::UncertaintyReport;
 use crate::io::figure::{draw_axes, draw_legend, draw_legend_at, err, font, swatch, Draw};
 
@@ -221,23 +222,18 @@ fn panel<DB: DrawingBackend>(
     Ok(())
 }
 
-/// A circular histogram (rose) of the θ errors: the symmetry period once round the circle, no error at the top,
-/// positive (counter-clockwise) errors to the left; wedge *areas* proportional to the samples in them, and the
-/// estimates' errors as rays.
+/// A circular histogram of the θ errors ([`super::rose`]), with the estimates' errors as rays.
 struct Rose<'a> {
     period_deg: f64,
     errors: &'a [f64],
     lines: [(Option<f64>, RGBColor, &'static str); 3],
 }
 
-/// Wedges of the rose.
-const ROSE_BINS: usize = 24;
-
 impl Rose<'_> {
-    /// The point at radius `r` in the direction of a θ error of `deg`.
+    /// The point at radius `r` in the direction of a θ error of `deg` ([`rose_point`]).
     fn at(&self, deg: f64, r: f64) -> (f64, f64) {
-        let phi = std::f64::consts::FRAC_PI_2 + std::f64::consts::TAU * deg / self.period_deg;
-        (r * phi.cos(), r * phi.sin())
+        let [x, y] = rose_point(deg, r, self.period_deg);
+        (x, y)
     }
 
     fn draw<DB: DrawingBackend>(
@@ -295,24 +291,10 @@ impl Rose<'_> {
                 .map_err(err)?;
         }
         let width = self.period_deg / ROSE_BINS as f64;
-        let mut counts = [0usize; ROSE_BINS];
-        for &e in self.errors.iter().filter(|e| e.is_finite()) {
-            let k = ((e + half) / width).floor().rem_euclid(ROSE_BINS as f64) as usize;
-            counts[k.min(ROSE_BINS - 1)] += 1;
-        }
-        let most = counts.iter().copied().max().unwrap_or(0).max(1) as f64;
         let fill = RGBColor(150, 170, 230).mix(0.7).filled();
-        let wedges = counts
-            .iter()
-            .enumerate()
-            .filter(|(_, &c)| c > 0)
-            .map(|(k, &c)| {
-                let r = (c as f64 / most).sqrt();
-                let from = -half + k as f64 * width;
-                let mut points = vec![(0.0, 0.0)];
-                points.extend((0..=8).map(|j| self.at(from + width * j as f64 / 8.0, r)));
-                Polygon::new(points, fill)
-            });
+        let wedges = rose_wedges(self.errors, self.period_deg)
+            .into_iter()
+            .map(|w| Polygon::new(w.into_iter().map(|[x, y]| (x, y)).collect::<Vec<_>>(), fill));
         chart
             .draw_series(wedges)
             .map_err(err)?
@@ -341,29 +323,6 @@ impl Rose<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn rose(period_deg: f64, errors: &[f64]) -> Rose<'_> {
-        Rose {
-            period_deg,
-            errors,
-            lines: [(None, RED, "a"), (None, RED, "b"), (None, RED, "c")],
-        }
-    }
-
-    #[test]
-    fn the_rose_puts_no_error_at_the_top_and_goes_round_once_per_period() {
-        for period in [360.0, 180.0, 90.0] {
-            let r = rose(period, &[]);
-            let close = |(x, y): (f64, f64), (a, b): (f64, f64)| {
-                (x - a).abs() < 1e-12 && (y - b).abs() < 1e-12
-            };
-            assert!(close(r.at(0.0, 1.0), (0.0, 1.0)));
-            // A quarter period counter-clockwise is to the left; ± half a period meet at the bottom.
-            assert!(close(r.at(period / 4.0, 1.0), (-1.0, 0.0)));
-            assert!(close(r.at(period / 2.0, 2.0), r.at(-period / 2.0, 2.0)));
-            assert!(close(r.at(period / 2.0, 1.0), (0.0, -1.0)));
-        }
-    }
 
     #[test]
     fn the_figure_has_the_rose_only_with_theta_errors() {

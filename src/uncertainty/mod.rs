@@ -11,6 +11,7 @@
 pub mod analysis;
 pub mod figure;
 pub mod kde;
+pub mod rose;
 
 pub use kde::{GaussianKde, KdeError};
 

@@ -414,6 +414,11 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
         assert!(s.position_mm < 1.5, "{:?}", r.report.samples);
     }
     assert!(!r.report.position_kde.is_empty(), "no position KDE");
+    // θ as an angle too: the circular histogram of the four samples' θ errors, over the object's symmetry period.
+    assert!(r.report.theta_period_deg.is_some_and(|p| p > 0.0 && p <= 360.0));
+    assert!(h
+        .query_by_label_contains("θ error circular histogram, 4 samples")
+        .is_some());
     assert!(r.report.baseline.is_some(), "the baseline found no contact");
     assert!(h
         .query_by_label_contains("4 of 4 samples registered")

@@ -115,7 +115,15 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
         ui.vertical(|ui| hypotheses(ui, r));
     });
     ui.horizontal(|ui| {
-        let w = ui.available_width() / 2.0 - 8.0;
+        // The two KDEs, and the circular θ histogram (square) where θ has errors.
+        let rose = r.report.samples.iter().any(|s| s.theta_deg.is_some());
+        let h = ui.available_height().max(180.0);
+        let square = if rose {
+            h.min(ui.available_width() / 4.0)
+        } else {
+            0.0
+        };
+        let w = (ui.available_width() - square) / 2.0 - 8.0;
         ui.vertical(|ui| {
             ui.set_width(w);
             kde_plot(ui, r, false, &mut highlight);
@@ -124,6 +132,12 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
             ui.set_width(w);
             kde_plot(ui, r, true, &mut highlight);
         });
+        if rose {
+            ui.vertical(|ui| {
+                ui.set_width(square);
+                rose_plot(ui, r);
+            });
+        }
     });
     if highlight != pose.highlight {
         cmds.push(Command::HighlightSample(highlight));
@@ -559,6 +573,78 @@ fn kde_plot(ui: &mut egui::Ui, r: &PoseAnalysis, theta: bool, highlight: &mut Op
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .and_then(|(k, _)| r.sample_of(k));
     }
+}
+
+/// The samples' θ errors as a circular histogram ([`tactile_derender::uncertainty::rose`]): the symmetry period once
+/// round, no error at the top, wedge areas by share, the estimates as rays.
+fn rose_plot(ui: &mut egui::Ui, r: &PoseAnalysis) {
+    use tactile_derender::uncertainty::rose::{rose_point, rose_wedges};
+    let rep = &r.report;
+    let period = rep.theta_period_deg.unwrap_or(360.0);
+    let errors: Vec<f64> = rep.samples.iter().filter_map(|s| s.theta_deg).collect();
+    let half = period / 2.0;
+    let response = Plot::new("rose_theta")
+        .data_aspect(1.0)
+        .view_aspect(1.0)
+        .show_axes(false)
+        .show_grid(false)
+        .allow_drag(false)
+        .allow_zoom(false)
+        .allow_scroll(false)
+        .include_x(-1.3)
+        .include_x(1.3)
+        .include_y(-1.3)
+        .include_y(1.3)
+        .legend(Legend::default())
+        .show(ui, |p| {
+            let ring: Vec<[f64; 2]> = (0..=96)
+                .map(|k| rose_point(period * k as f64 / 96.0, 1.0, period))
+                .collect();
+            p.line(Line::new("", PlotPoints::from(ring)).color(Color32::GRAY));
+            for wedge in rose_wedges(&errors, period) {
+                p.polygon(
+                    egui_plot::Polygon::new("", PlotPoints::from(wedge))
+                        .fill_color(KDE_COLOUR.gamma_multiply(0.6))
+                        .stroke(egui::Stroke::new(1.0, KDE_COLOUR)),
+                );
+            }
+            for (deg, text) in [
+                (0.0, "0°".to_string()),
+                (half / 2.0, format!("+{}°", half / 2.0)),
+                (half, format!("±{half}°")),
+                (-half / 2.0, format!("−{}°", half / 2.0)),
+            ] {
+                let [x, y] = rose_point(deg, 1.18, period);
+                p.text(egui_plot::Text::new("", [x, y].into(), text));
+            }
+            let rays = [
+                (
+                    rep.estimate.as_ref(),
+                    ESTIMATE_COLOUR,
+                    "single-sample estimate",
+                ),
+                (
+                    rep.multi_sample.as_ref(),
+                    MULTI_COLOUR,
+                    "multi-sample estimate",
+                ),
+                (rep.baseline.as_ref(), BASELINE_COLOUR, "baseline"),
+            ];
+            for (e, colour, name) in rays {
+                if let Some(v) = e.and_then(|e| e.theta_deg) {
+                    let tip = rose_point(v, 1.05, period);
+                    p.line(
+                        Line::new(name, PlotPoints::from(vec![[0.0, 0.0], tip]))
+                            .color(colour)
+                            .width(2.0),
+                    );
+                }
+            }
+        });
+    let name = format!("θ error circular histogram, {} samples", errors.len());
+    response
+        .response
+        .widget_info(|| egui::WidgetInfo::labeled(egui::accesskit::Role::Figure, true, &name));
 }
 
 #[cfg(test)]
