@@ -59,6 +59,14 @@ impl InvalidSetting {
             message: message.into(),
         }
     }
+
+    /// Run a check written with text errors, typing its error as `setting`'s.
+    pub fn wrap<T>(
+        setting: &'static str,
+        f: impl FnOnce() -> Result<T, String>,
+    ) -> Result<T, Self> {
+        f().map_err(|message| Self { setting, message })
+    }
 }
 
 /// Input that cannot be used as given: bytes or text that do not hold what their format says, an image of a size
@@ -84,6 +92,13 @@ impl InvalidInput {
     /// Run a check written with text errors, typing its error as `what`'s.
     pub fn wrap<T>(what: &'static str, f: impl FnOnce() -> Result<T, String>) -> Result<T, Self> {
         f().map_err(|message| Self { what, message })
+    }
+}
+
+/// The message alone, for code that reports in text.
+impl From<InvalidSetting> for String {
+    fn from(e: InvalidSetting) -> Self {
+        e.message
     }
 }
 

@@ -273,7 +273,7 @@ impl RowReader<'_> {
             None => f64::NAN,
         };
         let explicit_split = match row.get("split").filter(|s| !s.trim().is_empty()) {
-            Some(s) => Some(s.parse::<SplitName>().map_err(at)?),
+            Some(s) => Some(s.parse::<SplitName>().map_err(|e| at(e.into()))?),
             None => self.config.split,
         };
         let load = |key: &str| -> Result<Option<Image>, DatasetError> {

@@ -91,14 +91,16 @@ impl std::fmt::Display for SplitName {
 }
 
 impl std::str::FromStr for SplitName {
-    type Err = String;
+    type Err = crate::error::InvalidSetting;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        SplitName::ALL
-            .into_iter()
-            .find(|x| x.as_str() == s.trim())
-            .ok_or_else(|| {
-                format!("unknown split '{s}' (use train, unseen_poses or unseen_objects)")
-            })
+        crate::error::InvalidSetting::wrap("split", || {
+            SplitName::ALL
+                .into_iter()
+                .find(|x| x.as_str() == s.trim())
+                .ok_or_else(|| {
+                    format!("unknown split '{s}' (use train, unseen_poses or unseen_objects)")
+                })
+        })
     }
 }
 

@@ -48,8 +48,12 @@ impl FigureConfig {
 /// Errors drawing or writing a figure.
 #[derive(Debug, thiserror::Error)]
 pub enum FigureError {
-    #[error("{}: cannot draw the figure: {message}", path.display())]
-    Draw { path: PathBuf, message: String },
+    #[error("{}: cannot draw the figure: {source}", path.display())]
+    Draw {
+        path: PathBuf,
+        #[source]
+        source: DrawError,
+    },
     #[error("{}: cannot write: {source}", path.display())]
     Write {
         path: PathBuf,
@@ -67,12 +71,18 @@ pub trait Draw {
         &self,
         root: &DrawingArea<DB, Shift>,
         scale: f64,
-    ) -> Result<(), String>;
+    ) -> Result<(), DrawError>;
 }
 
-/// A plotters error as text.
-pub fn err<E: std::fmt::Display>(e: E) -> String {
-    e.to_string()
+/// A figure that could not be drawn: plotters' error as text (its error type is generic over the backend, so it is
+/// not kept as a source).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct DrawError(pub String);
+
+/// A plotters error as a [`DrawError`].
+pub fn err<E: std::fmt::Display>(e: E) -> DrawError {
+    DrawError(e.to_string())
 }
 
 /// A font of `size` (at scale 1) in the figures' typeface.
@@ -86,7 +96,7 @@ pub fn draw_axes<DB: DrawingBackend>(
     x_desc: &str,
     y_desc: &str,
     scale: f64,
-) -> Result<(), String> {
+) -> Result<(), DrawError> {
     // As many tick labels as fit side by side without touching (a label such as "-2.5" is ~3 em wide).
     let (w, h) = chart.plotting_area().dim_in_pixel();
     let fit = |px: u32, per: f64| ((f64::from(px) / (per * scale)) as usize).clamp(2, 12);
@@ -108,7 +118,7 @@ pub fn draw_axes<DB: DrawingBackend>(
 pub fn draw_legend<'a, DB: DrawingBackend + 'a>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     scale: f64,
-) -> Result<(), String> {
+) -> Result<(), DrawError> {
     draw_legend_at(chart, scale, SeriesLabelPosition::UpperRight)
 }
 
@@ -117,7 +127,7 @@ pub fn draw_legend_at<'a, DB: DrawingBackend + 'a>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     scale: f64,
     position: SeriesLabelPosition,
-) -> Result<(), String> {
+) -> Result<(), DrawError> {
     chart
         .configure_series_labels()
         .label_font(font(13.0, scale))
@@ -150,9 +160,9 @@ pub fn write_figure(
     });
     let svg_path = dir.join(format!("{stem}.svg"));
     let png_path = dir.join(format!("{stem}.png"));
-    let fail = |path: &Path, message: String| FigureError::Draw {
+    let fail = |path: &Path, source: DrawError| FigureError::Draw {
         path: path.to_path_buf(),
-        message,
+        source,
     };
     let scale = config.scale();
     let mut svg = String::new();
@@ -170,7 +180,7 @@ pub fn write_figure(
         root.present().map_err(|e| fail(&png_path, err(e)))?;
     }
     let img = image::RgbImage::from_raw(w, h, rgb)
-        .ok_or_else(|| fail(&png_path, "image buffer size".into()))?;
+        .ok_or_else(|| fail(&png_path, DrawError("image buffer size".into())))?;
     let mut png = Vec::new();
     img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
         .map_err(|e| fail(&png_path, err(e)))?;
@@ -202,7 +212,7 @@ impl Draw for ImageGrid<'_> {
         &self,
         root: &DrawingArea<DB, Shift>,
         s: f64,
-    ) -> Result<(), String> {
+    ) -> Result<(), DrawError> {
         let area = root.titled(&self.title, font(20.0, s)).map_err(err)?;
         let columns = self.columns.clamp(1, self.panels.len().max(1));
         let rows = self.panels.len().div_ceil(columns).max(1);
@@ -219,7 +229,7 @@ fn grid_panel<DB: DrawingBackend>(
     image: &crate::image::Image,
     style: &super::preview::PanelStyle,
     s: f64,
-) -> Result<(), String> {
+) -> Result<(), DrawError> {
     let inner = cell
         .margin(
             (6.0 * s) as i32,
@@ -245,7 +255,7 @@ fn grid_panel<DB: DrawingBackend>(
     let scaled = image::imageops::resize(&colours, sw, sh, image::imageops::FilterType::Nearest);
     let element =
         BitMapElement::<(i32, i32)>::with_owned_buffer((0, 0), (sw, sh), scaled.into_raw())
-            .ok_or("image buffer size")?;
+            .ok_or_else(|| DrawError("image buffer size".into()))?;
     picture.draw(&element).map_err(err)?;
     let bar = bar.shrink((0, 0), (bar_w, sh));
     // The colour bar with its axis.

@@ -38,22 +38,24 @@ pub enum PressChoice {
 }
 
 impl FromStr for PressChoice {
-    type Err = String;
+    type Err = crate::error::InvalidSetting;
 
-    fn from_str(s: &str) -> Result<Self, String> {
-        if s == "auto" {
-            return Ok(PressChoice::Auto);
-        }
-        match s.parse::<f64>() {
-            Ok(p) if p.is_finite() && (0.0..=DEEPEST_PRESS_M).contains(&p) => {
-                Ok(PressChoice::Fixed(p))
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        crate::error::InvalidSetting::wrap("press", || {
+            if s == "auto" {
+                return Ok(PressChoice::Auto);
             }
-            Ok(p) if p > DEEPEST_PRESS_M => Err(format!(
+            match s.parse::<f64>() {
+                Ok(p) if p.is_finite() && (0.0..=DEEPEST_PRESS_M).contains(&p) => {
+                    Ok(PressChoice::Fixed(p))
+                }
+                Ok(p) if p > DEEPEST_PRESS_M => Err(format!(
                 "press {p} m is deeper than the whole sensor; presses are in metres (6 mm is 0.006)"
             )),
-            Ok(p) => Err(format!("press {p} m: a press is a depth of 0 m or more")),
-            Err(_) => Err(format!("'{s}' is neither \"auto\" nor a press in metres")),
-        }
+                Ok(p) => Err(format!("press {p} m: a press is a depth of 0 m or more")),
+                Err(_) => Err(format!("'{s}' is neither \"auto\" nor a press in metres")),
+            }
+        })
     }
 }
 
@@ -290,6 +292,7 @@ mod tests {
         assert!("6"
             .parse::<PressChoice>()
             .unwrap_err()
+            .message
             .contains("6 mm is 0.006"));
         assert!("deep".parse::<PressChoice>().is_err());
         assert_eq!(

@@ -35,7 +35,7 @@ impl Draw for FitFigure<'_> {
         &self,
         root: &DrawingArea<DB, Shift>,
         s: f64,
-    ) -> Result<(), String> {
+    ) -> Result<(), crate::io::figure::DrawError> {
         let poses = [
             (self.truth, RGBColor(120, 120, 120), "true pose"),
             (self.baseline, RED, "threshold baseline"),

@@ -30,15 +30,15 @@ pub enum ReferenceChoice {
 }
 
 impl std::str::FromStr for ReferenceChoice {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s.trim() {
+    type Err = crate::error::InvalidSetting;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        crate::error::InvalidSetting::wrap("reference", || match s.trim() {
             "auto" => Ok(Self::Auto),
             n => n
                 .parse()
                 .map(Self::Frame)
                 .map_err(|_| format!("reference '{s}' must be 'auto' or a frame number (0-based)")),
-        }
+        })
     }
 }
 

@@ -38,7 +38,7 @@ impl Draw for KdeFigure<'_> {
         &self,
         root: &DrawingArea<DB, Shift>,
         scale: f64,
-    ) -> Result<(), String> {
+    ) -> Result<(), crate::io::figure::DrawError> {
         let r = self.report;
         let truth = if r.reference_is_truth {
             "true pose"
@@ -102,7 +102,7 @@ fn panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     p: &Panel<'_>,
     s: f64,
-) -> Result<(), String> {
+) -> Result<(), crate::io::figure::DrawError> {
     let xs = p
         .curve
         .iter()
@@ -240,7 +240,7 @@ impl Rose<'_> {
         &self,
         area: &DrawingArea<DB, Shift>,
         s: f64,
-    ) -> Result<(), String> {
+    ) -> Result<(), crate::io::figure::DrawError> {
         let stroke = (2.0 * s).round().max(1.0) as u32;
         let margin = (12.0 * s) as u32;
         let inner = area

@@ -415,7 +415,10 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     }
     assert!(!r.report.position_kde.is_empty(), "no position KDE");
     // θ as an angle too: the circular histogram of the four samples' θ errors, over the object's symmetry period.
-    assert!(r.report.theta_period_deg.is_some_and(|p| p > 0.0 && p <= 360.0));
+    assert!(r
+        .report
+        .theta_period_deg
+        .is_some_and(|p| p > 0.0 && p <= 360.0));
     assert!(h
         .query_by_label_contains("θ error circular histogram, 4 samples")
         .is_some());

@@ -467,10 +467,7 @@ fn stats(dir: PathBuf, as_json: bool, verify: bool) -> Result<()> {
 fn show(dir: PathBuf, index: usize, split: &str, out: PathBuf) -> Result<()> {
     tactile_derender::io::lock::check_not_written(&dir)?;
     let _lock = tactile_derender::io::lock::OutputLock::acquire(&out)?;
-    let split: SplitName = split
-        .parse()
-        .map_err(|e: String| anyhow!(e))
-        .context("--split")?;
+    let split: SplitName = split.parse().context("--split")?;
     let ds = Dataset::open(&dir)?;
     let pair = ds.pair(split, index)?;
     let panels: Vec<_> = [

@@ -151,15 +151,15 @@ impl TimestepSpacing {
 }
 
 impl std::str::FromStr for TimestepSpacing {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
+    type Err = crate::error::InvalidSetting;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        crate::error::InvalidSetting::wrap("sampler.spacing", || match s {
             "leading" => Ok(Self::Leading),
             "trailing" => Ok(Self::Trailing),
             _ => Err(format!(
                 "timestep spacing must be leading or trailing, got '{s}'"
             )),
-        }
+        })
     }
 }
 
