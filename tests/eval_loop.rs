@@ -8,6 +8,7 @@ use tactile_derender::metrics::evaluate::{
 };
 use tactile_derender::metrics::sources::{SimSource, SimSpec};
 use tactile_derender::objects::ObjectSet;
+use tactile_derender::pose::PoseConfig;
 use tactile_derender::sensor::Se2;
 use tactile_derender::sim::SimConfig;
 
@@ -42,7 +43,10 @@ fn ground_truth_generator_gives_perfect_depth_and_recovers_poses() {
     // The registration of the exact contact, taken as registered (the signature check would trade it for the noisy
     // signature's optimum: tests/signature_check.rs).
     let eval = Evaluator::new(EvalConfig {
-        check_signature: false,
+        pose: PoseConfig {
+            check_signature: false,
+            ..PoseConfig::default()
+        },
         ..EvalConfig::default()
     });
     let mut calls = 0;
@@ -96,7 +100,7 @@ fn uncertainty_analysis_reports_each_registration_and_can_cancel() {
     use tactile_derender::pose::threshold_contact;
     use tactile_derender::uncertainty::analysis::{analyse_with_progress, Signature};
     let src = source();
-    let eval = Evaluator::new(EvalConfig::default());
+    let eval = tactile_derender::pose::Estimator::new(PoseConfig::default());
     let pair = src.pair(0).unwrap();
     let ctx = src.context();
     let object = eval.object(&ctx.objects, &pair.object).unwrap();
@@ -206,10 +210,11 @@ fn dataset_split_source_feeds_the_loop() {
 fn the_diffusion_model_is_a_generator() {
     use glam::DAffine3;
     use tactile_derender::image::Image;
-    use tactile_derender::metrics::evaluate::{EvalContext, EvalPair, Generator};
+    use tactile_derender::metrics::evaluate::{EvalPair, Generator};
     use tactile_derender::metrics::model_generator::ModelGenerator;
     use tactile_derender::model::{DiffusionModel, GuidanceConfig, SamplerKind};
     use tactile_derender::pose::signature_check::SignatureModel;
+    use tactile_derender::pose::SensorContext;
     // The model team's tiny 8x8 reference checkpoint (untrained weights): this checks the wiring, not the quality.
     let path = std::path::Path::new("tests/fixtures/unet_small/unet_ref.safetensors");
     let sampler = SamplerKind::Ddim {
@@ -223,7 +228,7 @@ fn the_diffusion_model_is_a_generator() {
         guidance: GuidanceConfig::default(),
     };
     // A context without the sensor's cloak: nothing to guide with, so the model's own samples.
-    let ctx = EvalContext {
+    let ctx = SensorContext {
         intrinsics: SimConfig::default().camera.intrinsics().resized(8, 8),
         membrane: Image::filled(8, 8, 0.09),
         objects: ObjectSet::builtin(),
@@ -262,7 +267,7 @@ fn the_diffusion_model_is_a_generator() {
         .to_string();
     assert!(err.contains("unet_ref.safetensors"), "{err}");
     // With the cloak known the samples are guided towards the imprint: reproducible, and not the unguided ones.
-    let guided_ctx = EvalContext {
+    let guided_ctx = SensorContext {
         signature_model: Some(SignatureModel {
             shadow_px: 21.0,
             spacing: (2.7, 2.2),
@@ -302,7 +307,7 @@ impl tactile_derender::metrics::evaluate::Generator for OffsetTruth {
     fn generate(
         &self,
         pair: &tactile_derender::metrics::evaluate::EvalPair,
-        _ctx: &tactile_derender::metrics::evaluate::EvalContext,
+        _ctx: &tactile_derender::pose::SensorContext,
         n: usize,
         _seed: u64,
     ) -> Result<Vec<tactile_derender::image::Image>, EvalError> {
@@ -320,8 +325,11 @@ fn depth_anchoring_undoes_a_common_depth_offset() {
     // Anchoring alone: the signature check (which would also undo the offset, below) is off.
     let run = |anchor: bool, check: bool| {
         let eval = Evaluator::new(EvalConfig {
-            anchor_to_signature: anchor,
-            check_signature: check,
+            pose: PoseConfig {
+                anchor_to_signature: anchor,
+                check_signature: check,
+                ..PoseConfig::default()
+            },
             ..EvalConfig::default()
         });
         eval.evaluate(&src, &OffsetTruth { offset_m: 0.003 }, 7, &mut |_, _| true)
@@ -383,7 +391,7 @@ impl tactile_derender::metrics::evaluate::Generator for CornerContact {
     fn generate(
         &self,
         pair: &tactile_derender::metrics::evaluate::EvalPair,
-        _ctx: &tactile_derender::metrics::evaluate::EvalContext,
+        _ctx: &tactile_derender::pose::SensorContext,
         n: usize,
         _seed: u64,
     ) -> Result<Vec<tactile_derender::image::Image>, EvalError> {
@@ -396,7 +404,10 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
     let src = source();
     let run = |imprint_proposals: bool| {
         Evaluator::new(EvalConfig {
-            imprint_proposals,
+            pose: PoseConfig {
+                imprint_proposals,
+                ..PoseConfig::default()
+            },
             ..EvalConfig::default()
         })
         .evaluate(&src, &CornerContact, 7, &mut |_, _| true)
@@ -444,9 +455,9 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
         },
     };
     let pose = |imprint_proposals: bool| {
-        let config = EvalConfig {
+        let config = PoseConfig {
             imprint_proposals,
-            ..EvalConfig::default()
+            ..PoseConfig::default()
         };
         estimate_pose(&object, &sim, &input, &config, 7, &mut |_, _| true).unwrap()
     };
@@ -498,7 +509,7 @@ fn pose_estimate_steps_are_counted_and_named() {
             &object,
             &sim,
             &input,
-            &EvalConfig::default(),
+            &PoseConfig::default(),
             7,
             &mut |d, t| {
                 seen.push((d, t));

@@ -236,7 +236,7 @@ fn press_from_the_true_contact_puts_its_highest_point_on_the_object_s_top() {
             .unwrap(),
     )
     .unwrap();
-    let eval = tactile_derender::metrics::evaluate::EvalConfig::default();
+    let eval = tactile_derender::pose::PoseConfig::default();
     for (pose, press) in [
         (Se2::new(0.003, -0.002, 0.4), 0.002),
         (Se2::new(0.003, -0.002, 0.4), 0.006),

@@ -228,7 +228,10 @@ fn imported_recording_has_the_true_presses_and_scores_perfectly_with_the_ground_
     // registered: the signature check would trade the exact depth for the noisy signature's optimum).
     let src = DatasetSource::new(&ds, SplitName::UnseenObjects, None).unwrap();
     let r = Evaluator::new(EvalConfig {
-        check_signature: false,
+        pose: tactile_derender::pose::PoseConfig {
+            check_signature: false,
+            ..Default::default()
+        },
         ..EvalConfig::default()
     })
     .evaluate(&src, &GroundTruthGenerator, 0, &mut |_, _| true)

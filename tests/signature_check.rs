@@ -183,14 +183,14 @@ fn the_press_is_found_from_the_contact_and_the_noisy_signature() {
     // Independent truth: the press the simulator placed the sensor at (the sensor never measures it). With the true
     // contact as the sample, the signature's search lands within half a millimetre of it, as does the samples'
     // highest point alone (no signature); a fixed press is taken as given.
-    use tactile_derender::metrics::evaluate::EvalConfig;
     use tactile_derender::pipeline::press::{PressChoice, SensorPlacement};
     use tactile_derender::pipeline::ObjectSpec;
+    use tactile_derender::pose::PoseConfig;
     let object = ObjectSpec::library("builtin", "cross_w12_s50")
         .load()
         .unwrap();
     let prepared = PreparedObject::new(object.mesh.clone()).unwrap();
-    let eval = EvalConfig::default();
+    let eval = PoseConfig::default();
     for press in [0.003, 0.0045, 0.007] {
         let s = setup(
             "cross_w12_s50",
@@ -202,7 +202,7 @@ fn the_press_is_found_from_the_contact_and_the_noisy_signature() {
             sim: &s.sim,
             object: &object,
             prepared: &prepared,
-            eval: &eval,
+            pose: &eval,
         };
         let samples = std::slice::from_ref(&s.out.target);
         let (sig, imprint) = (&s.out.signature, &s.out.imprint);

@@ -3,27 +3,21 @@
 //! threshold baseline produces its own from the signature, and both are scored with the depth metrics and — after
 //! back-projection and registration from K random starts — the pose metrics.
 
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
-use glam::{DAffine3, DVec3};
+use glam::DAffine3;
 use serde::{Deserialize, Serialize};
 
 use super::depth::{depth_metrics, DepthMetrics, DepthMetricsConfig};
 use super::pose::pose_errors;
 use super::MetricsError;
 use crate::image::Image;
-use crate::mesh::{Mesh, RayCaster};
-use crate::objects::{ObjectError, ObjectSet, Symmetry};
-use crate::pose::from_depth::{anchor_to_signature, consensus_depth, SensorView};
-use crate::pose::posterior::PosteriorConfig;
-use crate::pose::signature_check::{SignatureCheckConfig, SignatureModel};
+use crate::objects::{ObjectError, ObjectSet};
+use crate::pose::from_depth::consensus_depth;
 use crate::pose::{
-    sample_surface, threshold_contact, BaselineConfig, Hypothesis, InitStrategy, PoseError,
-    SdfRegistration, SdfRegistrationConfig,
+    threshold_contact, Estimator, Hypothesis, ObjectModel, PoseConfig, PoseError, SensorContext,
 };
-use crate::recon::FreeSpaceConfig;
-use crate::sensor::{Intrinsics, Se2};
+use crate::sensor::Se2;
 
 /// Errors of the evaluation; each names its source.
 #[derive(Debug, thiserror::Error)]
@@ -86,31 +80,6 @@ pub struct EvalPair {
     pub imprint: Image,
 }
 
-/// What every pair of a source shares: the camera, the undeformed membrane depth E (free-space evidence) and the
-/// objects.
-#[derive(Clone, Debug)]
-pub struct EvalContext {
-    pub intrinsics: Intrinsics,
-    /// E: depth of the undeformed membrane, metres (0 where not seen).
-    pub membrane: Image,
-    pub objects: ObjectSet,
-    /// How a contact becomes a signature on this sensor (the shadow cloak), for the signature check; `None` when
-    /// unknown (the check is then skipped).
-    pub signature_model: Option<SignatureModel>,
-}
-
-impl EvalContext {
-    /// The camera and undeformed membrane of `sim`'s sensor, with `objects`.
-    pub fn of_simulator(sim: &crate::sim::Simulator, objects: ObjectSet) -> Self {
-        Self {
-            intrinsics: *sim.intrinsics(),
-            membrane: sim.nominal_depth().clone(),
-            objects,
-            signature_model: Some(SignatureModel::of_simulator(sim)),
-        }
-    }
-}
-
 /// A source of evaluation pairs (a dataset split, or pairs simulated on the fly).
 pub trait PairSource: Sync {
     /// Number of pairs.
@@ -122,7 +91,7 @@ pub trait PairSource: Sync {
     /// Pair `index` (< len).
     fn pair(&self, index: usize) -> Result<EvalPair, EvalError>;
     /// Camera, membrane and objects.
-    fn context(&self) -> &EvalContext;
+    fn context(&self) -> &SensorContext;
 }
 
 /// Produces in-contact depth images X̂0 for a pair: the model (conditioned on the imprint), or the ground truth.
@@ -133,7 +102,7 @@ pub trait Generator: Sync {
     fn generate(
         &self,
         pair: &EvalPair,
-        ctx: &EvalContext,
+        ctx: &SensorContext,
         n: usize,
         seed: u64,
     ) -> Result<Vec<Image>, EvalError>;
@@ -149,7 +118,7 @@ impl Generator for GroundTruthGenerator {
     fn generate(
         &self,
         pair: &EvalPair,
-        _ctx: &EvalContext,
+        _ctx: &SensorContext,
         n: usize,
         _seed: u64,
     ) -> Result<Vec<Image>, EvalError> {
@@ -157,74 +126,32 @@ impl Generator for GroundTruthGenerator {
     }
 }
 
-/// Settings of the evaluation.
+/// Settings of the evaluation: the pose engine's ([`PoseConfig`], stored flat) and the scoring's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct EvalConfig {
+    /// The pose engine, as `tnd pose` runs it.
+    #[serde(flatten)]
+    pub pose: PoseConfig,
     pub depth: DepthMetricsConfig,
-    pub registration: SdfRegistrationConfig,
-    pub free_space: FreeSpaceConfig,
-    pub baseline: BaselineConfig,
-    /// Random starts per registration (default 10, the paper's).
-    pub inits: usize,
-    /// Random starts are within this distance of the contact centroid, metres (default 10 mm).
-    pub init_radius_m: f64,
     /// Points sampled on each object for the Chamfer distance (default 1000).
     pub chamfer_points: usize,
     /// Model samples per pair. With more than 1, the model is also scored on the multi-sample estimate (the
     /// consensus of the samples, [`crate::pose::from_depth::consensus_depth`]; with the signature check, every
-    /// sample's hypotheses and, with [`Self::imprint_proposals`], the imprint's, pooled and checked) beside the
+    /// sample's hypotheses and, with [`PoseConfig::imprint_proposals`], the imprint's, pooled and checked) beside the
     /// first sample alone (default 1: single sample only).
     pub pose_samples: usize,
-    /// Fraction of the samples that must mark a pixel as contact for the consensus (default 0.5).
-    pub consensus_probability: f64,
-    /// Shift every estimate's contact depths onto the measured signature before registering it
-    /// ([`crate::pose::from_depth::anchor_to_signature`]; default true). Depth metrics score the estimate as
-    /// generated.
-    pub anchor_to_signature: bool,
-    /// Choose among the registration's hypotheses (and refine the choice) by the signature each one predicts
-    /// against the measured one ([`crate::pose::signature_check`]; default true). Needs the pair's signature and
-    /// the sensor's signature model.
-    pub check_signature: bool,
-    /// Settings of the signature check.
-    pub signature_check: SignatureCheckConfig,
-    /// Give the signature check the threshold baseline's registration hypotheses beside the sample's (the
-    /// imprint's own contact as further proposals; default true): where the imprint says more than one sample
-    /// (small, shallow contacts) its pose can win. `tnd eval` then scores it as a row of its own.
-    pub imprint_proposals: bool,
-    /// How the signature check's evidence becomes a pose posterior ([`crate::pose::posterior`]).
-    pub posterior: PosteriorConfig,
 }
 
 impl Default for EvalConfig {
     fn default() -> Self {
         Self {
+            pose: PoseConfig::default(),
             depth: DepthMetricsConfig::default(),
-            registration: SdfRegistrationConfig::default(),
-            free_space: FreeSpaceConfig::default(),
-            baseline: BaselineConfig::default(),
-            inits: 10,
-            init_radius_m: 0.01,
-            chamfer_points: 1000,
+            chamfer_points: crate::pose::estimator::DEFAULT_SURFACE_POINTS,
             pose_samples: 1,
-            consensus_probability: 0.5,
-            anchor_to_signature: true,
-            check_signature: true,
-            signature_check: SignatureCheckConfig::default(),
-            imprint_proposals: true,
-            posterior: PosteriorConfig::default(),
         }
     }
-}
-
-/// An object prepared for registration and scoring.
-pub struct ObjectModel {
-    pub registration: SdfRegistration,
-    /// Surface samples (object frame) for the Chamfer distance.
-    pub cloud: Vec<DVec3>,
-    pub symmetry: Symmetry,
-    /// Ray caster of the mesh (object frame) for the signature check.
-    pub caster: RayCaster,
 }
 
 pub use super::report::{
@@ -238,115 +165,52 @@ struct Registered {
     hypotheses: Vec<Hypothesis>,
 }
 
-/// Runs the evaluation; caches one [`ObjectModel`] per object.
+/// Runs the evaluation: the pose engine ([`Estimator`]) on every pair's estimates, and the scores.
 pub struct Evaluator {
-    pub config: EvalConfig,
-    objects: Mutex<HashMap<String, Arc<ObjectModel>>>,
+    config: EvalConfig,
+    /// The pose engine, configured by [`EvalConfig::pose`].
+    pub estimator: Estimator,
 }
 
 impl Evaluator {
     pub fn new(config: EvalConfig) -> Self {
-        Self {
-            config,
-            objects: Mutex::new(HashMap::new()),
-        }
+        let estimator =
+            Estimator::new(config.pose.clone()).with_surface_points(config.chamfer_points);
+        Self { config, estimator }
     }
 
-    /// The prepared object `name` of `set` (built on first use).
+    /// The settings this evaluator runs with.
+    pub fn config(&self) -> &EvalConfig {
+        &self.config
+    }
+
+    /// The prepared object `name` of `set` (built on first use; [`Estimator::object`]).
     pub fn object(&self, set: &ObjectSet, name: &str) -> Result<Arc<ObjectModel>, EvalError> {
-        if let Some(m) = self.objects.lock().ok().and_then(|m| m.get(name).cloned()) {
-            return Ok(m);
-        }
-        let mesh = set.mesh(name)?;
-        let symmetry = set.find(name).map(|e| e.symmetry).unwrap_or_default();
-        self.object_from_mesh(name, &mesh, symmetry)
-    }
-
-    /// Prepare (and cache under `name`) an object given by its mesh (object frame, resting pose) and symmetry.
-    pub fn object_from_mesh(
-        &self,
-        name: &str,
-        mesh: &Mesh,
-        symmetry: Symmetry,
-    ) -> Result<Arc<ObjectModel>, EvalError> {
-        let registration =
-            SdfRegistration::new(mesh, self.config.registration.clone()).map_err(|source| {
-                EvalError::Pose {
-                    object: name.to_string(),
-                    source,
-                }
-            })?;
-        let caster = RayCaster::new(mesh)?;
-        let model = Arc::new(ObjectModel {
-            registration,
-            cloud: sample_surface(mesh, self.config.chamfer_points, 0),
-            symmetry,
-            caster,
-        });
-        if let Ok(mut m) = self.objects.lock() {
-            m.insert(name.to_string(), model.clone());
-        }
-        Ok(model)
-    }
-
-    /// Register `object` to an in-contact depth image: every hypothesis, best first; `None` without contact
-    /// ([`crate::pose::from_depth::register_depth`] with this evaluator's free-space settings).
-    pub fn register_depth(
-        &self,
-        object: &ObjectModel,
-        x0: &Image,
-        ctx: &EvalContext,
-        t_world_camera: &DAffine3,
-        strategy: &InitStrategy,
-        seed: u64,
-    ) -> Result<Option<Vec<Hypothesis>>, PoseError> {
-        let view = SensorView {
-            intrinsics: &ctx.intrinsics,
-            membrane: &ctx.membrane,
-            t_world_camera,
-        };
-        crate::pose::from_depth::register_depth(
-            &object.registration,
-            x0,
-            &view,
-            &self.config.free_space,
-            strategy,
-            seed,
-        )
-    }
-
-    /// The estimates `samples` as registered: with [`EvalConfig::anchor_to_signature`] and a signature, each one's
-    /// contact depths moved onto it where the imprint says contact ([`anchor_to_signature`]), with the shifts (metres); otherwise unchanged, with
-    /// no shifts.
-    pub fn anchor(
-        &self,
-        samples: &[Image],
-        signature: Option<&Image>,
-        imprint: &Image,
-    ) -> Result<(Vec<Image>, Vec<f64>), PoseError> {
-        match signature {
-            Some(s) if self.config.anchor_to_signature => samples
-                .iter()
-                .map(|x| anchor_to_signature(x, s, imprint))
-                .collect(),
-            _ => Ok((samples.to_vec(), Vec::new())),
-        }
+        self.estimator.object(set, name).map_err(|e| match e {
+            PoseError::Object(e) => EvalError::Object(e),
+            PoseError::Mesh(e) => EvalError::Mesh(e),
+            source => EvalError::Pose {
+                object: name.to_string(),
+                source,
+            },
+        })
     }
 
     /// The depth metrics of `depth` and the hypotheses of registering every image of `registered` (each anchored as
-    /// [`Self::anchor`]), pooled in that order.
+    /// [`Estimator::anchor`]), pooled in that order.
     fn register_pair(
         &self,
         pair: &EvalPair,
         depth: &Image,
         registered: &[Image],
-        ctx: &EvalContext,
+        ctx: &SensorContext,
         seed: u64,
     ) -> Result<Registered, EvalError> {
         let depth = depth_metrics(depth, &pair.target, &self.config.depth)?;
         let object = self.object(&ctx.objects, &pair.object)?;
-        let strategy = self.random_starts(seed);
+        let strategy = self.estimator.random_starts(seed);
         let hypotheses = self
+            .estimator
             .pooled_hypotheses(
                 &object,
                 registered,
@@ -366,17 +230,18 @@ impl Evaluator {
         })
     }
 
-    /// The scores of a registration: its pose chosen by [`Self::choose`], with the signature check only when `check`
-    /// (and [`EvalConfig::check_signature`]) allow it, and the pose errors against the truth.
+    /// The scores of a registration: its pose chosen by [`Estimator::choose`], with the signature check only when `check`
+    /// (and [`PoseConfig::check_signature`]) allow it, and the pose errors against the truth.
     fn pose_result(
         &self,
         pair: &EvalPair,
-        ctx: &EvalContext,
+        ctx: &SensorContext,
         r: &Registered,
         check: bool,
     ) -> Result<MethodResult, EvalError> {
         let measured = Some((&pair.signature, &pair.imprint)).filter(|_| check);
         let chosen = self
+            .estimator
             .choose_with_posterior(
                 &r.object,
                 &r.hypotheses,
@@ -441,7 +306,7 @@ impl Evaluator {
             .pose_result(&pair, ctx, &model_reg, true)
             .map_err(fail)?;
         // The baseline as the paper defines it (its registration's best hypothesis), and with the signature check.
-        let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.baseline);
+        let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.pose.baseline);
         let base = self
             .register_pair(
                 &pair,
@@ -452,22 +317,22 @@ impl Evaluator {
             )
             .map_err(fail)?;
         let model_multi = if samples.len() > 1 {
-            let consensus =
-                consensus_depth(&samples, self.config.consensus_probability).map_err(|source| {
+            let consensus = consensus_depth(&samples, self.config.pose.consensus_probability)
+                .map_err(|source| {
                     fail(EvalError::Pose {
                         object: object.clone(),
                         source,
                     })
                 })?;
             let mut registered = vec![consensus.clone()];
-            if self.config.check_signature {
+            if self.config.pose.check_signature {
                 registered.extend(samples.iter().cloned());
             }
             let mut pooled = self
                 .register_pair(&pair, &consensus, &registered, ctx, pair_seed)
                 .map_err(fail)?;
             // The imprint's hypotheses as registered for the baseline (same starts, same seed) close the pool.
-            if self.config.check_signature && self.config.imprint_proposals {
+            if self.config.pose.check_signature && self.config.pose.imprint_proposals {
                 pooled.hypotheses.extend_from_slice(&base.hypotheses);
             }
             Some(self.pose_result(&pair, ctx, &pooled, true).map_err(fail)?)
@@ -475,8 +340,8 @@ impl Evaluator {
             None
         };
         let baseline = self.pose_result(&pair, ctx, &base, false).map_err(fail)?;
-        let checks = self.config.check_signature && ctx.signature_model.is_some();
-        let combine = checks && self.config.imprint_proposals;
+        let checks = self.config.pose.check_signature && ctx.signature_model.is_some();
+        let combine = checks && self.config.pose.imprint_proposals;
         let baseline_checked = checks
             .then(|| self.pose_result(&pair, ctx, &base, true))
             .transpose()
@@ -550,4 +415,33 @@ impl Evaluator {
 pub(crate) fn pair_seed(seed: u64, i: usize) -> u64 {
     seed.wrapping_mul(0x9E37_79B9_7F4A_7C15)
         .wrapping_add(i as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_pose_settings_are_stored_flat_beside_the_scoring_ones() {
+        // The JSON shape of settings written before the pose engine had its own config (records, reports) is kept.
+        let config = EvalConfig {
+            pose: PoseConfig {
+                check_signature: false,
+                inits: 7,
+                ..PoseConfig::default()
+            },
+            pose_samples: 4,
+            ..EvalConfig::default()
+        };
+        let json = serde_json::to_value(&config).unwrap();
+        assert_eq!(json["check_signature"], false);
+        assert_eq!(json["inits"], 7);
+        assert_eq!(json["pose_samples"], 4);
+        assert!(json.get("pose").is_none());
+        let back: EvalConfig = serde_json::from_value(json).unwrap();
+        assert_eq!(back, config);
+        // The evaluator's engine runs with the config's pose settings.
+        let evaluator = Evaluator::new(config.clone());
+        assert_eq!(evaluator.estimator.config, config.pose);
+    }
 }

@@ -10,7 +10,6 @@ pub mod coverage;
 pub mod depth;
 pub mod eval_log;
 pub mod evaluate;
-pub mod hypotheses;
 pub mod model_generator;
 pub mod paper_table;
 pub mod pose;

@@ -1,9 +1,10 @@
 //! The conditional diffusion model (paper IV.B) as an evaluation [`Generator`]: X̂0 samples for a pair's imprint,
 //! guided towards the imprint ([`crate::model::guidance`]) where the source knows its sensor's cloak.
 
-use super::evaluate::{EvalContext, EvalError, EvalPair, Generator};
+use super::evaluate::{EvalError, EvalPair, Generator};
 use crate::image::Image;
 use crate::model::{DiffusionModel, GuidanceConfig, ImprintGuidance, SamplerKind};
+use crate::pose::SensorContext;
 
 /// A loaded model and the sampler to run it with.
 pub struct ModelGenerator {
@@ -19,7 +20,7 @@ impl ModelGenerator {
     pub fn guidance_for(
         &self,
         pair: &EvalPair,
-        ctx: &EvalContext,
+        ctx: &SensorContext,
     ) -> Result<Option<ImprintGuidance>, EvalError> {
         let Some(model) = ctx.signature_model.as_ref() else {
             return Ok(None);
@@ -59,7 +60,7 @@ impl Generator for ModelGenerator {
     fn generate(
         &self,
         pair: &EvalPair,
-        ctx: &EvalContext,
+        ctx: &SensorContext,
         n: usize,
         seed: u64,
     ) -> Result<Vec<Image>, EvalError> {

@@ -1,9 +1,10 @@
 //! [`PairSource`]s for the evaluation loop: a dataset split ([`DatasetSource`]) and pairs simulated on the fly
 //! ([`SimSource`], the test bed for the pipeline before a dataset exists).
 
-use super::evaluate::{EvalContext, EvalError, EvalPair, PairSource};
+use super::evaluate::{EvalError, EvalPair, PairSource};
 use crate::dataset::{Dataset, SplitName};
 use crate::objects::ObjectSet;
+use crate::pose::SensorContext;
 use crate::sensor::{Scene, Se2};
 use crate::sim::{PreparedObject, SimConfig, Simulator};
 
@@ -14,7 +15,7 @@ pub struct DatasetSource<'a> {
     /// Index in the split of this source's pair 0.
     skip: usize,
     len: usize,
-    ctx: EvalContext,
+    ctx: SensorContext,
     t_sensor_camera: glam::DAffine3,
 }
 
@@ -37,7 +38,7 @@ impl<'a> DatasetSource<'a> {
             split,
             skip: 0,
             len: limit.map_or(n, |l| l.min(n)),
-            ctx: EvalContext::of_simulator(&sim, objects),
+            ctx: SensorContext::of_simulator(&sim, objects),
             t_sensor_camera: sim.t_sensor_camera(),
         })
     }
@@ -80,7 +81,7 @@ impl PairSource for DatasetSource<'_> {
         })
     }
 
-    fn context(&self) -> &EvalContext {
+    fn context(&self) -> &SensorContext {
         &self.ctx
     }
 }
@@ -100,7 +101,7 @@ pub struct SimSpec {
 pub struct SimSource {
     sim: Simulator,
     specs: Vec<SimSpec>,
-    ctx: EvalContext,
+    ctx: SensorContext,
 }
 
 impl SimSource {
@@ -113,7 +114,7 @@ impl SimSource {
             dir: "simulated pairs".into(),
             source,
         })?;
-        let ctx = EvalContext::of_simulator(&sim, objects);
+        let ctx = SensorContext::of_simulator(&sim, objects);
         Ok(Self { sim, specs, ctx })
     }
 }
@@ -150,7 +151,7 @@ impl PairSource for SimSource {
         })
     }
 
-    fn context(&self) -> &EvalContext {
+    fn context(&self) -> &SensorContext {
         &self.ctx
     }
 }

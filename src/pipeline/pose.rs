@@ -7,11 +7,12 @@ use glam::DAffine3;
 
 use super::{LoadedObject, PipelineError, Progress};
 use crate::image::Image;
-use crate::metrics::evaluate::{EvalConfig, EvalContext, EvalError, Evaluator};
+use crate::metrics::evaluate::EvalError;
 use crate::objects::ObjectSet;
 use crate::pose::posterior::PosePosterior;
 use crate::pose::signature_check::Rival;
 use crate::pose::{threshold_contact, Hypothesis};
+use crate::pose::{Estimator, PoseConfig, SensorContext};
 use crate::recon::is_valid_depth;
 use crate::sensor::Se2;
 use crate::sim::Simulator;
@@ -50,7 +51,7 @@ pub struct PoseEstimate {
     /// that best explains the measured signature, refined; `None` without a signature or with the check off.
     pub checked: Option<Se2>,
     /// The signature check picked a hypothesis of the imprint's threshold contact over the sample's
-    /// ([`EvalConfig::imprint_proposals`]).
+    /// ([`PoseConfig::imprint_proposals`]).
     pub checked_from_imprint: bool,
     /// The signature check's best hypothesis that is another pose than its pick, reduced by the object's symmetry
     /// ([`crate::pose::signature_check::Rival`]); close to it the signature cannot tell the two apart
@@ -67,7 +68,7 @@ pub struct PoseEstimate {
     /// ([`PosePosterior::region_mass`]).
     pub truth_region: Option<f64>,
     /// Per sample, the depth shift that anchored its contact onto the signature before registration (metres;
-    /// [`EvalConfig::anchor_to_signature`]); empty when the samples were registered as generated.
+    /// [`PoseConfig::anchor_to_signature`]); empty when the samples were registered as generated.
     pub anchor_shift_m: Vec<f64>,
 }
 
@@ -152,10 +153,11 @@ pub fn place_and_estimate(
     sim: &Simulator,
     observation: &Observation<'_>,
     placement: Placement,
-    config: &EvalConfig,
+    config: &PoseConfig,
     seed: u64,
     progress: Progress<'_>,
 ) -> Result<PlacedEstimate, PipelineError> {
+    config.validate()?;
     let (press_m, t_world_camera) = match placement {
         Placement::Camera(t) => (None, t),
         Placement::Press(choice) => {
@@ -171,7 +173,7 @@ pub fn place_and_estimate(
                 sim,
                 object,
                 prepared,
-                eval: config,
+                pose: config,
             };
             let press = placement
                 .press(
@@ -204,15 +206,15 @@ pub fn estimate_pose(
     object: &LoadedObject,
     sim: &Simulator,
     input: &PoseInput<'_>,
-    config: &EvalConfig,
+    config: &PoseConfig,
     seed: u64,
     progress: Progress<'_>,
 ) -> Result<PoseEstimate, PipelineError> {
-    let ctx = EvalContext::of_simulator(sim, ObjectSet::builtin());
-    let evaluator = Evaluator::new(config.clone());
-    let model = evaluator.object_from_mesh(&object.name, &object.mesh, object.symmetry)?;
+    let ctx = SensorContext::of_simulator(sim, ObjectSet::builtin());
+    let estimator = Estimator::new(config.clone());
+    let model = estimator.object_from_mesh(&object.name, &object.mesh, object.symmetry)?;
     let (samples, anchor_shift_m) =
-        evaluator.anchor(input.samples, input.signature, input.imprint)?;
+        estimator.anchor(input.samples, input.signature, input.imprint)?;
     let with_contact: Vec<usize> = input
         .samples
         .iter()
@@ -223,7 +225,7 @@ pub fn estimate_pose(
     // The first sample with contact that registers gives the start; one that fails is skipped here (the analysis
     // records it with the others).
     let (registered_sample, hypotheses) = first_registration(
-        &evaluator,
+        &estimator,
         &model,
         &ctx,
         &input.t_world_camera,
@@ -243,8 +245,8 @@ pub fn estimate_pose(
             // The imprint's own contact proposes poses too; the check scores them beside the sample's.
             let mut pool = hypotheses.clone();
             if let (true, Some(b)) = (config.imprint_proposals, &baseline) {
-                let strategy = evaluator.random_starts(seed);
-                pool.extend(evaluator.pooled_hypotheses(
+                let strategy = estimator.random_starts(seed);
+                pool.extend(estimator.pooled_hypotheses(
                     &model,
                     std::slice::from_ref(b),
                     &ctx,
@@ -253,7 +255,7 @@ pub fn estimate_pose(
                     &strategy,
                 )?);
             }
-            match evaluator.check_with_posterior(
+            match estimator.check_with_posterior(
                 &model,
                 &pool,
                 &ctx,
@@ -294,7 +296,7 @@ pub fn estimate_pose(
     // The baseline's step is counted whether or not there is one (no signature), so that the steps keep the
     // numbers [`pose_stage`] names.
     let no_baseline = usize::from(sig.baseline.is_none());
-    let mut report = analyse_with_progress(&evaluator, &model, &ctx, &sig, seed, &mut |done, _| {
+    let mut report = analyse_with_progress(&estimator, &model, &ctx, &sig, seed, &mut |done, _| {
         progress(1 + done + no_baseline * usize::from(done > n), total)
     })
     .map_err(|e| match e {
@@ -365,7 +367,7 @@ pub fn write_pose_geometry(
     sim: &Simulator,
     input: &PoseInput<'_>,
     estimate: &PoseEstimate,
-    config: &EvalConfig,
+    config: &PoseConfig,
     seed: u64,
     encoding: crate::io::ply::PlyEncoding,
 ) -> Result<Vec<GeometryFile>, PipelineError> {

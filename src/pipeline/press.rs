@@ -18,9 +18,9 @@ use serde::{Deserialize, Serialize};
 use super::{LoadedObject, PipelineError};
 use crate::dataset::import_recording::DEFAULT_MAX_PRESS_M;
 use crate::image::Image;
-use crate::metrics::evaluate::{EvalConfig, EvalContext, Evaluator};
 use crate::objects::ObjectSet;
 use crate::pose::InitStrategy;
+use crate::pose::{Estimator, PoseConfig, SensorContext};
 use crate::sim::{PreparedObject, Simulator};
 
 /// Deepest press a [`PressChoice::Fixed`] takes, metres: the whole sensor is about 90 mm deep.
@@ -74,7 +74,7 @@ pub struct SensorPlacement<'a> {
     pub object: &'a LoadedObject,
     /// The same object, prepared for rendering (its top and ray caster).
     pub prepared: &'a PreparedObject,
-    pub eval: &'a EvalConfig,
+    pub pose: &'a PoseConfig,
 }
 
 impl SensorPlacement<'_> {
@@ -97,7 +97,7 @@ impl SensorPlacement<'_> {
                 samples,
                 signature,
                 imprint,
-                self.eval,
+                self.pose,
                 DEFAULT_MAX_PRESS_M,
             )?,
         };
@@ -118,12 +118,12 @@ pub fn press_from_samples(
     samples: &[Image],
     signature: Option<&Image>,
     imprint: &Image,
-    eval: &EvalConfig,
+    config: &PoseConfig,
     max_press: f64,
 ) -> Result<Option<f64>, PipelineError> {
     // At press 0 the sensor's apex is on the object's top; pressing p deeper moves every back-projected point p down.
     let t_world_camera = sim.t_world_camera(&sim.pressing_pose(object, 0.0, 0.0, 0.0, 0.0));
-    let (anchored, _) = Evaluator::new(eval.clone()).anchor(samples, signature, imprint)?;
+    let (anchored, _) = Estimator::new(config.clone()).anchor(samples, signature, imprint)?;
     let mut presses: Vec<f64> = anchored
         .iter()
         .filter_map(|s| {
@@ -162,22 +162,22 @@ fn search_press(
     least: f64,
     seed: u64,
 ) -> Result<f64, PipelineError> {
-    let evaluator = Evaluator::new(at.eval.clone());
+    let estimator = Estimator::new(at.pose.clone());
     let Some(first) = samples
         .iter()
         .find(|s| s.data.iter().any(|&d| crate::recon::is_valid_depth(d)))
     else {
         return Ok(least);
     };
-    let ectx = EvalContext::of_simulator(at.sim, ObjectSet::builtin());
-    let model = evaluator.object_from_mesh(&at.object.name, &at.object.mesh, at.object.symmetry)?;
+    let ectx = SensorContext::of_simulator(at.sim, ObjectSet::builtin());
+    let model = estimator.object_from_mesh(&at.object.name, &at.object.mesh, at.object.symmetry)?;
     let measured = Some((signature, imprint));
     let place = |press: f64| {
         at.sim
             .t_world_camera(&at.sim.pressing_pose(at.prepared, 0.0, 0.0, 0.0, press))
     };
     let register = |t: &glam::DAffine3, strategy: &InitStrategy| {
-        evaluator.pooled_hypotheses(
+        estimator.pooled_hypotheses(
             &model,
             std::slice::from_ref(first),
             &ectx,
@@ -189,9 +189,9 @@ fn search_press(
     // At the least press from the evaluation's random starts; at the others from its pick and best poses (another
     // press moves the pose little), a third of the work.
     let t = place(least);
-    let hypotheses = register(&t, &evaluator.random_starts(seed))?;
+    let hypotheses = register(&t, &estimator.random_starts(seed))?;
     let Some((pick, _, cost)) =
-        evaluator.choose_scored(&model, &hypotheses, &ectx, &t, measured)?
+        estimator.choose_scored(&model, &hypotheses, &ectx, &t, measured)?
     else {
         return Ok(least);
     };
@@ -220,7 +220,7 @@ fn search_press(
         let mut hypotheses: Vec<_> = found?.into_iter().flatten().collect();
         hypotheses.sort_by(|a, b| a.cost.total_cmp(&b.cost));
         if let Some((_, _, Some(cost))) =
-            evaluator.choose_scored(&model, &hypotheses, &ectx, &t, measured)?
+            estimator.choose_scored(&model, &hypotheses, &ectx, &t, measured)?
         {
             scores.push((press, cost));
         }

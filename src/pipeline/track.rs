@@ -13,9 +13,9 @@ use serde::{Deserialize, Serialize};
 
 pub use super::press::PressChoice;
 use super::{LoadedObject, PipelineError, Progress};
-use crate::metrics::evaluate::EvalConfig;
 use crate::model::DiffusionModel;
 use crate::objects::Symmetry;
+use crate::pose::PoseConfig;
 use crate::recording::ProcessedRecording;
 use crate::sensor::Se2;
 use crate::sim::{PreparedObject, Simulator};
@@ -315,7 +315,7 @@ pub struct TrackContext<'a> {
     pub prepared: &'a PreparedObject,
     pub sim: &'a Simulator,
     pub derender: &'a super::DerenderConfig,
-    pub eval: &'a EvalConfig,
+    pub pose: &'a PoseConfig,
     pub press: PressChoice,
 }
 
@@ -347,7 +347,7 @@ pub fn track_frame(
         imprint,
         guidance.as_ref(),
         &derender,
-        ctx.eval.consensus_probability,
+        ctx.pose.consensus_probability,
         &mut *progress,
     )?;
     let mut row = FrameTrack::new(
@@ -368,7 +368,7 @@ pub fn track_frame(
         ctx.sim,
         &observation,
         super::Placement::Press(ctx.press),
-        ctx.eval,
+        ctx.pose,
         derender.seed,
         &mut |done, total| progress(done, total),
     ) {

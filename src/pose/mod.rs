@@ -1,12 +1,15 @@
 //! **SE(2) pose estimation** (paper IV.C, V.D): the object signed distance ([`sdf`], [`sdf_grid`]), registration of
 //! the object to reconstructed contact points with free-space evidence ([`register`]: the [`Registration`] trait and
 //! its driver; [`sdf_register`]: the CHSEL-inspired Gauss–Newton/Levenberg–Marquardt implementation), and the
-//! threshold baseline ([`baseline`]).
+//! threshold baseline ([`baseline`]); the pose engine that runs them on depth estimates ([`estimator`]: anchoring,
+//! registration, hypotheses; [`choose`]: the signature check's pick and the posterior).
 //!
 //! Poses are [`crate::sensor::Se2`] `t_world_object`: the object's resting frame placed at `(x, y)` with yaw `theta`
 //! about the table normal, metres and radians.
 
 pub mod baseline;
+pub mod choose;
+pub mod estimator;
 pub mod export;
 pub mod figure;
 pub mod from_depth;
@@ -20,6 +23,7 @@ pub mod signature_check;
 
 pub use crate::mesh::sample_surface;
 pub use baseline::{threshold_contact, BaselineConfig};
+pub use estimator::{Estimator, ObjectModel, PoseConfig, SensorContext};
 pub use register::{
     initial_poses, register, Hypothesis, InitStrategy, Registration, RegistrationProblem,
 };
@@ -44,6 +48,10 @@ pub enum PoseError {
     NoContact,
     #[error("{what} contains a non-finite value at index {index}")]
     NonFinite { what: &'static str, index: usize },
+    #[error(transparent)]
+    Object(#[from] crate::objects::ObjectError),
+    #[error(transparent)]
+    Mesh(#[from] crate::mesh::MeshError),
 }
 
 /// Check settings: each of `positive` finite and > 0, each of `non_negative` finite and >= 0; the error names the

@@ -127,7 +127,7 @@ impl Default for SdfRegistrationConfig {
 }
 
 impl SdfRegistrationConfig {
-    fn validate(&self) -> Result<(), PoseError> {
+    pub(crate) fn validate(&self) -> Result<(), PoseError> {
         let positive = [
             ("scale_m", self.scale_m),
             ("initial_scale_m", self.initial_scale_m),

@@ -25,55 +25,67 @@ use crate::sensor::{Intrinsics, Se2};
 use crate::sim::render::render_depth;
 use crate::sim::shadows::tactile_signature;
 
-/// Settings of the signature check.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// Settings of the signature check. On the command line only `--check-refine` ([`Self::refine`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(default)]
 pub struct SignatureCheckConfig {
     /// Robust (Cauchy) scale of the per-pixel residual S − Ŝ, metres (default 3 mm, about twice the synthetic
     /// noise σ = 1.38 mm).
+    #[arg(skip = DEFAULT_SIGNATURE_CHECK.scale_m)]
     pub scale_m: f64,
-    /// Hypotheses (the lowest-scoring distinct ones) refined by the pattern search besides the registration's best
-    /// (default 20: every hypothesis of a 10-start registration of the sample and of the imprint; 0 refines none
-    /// and picks among all as scored). On the real-mesh validation set refining 20 instead of 3 took the mean
+    /// Hypotheses the signature check refines besides the registration's best (0: none).
+    ///
+    /// The lowest-scoring distinct ones; the default 20 is every hypothesis of a 10-start registration of the
+    /// sample and of the imprint, and 0 picks among all as scored. On the real-mesh validation set refining 20 instead of 3 took the mean
     /// position error from 1.94 to 1.44 mm: the pose that explains the signature best often starts as a
     /// hypothesis the unrefined score ranks low.
+    #[arg(long = "check-refine", default_value_t = DEFAULT_SIGNATURE_CHECK.refine)]
     pub refine: usize,
     /// How much better (natural log-likelihood under the sensor's Gaussian noise, [`SignatureModel::noise_std`])
     /// another hypothesis must explain the signature than the registration's best to replace it (default 0: the
     /// best explanation wins; 3 and 10 nats were no better on the real-mesh validation set).
+    #[arg(skip = DEFAULT_SIGNATURE_CHECK.margin_nats)]
     pub margin_nats: f64,
     /// First translation step of the pattern search, metres (default 1 mm); rotation steps are this over
     /// `lever_m`.
+    #[arg(skip = DEFAULT_SIGNATURE_CHECK.step_m)]
     pub step_m: f64,
     /// The search stops when the step falls below this, metres (default 0.05 mm).
+    #[arg(skip = DEFAULT_SIGNATURE_CHECK.min_step_m)]
     pub min_step_m: f64,
     /// Lever arm converting rotation to length, metres (default 20 mm).
+    #[arg(skip = DEFAULT_SIGNATURE_CHECK.lever_m)]
     pub lever_m: f64,
     /// Most cost evaluations per refined hypothesis (default 150).
+    #[arg(skip = DEFAULT_SIGNATURE_CHECK.max_evaluations)]
     pub max_evaluations: usize,
     /// Take the membrane from the measurement's own reference frame (R = S + Y, averaged over a window of this
     /// radius, pixels) instead of the nominal membrane, so that a drifted inflation is predicted as measured; 0
     /// uses the nominal membrane (default 3).
+    #[arg(skip = DEFAULT_SIGNATURE_CHECK.reference_radius_px)]
     pub reference_radius_px: usize,
 }
 
+/// The defaults (also the command line's).
+const DEFAULT_SIGNATURE_CHECK: SignatureCheckConfig = SignatureCheckConfig {
+    scale_m: 0.003,
+    refine: 20,
+    margin_nats: 0.0,
+    step_m: 0.001,
+    min_step_m: 5e-5,
+    lever_m: 0.02,
+    max_evaluations: 150,
+    reference_radius_px: 3,
+};
+
 impl Default for SignatureCheckConfig {
     fn default() -> Self {
-        Self {
-            scale_m: 0.003,
-            refine: 20,
-            margin_nats: 0.0,
-            step_m: 0.001,
-            min_step_m: 5e-5,
-            lever_m: 0.02,
-            max_evaluations: 150,
-            reference_radius_px: 3,
-        }
+        DEFAULT_SIGNATURE_CHECK
     }
 }
 
 impl SignatureCheckConfig {
-    fn validate(&self) -> Result<(), PoseError> {
+    pub(crate) fn validate(&self) -> Result<(), PoseError> {
         super::check_settings(
             "signature check: ",
             &[

@@ -6,8 +6,9 @@ use glam::DAffine3;
 
 use super::{FailedRegistration, SampleError, UncertaintyReport};
 use crate::image::Image;
-use crate::metrics::evaluate::{EvalContext, EvalError, Evaluator, ObjectModel};
+use crate::metrics::evaluate::EvalError;
 use crate::pose::from_depth::consensus_depth;
+use crate::pose::{Estimator, ObjectModel, SensorContext};
 use crate::pose::{Hypothesis, InitStrategy, PoseError};
 use crate::sensor::Se2;
 
@@ -28,7 +29,7 @@ pub struct Signature<'a> {
     /// The fixed start; `None`: the best of a K-start registration of the first sample with contact.
     pub init: Option<Se2>,
     /// (S, Y), the measured signature and imprint: with them (and
-    /// [`crate::metrics::evaluate::EvalConfig::check_signature`]) the multi-sample estimate is the signature check's
+    /// [`crate::pose::PoseConfig::check_signature`]) the multi-sample estimate is the signature check's
     /// pick among the consensus's and every sample's hypotheses.
     pub measured: Option<(&'a Image, &'a Image)>,
 }
@@ -38,17 +39,17 @@ pub struct Signature<'a> {
 /// skipped here (the analysis records it with the others); the error of the last one is returned when none
 /// registers.
 pub fn first_registration(
-    evaluator: &Evaluator,
+    estimator: &Estimator,
     object: &ObjectModel,
-    ctx: &EvalContext,
+    ctx: &SensorContext,
     t_world_camera: &DAffine3,
     samples: &[Image],
     seed: u64,
 ) -> Result<Option<(usize, Vec<Hypothesis>)>, PoseError> {
-    let strategy = evaluator.random_starts(seed);
+    let strategy = estimator.random_starts(seed);
     let mut last_error = None;
     for (i, s) in samples.iter().enumerate() {
-        match evaluator.register_depth(object, s, ctx, t_world_camera, &strategy, seed) {
+        match estimator.register_depth(object, s, ctx, t_world_camera, &strategy, seed) {
             Ok(Some(h)) if !h.is_empty() => return Ok(Some((i, h))),
             Ok(_) => {}
             Err(e) => last_error = Some(e),
@@ -60,21 +61,21 @@ pub fn first_registration(
 /// Register each sample from the fixed start and measure the errors against the truth (or, without it, against the
 /// fixed start's source estimate). Samples without contact are skipped.
 pub fn analyse(
-    evaluator: &Evaluator,
+    estimator: &Estimator,
     object: &ObjectModel,
-    ctx: &EvalContext,
+    ctx: &SensorContext,
     sig: &Signature<'_>,
     seed: u64,
 ) -> Result<UncertaintyReport, EvalError> {
-    analyse_with_progress(evaluator, object, ctx, sig, seed, &mut |_, _| true)
+    analyse_with_progress(estimator, object, ctx, sig, seed, &mut |_, _| true)
 }
 
 /// [`analyse`] reporting `progress(done, total)` after each registration (the K-start search when `sig.init` is
 /// `None`, every sample, the baseline); returning `false` stops it with [`EvalError::Cancelled`].
 pub fn analyse_with_progress(
-    evaluator: &Evaluator,
+    estimator: &Estimator,
     object: &ObjectModel,
-    ctx: &EvalContext,
+    ctx: &SensorContext,
     sig: &Signature<'_>,
     seed: u64,
     progress: &mut dyn FnMut(usize, usize) -> bool,
@@ -93,12 +94,12 @@ pub fn analyse_with_progress(
             Err(EvalError::Cancelled)
         }
     };
-    let strategy = evaluator.random_starts(seed);
+    let strategy = estimator.random_starts(seed);
     let init = match sig.init {
         Some(i) => i,
         None => {
             let found = first_registration(
-                evaluator,
+                estimator,
                 object,
                 ctx,
                 &sig.t_world_camera,
@@ -131,7 +132,7 @@ pub fn analyse_with_progress(
         })
     };
     for (i, s) in sig.samples.iter().enumerate() {
-        let hyps = match evaluator.register_depth(
+        let hyps = match estimator.register_depth(
             object,
             s,
             ctx,
@@ -157,7 +158,7 @@ pub fn analyse_with_progress(
     }
     let baseline = match sig.baseline {
         Some(b) => {
-            match evaluator.register_depth(object, b, ctx, &sig.t_world_camera, &fixed, seed) {
+            match estimator.register_depth(object, b, ctx, &sig.t_world_camera, &fixed, seed) {
                 Ok(h) => h.and_then(|h| h.first().copied()).map(|best| {
                     SampleError::new(best.pose, best.cost, reference, &object.symmetry)
                 }),
@@ -173,7 +174,7 @@ pub fn analyse_with_progress(
         step(&mut done)?;
     }
     let multi_sample = if multi {
-        let estimate = multi_sample_estimate(evaluator, object, ctx, sig, &strategy);
+        let estimate = multi_sample_estimate(estimator, object, ctx, sig, &strategy);
         step(&mut done)?;
         match estimate {
             Ok(pose) => {
@@ -197,19 +198,19 @@ pub fn analyse_with_progress(
 }
 
 /// The multi-sample estimate of `sig`: the samples' consensus contact registered from `strategy`'s starts; with the
-/// signature check ([`Evaluator::choose`]) every sample (and, with
-/// [`crate::metrics::evaluate::EvalConfig::imprint_proposals`], the threshold baseline's contact) is registered from
+/// signature check ([`Estimator::choose`]) every sample (and, with
+/// [`crate::pose::PoseConfig::imprint_proposals`], the threshold baseline's contact) is registered from
 /// them too and the check picks among all those hypotheses. Returns the pose with its registration cost (NaN for a
 /// pose the check refined).
 pub fn multi_sample_estimate(
-    evaluator: &Evaluator,
+    estimator: &Estimator,
     object: &ObjectModel,
-    ctx: &EvalContext,
+    ctx: &SensorContext,
     sig: &Signature<'_>,
     strategy: &InitStrategy,
 ) -> Result<Option<(Se2, f64)>, PoseError> {
-    let consensus = consensus_depth(sig.samples, evaluator.config.consensus_probability)?;
-    let checked = evaluator.config.check_signature && sig.measured.is_some();
+    let consensus = consensus_depth(sig.samples, estimator.config.consensus_probability)?;
+    let checked = estimator.config.check_signature && sig.measured.is_some();
     let mut registered = vec![consensus];
     if checked {
         // Each proposing sample is registered from every start, the bulk of the estimate's time; samples beyond the
@@ -217,12 +218,12 @@ pub fn multi_sample_estimate(
         // posterior then costs what a 16-sample one does here).
         registered.extend(sig.samples.iter().take(MULTI_PROPOSALS).cloned());
         // The imprint's threshold contact proposes too (its depths are the signature's: nothing to anchor).
-        if let (true, Some(b)) = (evaluator.config.imprint_proposals, sig.baseline) {
+        if let (true, Some(b)) = (estimator.config.imprint_proposals, sig.baseline) {
             registered.push(b.clone());
         }
     }
     // The samples arrive anchored (or not) as the caller chose: no second anchoring here.
-    let hypotheses = evaluator.pooled_hypotheses(
+    let hypotheses = estimator.pooled_hypotheses(
         object,
         &registered,
         ctx,
@@ -230,7 +231,7 @@ pub fn multi_sample_estimate(
         None,
         strategy,
     )?;
-    let pose = evaluator
+    let pose = estimator
         .choose(object, &hypotheses, ctx, &sig.t_world_camera, sig.measured)?
         .map(|(pose, _)| pose);
     Ok(pose.map(|p| {

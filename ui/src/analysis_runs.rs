@@ -64,10 +64,6 @@ pub struct PoseView {
     pub result: Option<Box<PoseAnalysis>>,
     /// The sample highlighted by hovering the KDE plots.
     pub highlight: Option<usize>,
-    /// Register without the signature check (the registration's best hypothesis is the estimate).
-    pub no_signature_check: bool,
-    /// Check only the sample's hypotheses, without the imprint's threshold contact's.
-    pub no_imprint_proposals: bool,
 }
 
 /// Live state of the analysis tabs.
@@ -487,8 +483,7 @@ impl WorkbenchApp {
             imprint: r.input.imprint.clone(),
             samples: r.samples.clone(),
             seed: r.config.seed,
-            check_signature: !view.no_signature_check,
-            imprint_proposals: !view.no_imprint_proposals,
+            config: self.state.pose.clone(),
         };
         raise_cancel(&mut view.cancel);
         let cancel = Arc::new(AtomicBool::new(false));
@@ -545,7 +540,7 @@ impl WorkbenchApp {
             &sim,
             &input,
             &estimate,
-            &req.eval_config(),
+            &req.config,
             req.seed,
             tactile_derender::io::ply::PlyEncoding::Binary,
         )?;

@@ -267,8 +267,8 @@ impl WorkbenchApp {
                 self.report("export", r);
             }
             Command::HighlightSample(k) => self.analysis.pose.highlight = k,
-            Command::SetSignatureCheck(on) => self.analysis.pose.no_signature_check = !on,
-            Command::SetImprintProposals(on) => self.analysis.pose.no_imprint_proposals = !on,
+            Command::SetSignatureCheck(on) => self.state.pose.check_signature = on,
+            Command::SetImprintProposals(on) => self.state.pose.imprint_proposals = on,
             Command::ZoomImage(target) => self.analysis.zoom = target,
             Command::OpenRecording(path) => {
                 self.state.recording = crate::recording_view::RecordingSettings {

@@ -10,10 +10,10 @@ use std::sync::Arc;
 
 use anyhow::{anyhow, Result};
 use tactile_derender::image::Image;
-use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::metrics::{depth_metrics, DepthMetrics, DepthMetricsConfig};
 use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::{self, DerenderConfig};
+use tactile_derender::pose::estimator::DEFAULT_CONSENSUS_PROBABILITY;
 
 use crate::worker::{JobKind, WorkerMsg};
 
@@ -276,7 +276,7 @@ pub fn run(
         &input.imprint,
         guidance.as_ref(),
         &req.config,
-        EvalConfig::default().consensus_probability,
+        DEFAULT_CONSENSUS_PROBABILITY,
         &mut |done, total| {
             progress(done, total);
             !cancel.load(Ordering::Relaxed)

@@ -9,9 +9,9 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use tactile_derender::image::Image;
-use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::pipeline::press::PressChoice;
 use tactile_derender::pipeline::{self, Observation, Placement};
+use tactile_derender::pose::PoseConfig;
 use tactile_derender::sim::Simulator;
 
 use crate::derender::PoseContext;
@@ -28,21 +28,8 @@ pub struct PoseRequest {
     /// The run's X̂0 samples, metres.
     pub samples: Vec<Image>,
     pub seed: u64,
-    /// Judge the registration's hypotheses by the signature each predicts (the signature check).
-    pub check_signature: bool,
-    /// Pool the imprint's threshold-contact hypotheses with the sample's before the check.
-    pub imprint_proposals: bool,
-}
-
-impl PoseRequest {
-    /// The pose settings this request runs with: the one definition the job and the exports of its result share.
-    pub fn eval_config(&self) -> EvalConfig {
-        EvalConfig {
-            check_signature: self.check_signature,
-            imprint_proposals: self.imprint_proposals,
-            ..EvalConfig::default()
-        }
-    }
+    /// The pose engine's settings (the session's): the job and the exports of its result run with these.
+    pub config: PoseConfig,
 }
 
 /// Register the samples and the baseline ([`pipeline::estimate_pose`], as `tnd pose` does), reporting
@@ -54,7 +41,6 @@ pub fn run(
 ) -> Result<PoseAnalysis> {
     let sim = Simulator::new(req.context.sim.clone()).context("sensor configuration")?;
     let object = req.context.object.spec().load()?;
-    let eval = req.eval_config();
     // Where the press is not known, the sensor goes where the samples and the signature say (as `tnd pose`).
     let c = &req.context;
     let placement = if c.find_press {
@@ -74,7 +60,7 @@ pub fn run(
         &sim,
         &observation,
         placement,
-        &eval,
+        &req.config,
         req.seed,
         &mut |done, total| {
             progress(done, total);

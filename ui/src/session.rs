@@ -102,6 +102,7 @@ pub fn validate(state: &State) -> Result<(), String> {
         .config
         .validate(None)
         .map_err(|e| e.to_string())?;
+    state.pose.validate().map_err(|e| e.to_string())?;
     Ok(())
 }
 

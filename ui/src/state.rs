@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 use tactile_derender::dataset::SplitName;
 use tactile_derender::mesh::Units;
+use tactile_derender::pose::PoseConfig;
 use tactile_derender::sensor::Se2;
 use tactile_derender::sim::SimConfig;
 
@@ -41,6 +42,10 @@ pub struct State {
     pub derender: DerenderSettings,
     /// The open sensor recording, its topic, reference and timeline position.
     pub recording: crate::recording_view::RecordingSettings,
+    /// Pose estimation (the Pose tab and the Recording tab's track): the core's [`PoseConfig`], the same settings
+    /// and defaults as `tnd pose`, `tnd eval` and `tnd recording track` (`check_signature`, `imprint_proposals`,
+    /// `anchor_to_signature`, `inits`, the signature check's and the posterior's settings, ...).
+    pub pose: PoseConfig,
 }
 
 impl Default for State {
@@ -56,6 +61,7 @@ impl Default for State {
             dataset: DatasetSettings::default(),
             derender: DerenderSettings::default(),
             recording: Default::default(),
+            pose: PoseConfig::default(),
         }
     }
 }

@@ -9,10 +9,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use anyhow::{anyhow, Context, Result};
-use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::track::{track_frame, FrameTrack, PressChoice, TrackContext};
 use tactile_derender::pipeline::{DerenderConfig, PipelineError};
+use tactile_derender::pose::PoseConfig;
 use tactile_derender::recording::ProcessedRecording;
 use tactile_derender::sensor::Se2;
 use tactile_derender::sim::{PreparedObject, SimConfig, Simulator};
@@ -57,6 +57,8 @@ pub struct TrackRequest {
     pub model: PathBuf,
     pub derender: DerenderConfig,
     pub sim: SimConfig,
+    /// The pose engine's settings (the session's).
+    pub pose: PoseConfig,
 }
 
 impl TrackRequest {
@@ -85,14 +87,13 @@ pub fn spawn(
         let prepared = PreparedObject::new(object.mesh.clone())?;
         let device = tactile_derender::model::device::open_device(&req.derender.device)?;
         let model = DiffusionModel::load_on(&req.model, &device)?;
-        let eval = EvalConfig::default();
         let track = TrackContext {
             model: &model,
             object: &object,
             prepared: &prepared,
             sim: &sim,
             derender: &req.derender,
-            eval: &eval,
+            pose: &req.pose,
             press: PressChoice::Auto,
         };
         let mut cancelled = false;
@@ -157,6 +158,7 @@ impl crate::app::WorkbenchApp {
             model,
             derender: self.state.derender.config.clone(),
             sim: self.state.sim.clone(),
+            pose: self.state.pose.clone(),
         };
         let frames = req.frames().len();
         if frames == 0 {

@@ -569,7 +569,12 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     // check ran.
     h.get_by_label("signature check").click();
     h.run_ok();
-    assert!(h.state().analysis.pose.no_signature_check);
+    assert!(!h.state().state.pose.check_signature);
+    // The setting is the session's, stored as the core's PoseConfig (`tnd pose --no-signature-check`).
+    assert_eq!(
+        serde_json::to_value(&h.state().state).unwrap()["pose"]["check_signature"],
+        false
+    );
     h.get_by_label("Register samples").click();
     wait_for(&mut h, "the registration without the check", |a| {
         !a.analysis.pose.running && a.analysis.pose.result.is_some()
@@ -585,7 +590,7 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     h.run_ok();
     h.get_by_label("imprint proposals").click();
     h.run_ok();
-    assert!(h.state().analysis.pose.no_imprint_proposals);
+    assert!(!h.state().state.pose.imprint_proposals);
     h.get_by_label("Register samples").click();
     wait_for(&mut h, "the registration without imprint proposals", |a| {
         !a.analysis.pose.running && a.analysis.pose.result.is_some()

@@ -22,8 +22,7 @@ use tactile_derender::metrics::sources::DatasetSource;
 
 use crate::eval_tables::{breakdown_tables, markdown_table};
 use tactile_derender::model::{DiffusionModel, GuidanceConfig, SamplerConfig, TactileConfig};
-use tactile_derender::pose::signature_check::SignatureCheckConfig;
-use tactile_derender::pose::threshold_contact;
+use tactile_derender::pose::{threshold_contact, PoseConfig};
 use tactile_derender::uncertainty::analysis::{analyse, Signature};
 
 #[derive(Args, Debug)]
@@ -61,36 +60,18 @@ pub struct EvalArgs {
     /// JSON only: leave out the markdown tables (on stderr) beside the JSON objects (one per split, on stdout).
     #[arg(long)]
     pub json: bool,
-    /// Also write report.md and uncertainty plots (KDE over --samples samples) for --report-pairs pairs per split.
+    /// Also write report.md and uncertainty plots (KDE over --report-samples samples) for --report-pairs pairs per
+    /// split.
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Pairs per split with an uncertainty analysis in the report.
     #[arg(long, default_value_t = 3)]
     pub report_pairs: usize,
-    /// Samples per uncertainty analysis.
+    /// Samples per uncertainty analysis in the report (`--pose-samples` are the samples every pair is scored on).
     #[arg(long, default_value_t = 50)]
-    pub samples: usize,
-    /// Register the estimates as generated, without shifting their contact depths onto the measured signature
-    /// (depth anchoring, on by default: it removes the offset a drifted membrane inflation gives).
-    #[arg(long)]
-    pub no_anchor: bool,
-    /// Take the registration's lowest-cost hypothesis as the pose, without checking the hypotheses against the
-    /// measured signature (the signature check, on by default: each hypothesis predicts the signature, the best
-    /// explanation is refined and kept).
-    #[arg(long)]
-    pub no_signature_check: bool,
-    /// Leave out the row of the model's sample with the imprint's threshold contact as further proposals to the
-    /// signature check (shown by default with the check).
-    #[arg(long)]
-    pub no_imprint_proposals: bool,
-    /// Hypotheses the signature check refines besides the registration's best (the lowest-scoring distinct
-    /// ones; default 20): more cost more time and find poses further from the best one.
-    #[arg(long, default_value_t = SignatureCheckConfig::default().refine)]
-    pub check_refine: usize,
-    /// Random starts per registration (the paper's K = 10); with the signature check more starts give it more
-    /// hypotheses to choose from.
-    #[arg(long, default_value_t = EvalConfig::default().inits)]
-    pub inits: usize,
+    pub report_samples: usize,
+    #[command(flatten)]
+    pub pose: PoseConfig,
     /// Also print this run in the paper's table layout and units (θ in rad, Chamfer in m², splits side by side).
     #[arg(long)]
     pub paper: bool,
@@ -104,10 +85,6 @@ pub struct EvalArgs {
     /// scored again (a larger --limit extends it); a file of other settings is refused, naming them.
     #[arg(long)]
     pub records: Option<PathBuf>,
-    /// A posterior calibration (JSON, as `tnd posterior --fit` writes) instead of the bundled one: the regions
-    /// whose coverage the tables report.
-    #[arg(long, value_name = "FILE")]
-    pub posterior: Option<PathBuf>,
     /// Also save every scored pair's imprint, signature, true X0 and model samples (all --pose-samples of them) as
     /// DIR/<split>/<index>.npz, metres, for analysis in numpy (docs/evaluation.md).
     #[arg(long, value_name = "DIR")]
@@ -187,9 +164,9 @@ fn records_settings(a: &EvalArgs, dataset: &Dataset) -> Result<Value> {
     Ok(json!({
         "model": model, "data": canonical(dataset.dir()), "manifest_sha256": sha256_hex(&manifest),
         "seed": a.seed, "skip": a.skip, "pose_samples": a.pose_samples.max(1), "sampler": a.sampler,
-        "guidance": a.guidance, "anchor": !a.no_anchor, "signature_check": !a.no_signature_check,
-        "imprint_proposals": !a.no_imprint_proposals, "check_refine": a.check_refine, "inits": a.inits,
-        "posterior": crate::posterior_cmd::config_or_default(a.posterior.as_deref())?,
+        "guidance": a.guidance, "anchor": a.pose.anchor_to_signature,
+        "signature_check": a.pose.check_signature, "imprint_proposals": a.pose.imprint_proposals,
+        "check_refine": a.pose.signature_check.refine, "inits": a.pose.inits, "posterior": a.pose.posterior,
     }))
 }
 
@@ -246,17 +223,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
         &splits(&a.split)?,
     )?;
     let mut paper = Vec::new();
+    a.pose.validate()?;
     let evaluator = Evaluator::new(EvalConfig {
+        pose: a.pose.clone(),
         pose_samples: a.pose_samples.max(1),
-        anchor_to_signature: !a.no_anchor,
-        check_signature: !a.no_signature_check,
-        imprint_proposals: !a.no_imprint_proposals,
-        inits: a.inits,
-        signature_check: SignatureCheckConfig {
-            refine: a.check_refine,
-            ..Default::default()
-        },
-        posterior: crate::posterior_cmd::config_or_default(a.posterior.as_deref())?,
         ..EvalConfig::default()
     });
     let rrd = a.rerun.open("tnd eval")?;
@@ -506,9 +476,16 @@ fn uncertainty_plots(
     let ctx = source.context();
     for i in 0..a.report_pairs.min(source.len()) {
         let pair = source.pair(i)?;
-        let samples = gen.generate(&pair, ctx, a.samples, a.seed.wrapping_add(i as u64))?;
-        let (samples, _) = evaluator.anchor(&samples, Some(&pair.signature), &pair.imprint)?;
-        let base = threshold_contact(&pair.signature, &pair.imprint, &evaluator.config.baseline);
+        let samples = gen.generate(&pair, ctx, a.report_samples, a.seed.wrapping_add(i as u64))?;
+        let (samples, _) =
+            evaluator
+                .estimator
+                .anchor(&samples, Some(&pair.signature), &pair.imprint)?;
+        let base = threshold_contact(
+            &pair.signature,
+            &pair.imprint,
+            &evaluator.config().pose.baseline,
+        );
         let object = evaluator.object(&ctx.objects, &pair.object)?;
         let sig = Signature {
             t_world_camera: pair.t_world_camera,
@@ -518,7 +495,7 @@ fn uncertainty_plots(
             init: None,
             measured: Some((&pair.signature, &pair.imprint)),
         };
-        let r = analyse(evaluator, &object, ctx, &sig, a.seed)?;
+        let r = analyse(&evaluator.estimator, &object, ctx, &sig, a.seed)?;
         let sub = dir.join(format!("{split}_{i}"));
         r.write(&sub)?;
         let _ = writeln!(
@@ -558,7 +535,7 @@ impl<'a> PairLog<'a> {
 
     fn mesh(
         &mut self,
-        ctx: &tactile_derender::metrics::evaluate::EvalContext,
+        ctx: &tactile_derender::pose::SensorContext,
         name: &str,
     ) -> Result<&tactile_derender::mesh::Mesh> {
         if !self.meshes.contains_key(name) {
@@ -574,7 +551,7 @@ impl<'a> PairLog<'a> {
     /// pose.
     fn pair(
         &mut self,
-        ctx: &tactile_derender::metrics::evaluate::EvalContext,
+        ctx: &tactile_derender::pose::SensorContext,
         i: usize,
         pair: &tactile_derender::metrics::evaluate::EvalPair,
         sample: &tactile_derender::image::Image,
@@ -603,7 +580,7 @@ impl<'a> PairLog<'a> {
     /// The model's estimated pose of every scored pair of the split, at its pair's step.
     fn estimates(
         &mut self,
-        ctx: &tactile_derender::metrics::evaluate::EvalContext,
+        ctx: &tactile_derender::pose::SensorContext,
         report: &tactile_derender::metrics::evaluate::EvalReport,
     ) -> Result<()> {
         use crate::rerun_out::{object_at, ESTIMATE_RGB};

@@ -13,11 +13,11 @@ use serde_json::json;
 use tactile_derender::io::figure::FigureConfig;
 use tactile_derender::io::npy;
 use tactile_derender::io::ply::PlyEncoding;
-use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::press::PressChoice;
 use tactile_derender::pipeline::{self, DerenderConfig, ObjectSpec};
 use tactile_derender::pose::from_depth::contact_probability;
+use tactile_derender::pose::PoseConfig;
 use tactile_derender::sim::{PreparedObject, Simulator};
 
 use super::args::SensorArgs;
@@ -38,15 +38,8 @@ pub struct PoseArgs {
     /// The true in-contact depth X0 (.npy), used by --model ground-truth.
     #[arg(long)]
     pub target: Option<PathBuf>,
-    /// Take the registration's lowest-cost hypothesis as the estimate, without checking the hypotheses against the
-    /// signature (the check needs --signature; on by default).
-    #[arg(long)]
-    pub no_signature_check: bool,
-    /// Check only the sample's hypotheses, without the imprint's threshold contact as further proposals (on by
-    /// default with the check: where the imprint says more than the sample, on small or shallow contacts, its
-    /// pose can win).
-    #[arg(long)]
-    pub no_imprint_proposals: bool,
+    #[command(flatten)]
+    pub pose: PoseConfig,
     /// The true pose X,Y,THETA (metres, metres, radians; errors are measured against it, otherwise against the
     /// first registration's best hypothesis, `best_hypothesis` in pose.json, where every sample's registration
     /// starts: the signature check's estimate may differ from it).
@@ -59,9 +52,6 @@ pub struct PoseArgs {
     pub press: PressChoice,
     #[command(flatten)]
     pub derender: DerenderConfig,
-    /// A posterior calibration (JSON, as `tnd posterior --fit` writes) instead of the bundled one.
-    #[arg(long, value_name = "FILE")]
-    pub posterior: Option<PathBuf>,
     /// Encoding of the PLY files (contact, free-space and consensus points, the object at each estimate).
     #[arg(long, value_enum, default_value_t = PlyEncoding::Binary)]
     pub ply: PlyEncoding,
@@ -95,12 +85,6 @@ pub fn run(a: PoseArgs) -> Result<()> {
         .as_deref()
         .map(|t| crate::args::parse_pose("--truth", t))
         .transpose()?;
-    let eval = EvalConfig {
-        check_signature: !a.no_signature_check,
-        imprint_proposals: !a.no_imprint_proposals,
-        posterior: crate::posterior_cmd::config_or_default(a.posterior.as_deref())?,
-        ..EvalConfig::default()
-    };
     let (generator, samples, probability) = if a.model == "ground-truth" {
         let target = a.target.as_ref().ok_or_else(|| {
             anyhow!("--model ground-truth needs --target FILE.npy (the in-contact depth to use as every sample)")
@@ -121,7 +105,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
             &imprint,
             guidance.as_ref(),
             &a.derender,
-            eval.consensus_probability,
+            a.pose.consensus_probability,
             &mut progress::callback(&mut bar),
         )?;
         progress::finish(&mut bar);
@@ -149,7 +133,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         &sim,
         &observation,
         pipeline::Placement::Press(a.press),
-        &eval,
+        &a.pose,
         a.derender.seed,
         &mut progress::callback(&mut bar),
     ) {
@@ -203,7 +187,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         &sim,
         &input,
         &estimate,
-        &eval,
+        &a.pose,
         a.derender.seed,
         a.ply,
     )?;

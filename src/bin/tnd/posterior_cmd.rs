@@ -3,7 +3,7 @@
 //! that `tnd eval`, `tnd pose` and `tnd recording track` take as `--posterior FILE`: a user with labelled
 //! recordings of their own sensor calibrates the uncertainty it reports.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
@@ -51,23 +51,6 @@ const METHODS: [(&str, Row); 4] = [
     ("baseline_checked", |r| r.baseline_checked.as_ref()),
 ];
 
-/// The calibration of `--posterior FILE` (eval, pose, track), or the bundled one without it.
-pub fn config_or_default(file: Option<&Path>) -> Result<PosteriorConfig> {
-    Ok(file.map(read_config).transpose()?.unwrap_or_default())
-}
-
-/// A posterior calibration from a JSON file (every field optional, the defaults for the others).
-pub fn read_config(path: &Path) -> Result<PosteriorConfig> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    let config: PosteriorConfig = serde_json::from_str(&text)
-        .map_err(|e| anyhow!("{}: not a posterior calibration: {e}", path.display()))?;
-    config
-        .validate()
-        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    Ok(config)
-}
-
 pub fn run(a: PosteriorArgs) -> Result<()> {
     let methods: Vec<_> = METHODS
         .iter()
@@ -84,7 +67,11 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
         .as_deref()
         .map(tactile_derender::io::lock::OutputLock::acquire)
         .transpose()?;
-    let config = a.config.as_deref().map(read_config).transpose()?;
+    let config = a
+        .config
+        .as_deref()
+        .map(|p| PosteriorConfig::read(p).map_err(|e| anyhow!("{}: {e}", p.display())))
+        .transpose()?;
     let mut records = Vec::new();
     for path in &a.records {
         records.extend(EvalLog::read(path)?.1);

@@ -12,9 +12,9 @@ use tactile_derender::image::Image;
 use tactile_derender::io::figure::{write_figure, FigureConfig, ImageGrid};
 use tactile_derender::io::preview::PanelStyle;
 use tactile_derender::io::{npy, write_atomic};
-use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::{self, DerenderConfig};
+use tactile_derender::pose::estimator::DEFAULT_CONSENSUS_PROBABILITY;
 
 #[derive(Args, Debug)]
 pub struct SampleArgs {
@@ -71,7 +71,7 @@ pub fn run(a: SampleArgs) -> Result<()> {
         &imprint,
         guidance.as_ref(),
         &a.derender,
-        EvalConfig::default().consensus_probability,
+        DEFAULT_CONSENSUS_PROBABILITY,
         &mut super::progress::callback(&mut bar),
     )?;
     super::progress::finish(&mut bar);

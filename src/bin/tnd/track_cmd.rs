@@ -11,10 +11,10 @@ use clap::Args;
 use serde_json::{json, Value};
 use tactile_derender::dataset::import_recording::{calibrate_or_explain, frame_poses, PoseSource};
 use tactile_derender::io::write_atomic;
-use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::track::{track_frame, FrameTrack, PressChoice, TrackContext};
 use tactile_derender::pipeline::{DerenderConfig, ObjectSpec};
+use tactile_derender::pose::PoseConfig;
 use tactile_derender::recording::source::DEFAULT_MAX_POSE_GAP_S;
 use tactile_derender::recording::{self, ProcessedRecording, Recording, StreamKind};
 use tactile_derender::sim::{PreparedObject, Simulator};
@@ -61,9 +61,8 @@ pub struct TrackArgs {
     /// inflation and footprint, camera position, noise; see tnd calibrate).
     #[arg(long)]
     pub no_calibrate: bool,
-    /// A posterior calibration (JSON, as `tnd posterior --fit` writes) instead of the bundled one.
-    #[arg(long, value_name = "FILE")]
-    pub posterior: Option<PathBuf>,
+    #[command(flatten)]
+    pub pose: PoseConfig,
     /// Output directory: track.csv (one row per frame) and track.json; a run killed part-way resumes into it.
     #[arg(long)]
     pub out: PathBuf,
@@ -93,9 +92,9 @@ fn settings(a: &TrackArgs, sim: &tactile_derender::sim::SimConfig) -> Value {
         "object": object, "model": model, "derender": a.derender, "press": a.press.to_string(),
         "every": a.every, "min_contact_px": a.min_contact_px, "sim": sim, "calibrate": !a.no_calibrate,
     });
-    // Only when given: a track made before the option resumes under the same settings.
-    if let Some(p) = &a.posterior {
-        settings["posterior"] = json!(canonical(p));
+    // Only when not the defaults: a track made before the pose options resumes under the same settings.
+    if a.pose != PoseConfig::default() {
+        settings["pose"] = json!(a.pose);
     }
     settings
 }
@@ -315,17 +314,13 @@ pub fn run(a: TrackArgs) -> Result<()> {
             todo.len()
         );
     }
-    let eval = EvalConfig {
-        posterior: crate::posterior_cmd::config_or_default(a.posterior.as_deref())?,
-        ..EvalConfig::default()
-    };
     let ctx = TrackContext {
         model: &model,
         object: &object,
         prepared: &prepared,
         sim: &sim,
         derender: &a.derender,
-        eval: &eval,
+        pose: &a.pose,
         press: a.press,
     };
     let score = |row: &mut FrameTrack| {

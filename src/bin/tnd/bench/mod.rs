@@ -37,7 +37,7 @@ pub enum BenchCommand {
     /// SE(2) registration from K starts: wall time and pose errors (optionally the peer's saved problem).
     Pose(pose::PoseBenchArgs),
     /// The N-sample pose posterior of `tnd pose`'s pipeline (sampling, press, registration, check), stage by stage.
-    Posterior(posterior::PosteriorBenchArgs),
+    Posterior(Box<posterior::PosteriorBenchArgs>),
     /// U-Net forward and training step against `../shared/peers/unet_torch.py`.
     Unet(unet::UnetBenchArgs),
     /// The tiled convolution's three GEMM patterns, our AVX-512 kernels against the `gemm` crate (GFLOP/s).

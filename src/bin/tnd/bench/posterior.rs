@@ -14,12 +14,12 @@ use std::time::Instant;
 use anyhow::{anyhow, Result};
 use clap::Args;
 use serde_json::json;
-use tactile_derender::metrics::evaluate::EvalConfig;
 use tactile_derender::model::guidance::GuidanceConfig;
 use tactile_derender::model::sampler::SamplerConfig;
 use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::press::PressChoice;
 use tactile_derender::pipeline::{self, DerenderConfig, ObjectSpec, Observation, Placement};
+use tactile_derender::pose::PoseConfig;
 use tactile_derender::sensor::{Scene, Se2};
 use tactile_derender::sim::{PreparedObject, SimConfig, Simulator};
 use tactile_derender::uncertainty::SampleError;
@@ -48,6 +48,9 @@ pub struct PosteriorBenchArgs {
     pub sampler: SamplerConfig,
     #[command(flatten)]
     pub guidance: GuidanceConfig,
+    // The pose engine's settings, as `tnd pose` takes them.
+    #[command(flatten)]
+    pub engine: PoseConfig,
     /// Timed runs per sample count (median reported); each draws its samples with seed `seed + run`.
     #[arg(long, default_value_t = 3)]
     pub runs: usize,
@@ -99,7 +102,6 @@ pub fn run(a: &PosteriorBenchArgs) -> Result<()> {
         "object": a.object, "truth": truth, "press_m": a.press, "contact_px": contact.contact_pixels,
         "sampler": a.sampler, "guidance": a.guidance}),
     );
-    let eval = EvalConfig::default();
     for &n in &a.samples {
         let config = DerenderConfig {
             samples: n,
@@ -115,7 +117,7 @@ pub fn run(a: &PosteriorBenchArgs) -> Result<()> {
                 ..config.clone()
             };
             records.push(time_run(
-                &model, &sim, &object, &prepared, &contact, truth, &config, &eval,
+                &model, &sim, &object, &prepared, &contact, truth, &config, &a.engine,
             )?);
         }
         let median = |f: &dyn Fn(&RunRecord) -> f64| {
@@ -152,7 +154,7 @@ fn time_run(
     contact: &tactile_derender::sim::SimOutput,
     truth: Se2,
     config: &DerenderConfig,
-    eval: &EvalConfig,
+    eval: &PoseConfig,
 ) -> Result<RunRecord> {
     let t0 = Instant::now();
     let guidance =

@@ -1,69 +1,26 @@
 //! **Choosing the pose** from registration hypotheses (paper IV.C, extended): the hypotheses of one or several
 //! in-contact depth estimates pooled, and the pick — the registration's best, or the hypothesis that best explains
-//! the measured signature ([`crate::pose::signature_check`]), refined.
+//! the measured signature ([`super::signature_check`]), refined.
 
 use glam::DAffine3;
 
-use super::evaluate::{EvalContext, Evaluator, ObjectModel};
+use super::estimator::{Estimator, ObjectModel, SensorContext};
+use super::posterior::PosePosterior;
+use super::signature_check::{measured_membrane, Checked, SignatureCheck};
+use super::{Hypothesis, PoseError};
 use crate::image::Image;
-use crate::pose::posterior::PosePosterior;
-use crate::pose::signature_check::{measured_membrane, Checked, SignatureCheck};
-use crate::pose::{Hypothesis, InitStrategy, PoseError};
 use crate::sensor::Se2;
 
-impl Evaluator {
-    /// The registration's starts: [`EvalConfig::inits`] random poses within [`EvalConfig::init_radius_m`] of the
-    /// contact centroid, drawn from `seed`.
-    ///
-    /// [`EvalConfig::inits`]: super::evaluate::EvalConfig::inits
-    /// [`EvalConfig::init_radius_m`]: super::evaluate::EvalConfig::init_radius_m
-    pub fn random_starts(&self, seed: u64) -> InitStrategy {
-        InitStrategy::Random {
-            count: self.config.inits,
-            radius_m: self.config.init_radius_m,
-            seed,
-        }
-    }
-
-    /// Every image of `estimates` anchored to `anchor_to` = (signature, imprint) ([`Self::anchor`]; `None`: as
-    /// given) and registered from `strategy`'s starts: the
-    /// hypotheses of all of them, each image's best first, in the order of `estimates` (images without contact
-    /// give none).
-    #[allow(clippy::too_many_arguments)]
-    pub fn pooled_hypotheses(
-        &self,
-        object: &ObjectModel,
-        estimates: &[Image],
-        ctx: &EvalContext,
-        t_world_camera: &DAffine3,
-        anchor_to: Option<(&Image, &Image)>,
-        strategy: &InitStrategy,
-    ) -> Result<Vec<Hypothesis>, PoseError> {
-        let seed = match strategy {
-            InitStrategy::Random { seed, .. } => *seed,
-            InitStrategy::Fixed(_) => 0,
-        };
-        let (anchored, _) = match anchor_to {
-            Some((signature, imprint)) => self.anchor(estimates, Some(signature), imprint)?,
-            None => (estimates.to_vec(), Vec::new()),
-        };
-        let mut hypotheses = Vec::new();
-        for x0 in &anchored {
-            let hyps = self.register_depth(object, x0, ctx, t_world_camera, strategy, seed)?;
-            hypotheses.extend(hyps.unwrap_or_default());
-        }
-        Ok(hypotheses)
-    }
-
+impl Estimator {
     /// The pose from a registration's `hypotheses`: the first one (the best of a single registration), or, with
-    /// [`EvalConfig::check_signature`], a `measured` (signature, imprint) and the sensor's signature model, the one the
+    /// [`super::PoseConfig::check_signature`], a `measured` (signature, imprint) and the sensor's signature model, the one the
     /// signature check picks and refines ([`SignatureCheck::select`]), with the index in `hypotheses` of the one it came
     /// from (0 without the check). `None` without hypotheses.
     pub fn choose(
         &self,
         object: &ObjectModel,
         hypotheses: &[Hypothesis],
-        ctx: &EvalContext,
+        ctx: &SensorContext,
         t_world_camera: &DAffine3,
         measured: Option<(&Image, &Image)>,
     ) -> Result<Option<(Se2, usize)>, PoseError> {
@@ -78,7 +35,7 @@ impl Evaluator {
         &self,
         object: &ObjectModel,
         hypotheses: &[Hypothesis],
-        ctx: &EvalContext,
+        ctx: &SensorContext,
         t_world_camera: &DAffine3,
         measured: Option<(&Image, &Image)>,
     ) -> Result<Option<(Se2, usize, Option<f64>)>, PoseError> {
@@ -94,7 +51,7 @@ impl Evaluator {
         &self,
         object: &ObjectModel,
         hypotheses: &[Hypothesis],
-        ctx: &EvalContext,
+        ctx: &SensorContext,
         t_world_camera: &DAffine3,
         measured: Option<(&Image, &Image)>,
     ) -> Result<Option<(Se2, Option<PosePosterior>)>, PoseError> {
@@ -111,7 +68,7 @@ impl Evaluator {
         &self,
         object: &ObjectModel,
         hypotheses: &[Hypothesis],
-        ctx: &EvalContext,
+        ctx: &SensorContext,
         t_world_camera: &DAffine3,
         measured: Option<(&Image, &Image)>,
     ) -> Result<Option<Checked>, PoseError> {
@@ -121,14 +78,12 @@ impl Evaluator {
     }
 
     /// [`Self::check`] with the pose posterior of the check's refined candidates
-    /// ([`SignatureCheck::posterior`] with [`EvalConfig::posterior`]) when `posterior` is asked for.
-    ///
-    /// [`EvalConfig::posterior`]: super::evaluate::EvalConfig::posterior
+    /// ([`SignatureCheck::posterior`] with [`super::PoseConfig::posterior`]) when `posterior` is asked for.
     pub fn check_with_posterior(
         &self,
         object: &ObjectModel,
         hypotheses: &[Hypothesis],
-        ctx: &EvalContext,
+        ctx: &SensorContext,
         t_world_camera: &DAffine3,
         measured: Option<(&Image, &Image)>,
         posterior: bool,

@@ -1,0 +1,446 @@
+//! The **pose engine** (paper IV.C, extended): one [`Estimator`] owns every step between an in-contact depth
+//! estimate and a pose — anchoring the estimate's contact depths onto the measured signature, the K-start
+//! registration with free-space evidence, pooling the hypotheses of several estimates, the signature check with its
+//! refinement, and the posterior ([`super::choose`]) — configured by one [`PoseConfig`]. `PoseConfig` is clap +
+//! serde: `tnd eval`, `tnd pose` and `tnd recording track` flatten it into their options and the workbench stores it
+//! in its sessions, so a setting means the same everywhere. Scoring against a true pose is `metrics`'; the pose use
+//! case that places the sensor and runs this engine is `pipeline::place_and_estimate`.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+
+use clap::ArgAction;
+use glam::{DAffine3, DVec3};
+use serde::{Deserialize, Serialize};
+
+use super::from_depth::{anchor_to_signature, SensorView};
+use super::posterior::PosteriorConfig;
+use super::signature_check::{SignatureCheckConfig, SignatureModel};
+use super::{
+    sample_surface, BaselineConfig, Hypothesis, InitStrategy, PoseError, SdfRegistration,
+    SdfRegistrationConfig,
+};
+use crate::error::InvalidInput;
+use crate::image::Image;
+use crate::mesh::{Mesh, RayCaster};
+use crate::objects::{ObjectSet, Symmetry};
+use crate::recon::FreeSpaceConfig;
+use crate::sensor::Intrinsics;
+
+/// The value of `--posterior` that names the bundled calibration ([`PosteriorConfig::default`]).
+pub const BUNDLED_POSTERIOR: &str = "bundled";
+
+/// Settings of the pose engine. On the command line: `--inits`, `--no-anchor`, `--no-signature-check`,
+/// `--no-imprint-proposals`, `--check-refine` and `--posterior FILE`; the others are set in session or config files
+/// (serde, every field optional).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
+#[serde(default)]
+pub struct PoseConfig {
+    /// The registration's solver settings.
+    #[arg(skip = SdfRegistrationConfig::default())]
+    pub registration: SdfRegistrationConfig,
+    /// Where free-space points are placed along each camera ray.
+    #[arg(skip = FreeSpaceConfig::default())]
+    pub free_space: FreeSpaceConfig,
+    /// The threshold baseline (the imprint's own contact).
+    #[arg(skip = BaselineConfig::default())]
+    pub baseline: BaselineConfig,
+    /// Random starts per registration (the paper's K = 10).
+    ///
+    /// With the signature check more starts give it more hypotheses to choose from.
+    #[arg(long, default_value_t = DEFAULT_INITS)]
+    pub inits: usize,
+    /// Random starts are within this distance of the contact centroid, metres (default 10 mm).
+    #[arg(skip = 0.01)]
+    pub init_radius_m: f64,
+    /// Fraction of the samples that must mark a pixel as contact for their consensus, the multi-sample estimate's
+    /// contact (default 0.5).
+    #[arg(skip = DEFAULT_CONSENSUS_PROBABILITY)]
+    pub consensus_probability: f64,
+    /// Depth anchoring (on; `--no-anchor` registers the estimates as generated).
+    ///
+    /// Every estimate's contact depths are shifted onto the measured signature before registration, which
+    /// removes the offset a drifted membrane inflation gives (`pose::from_depth::anchor_to_signature`). Depth
+    /// metrics score the estimate as generated.
+    #[arg(long = "no-anchor", action = ArgAction::SetFalse)]
+    pub anchor_to_signature: bool,
+    /// The signature check (on; `--no-signature-check` takes the registration's lowest-cost hypothesis).
+    ///
+    /// Each hypothesis predicts the signature; the best explanation is refined and kept
+    /// (`pose::signature_check`). Needs the signature and the sensor's signature model.
+    #[arg(long = "no-signature-check", action = ArgAction::SetFalse)]
+    pub check_signature: bool,
+    /// Settings of the signature check (`--check-refine`).
+    #[command(flatten)]
+    pub signature_check: SignatureCheckConfig,
+    /// Imprint proposals (on, with the check; `--no-imprint-proposals` checks the sample's hypotheses alone).
+    ///
+    /// The threshold baseline's registration hypotheses join the sample's, so that where the imprint says more
+    /// than a sample (small, shallow contacts) its pose can win. `tnd eval` scores it as a row of its own.
+    #[arg(long = "no-imprint-proposals", action = ArgAction::SetFalse)]
+    pub imprint_proposals: bool,
+    /// A posterior calibration (JSON, as `tnd posterior --fit` writes) instead of the bundled one.
+    ///
+    /// It sets how the signature check's evidence becomes a pose posterior (`pose::posterior`), whose regions
+    /// the outputs and `tnd eval`'s coverage report.
+    #[arg(long = "posterior", value_name = "FILE", default_value = BUNDLED_POSTERIOR,
+          value_parser = parse_posterior, hide_default_value = true)]
+    pub posterior: PosteriorConfig,
+}
+
+/// Default of [`PoseConfig::inits`].
+pub const DEFAULT_INITS: usize = 10;
+/// Default of [`PoseConfig::consensus_probability`].
+pub const DEFAULT_CONSENSUS_PROBABILITY: f64 = 0.5;
+
+impl Default for PoseConfig {
+    fn default() -> Self {
+        Self {
+            registration: SdfRegistrationConfig::default(),
+            free_space: FreeSpaceConfig::default(),
+            baseline: BaselineConfig::default(),
+            inits: DEFAULT_INITS,
+            init_radius_m: 0.01,
+            consensus_probability: DEFAULT_CONSENSUS_PROBABILITY,
+            anchor_to_signature: true,
+            check_signature: true,
+            signature_check: SignatureCheckConfig::default(),
+            imprint_proposals: true,
+            posterior: PosteriorConfig::default(),
+        }
+    }
+}
+
+impl PoseConfig {
+    /// Every setting in range (a session or config file can hold any number); the error names the first that is
+    /// not.
+    pub fn validate(&self) -> Result<(), PoseError> {
+        if self.inits == 0 {
+            return Err(PoseError::Config(
+                "pose: inits must be at least 1 (random starts per registration)".into(),
+            ));
+        }
+        if !(self.consensus_probability > 0.0 && self.consensus_probability <= 1.0) {
+            return Err(PoseError::Config(format!(
+                "pose: consensus_probability must be in (0, 1], got {}",
+                self.consensus_probability
+            )));
+        }
+        super::check_settings("pose: ", &[], &[("init_radius_m", self.init_radius_m)])?;
+        self.registration.validate()?;
+        self.signature_check.validate()?;
+        self.posterior.validate()
+    }
+}
+
+/// `--posterior`: [`BUNDLED_POSTERIOR`] or a calibration file.
+fn parse_posterior(value: &str) -> Result<PosteriorConfig, InvalidInput> {
+    if value == BUNDLED_POSTERIOR {
+        return Ok(PosteriorConfig::default());
+    }
+    PosteriorConfig::read(Path::new(value))
+}
+
+impl PosteriorConfig {
+    /// A posterior calibration from a JSON file (every field optional, the defaults for the others), checked. The
+    /// error says what is wrong; the caller names the file.
+    pub fn read(path: &Path) -> Result<Self, InvalidInput> {
+        const WHAT: &str = "posterior calibration";
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| InvalidInput::new(WHAT, format!("cannot read: {e}")))?;
+        let config: Self = serde_json::from_str(&text)
+            .map_err(|e| InvalidInput::new(WHAT, format!("not a posterior calibration: {e}")))?;
+        config
+            .validate()
+            .map_err(|e| InvalidInput::new(WHAT, e.to_string()))?;
+        Ok(config)
+    }
+}
+
+/// What the estimator knows about the sensor the estimates come from: the camera, the undeformed membrane depth E
+/// (free-space evidence) and the signature model; and the object set the objects are named in.
+#[derive(Clone, Debug)]
+pub struct SensorContext {
+    pub intrinsics: Intrinsics,
+    /// E: depth of the undeformed membrane, metres (0 where not seen).
+    pub membrane: Image,
+    pub objects: ObjectSet,
+    /// How a contact becomes a signature on this sensor (the shadow cloak), for the signature check; `None` when
+    /// unknown (the check is then skipped).
+    pub signature_model: Option<SignatureModel>,
+}
+
+impl SensorContext {
+    /// The camera and undeformed membrane of `sim`'s sensor, with `objects`.
+    pub fn of_simulator(sim: &crate::sim::Simulator, objects: ObjectSet) -> Self {
+        Self {
+            intrinsics: *sim.intrinsics(),
+            membrane: sim.nominal_depth().clone(),
+            objects,
+            signature_model: Some(SignatureModel::of_simulator(sim)),
+        }
+    }
+}
+
+/// An object prepared for registration, the signature check and scoring.
+pub struct ObjectModel {
+    pub registration: SdfRegistration,
+    /// Surface samples (object frame) for the Chamfer distance.
+    pub cloud: Vec<DVec3>,
+    pub symmetry: Symmetry,
+    /// Ray caster of the mesh (object frame) for the signature check.
+    pub caster: RayCaster,
+}
+
+/// Default of the surface samples per object ([`Estimator::with_surface_points`]).
+pub const DEFAULT_SURFACE_POINTS: usize = 1000;
+
+/// The pose engine (module docs); caches one [`ObjectModel`] per object name.
+pub struct Estimator {
+    pub config: PoseConfig,
+    surface_points: usize,
+    objects: Mutex<HashMap<String, Arc<ObjectModel>>>,
+}
+
+impl Estimator {
+    pub fn new(config: PoseConfig) -> Self {
+        Self {
+            config,
+            surface_points: DEFAULT_SURFACE_POINTS,
+            objects: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// Sample `n` points on each object's surface for [`ObjectModel::cloud`] (default [`DEFAULT_SURFACE_POINTS`]).
+    pub fn with_surface_points(mut self, n: usize) -> Self {
+        self.surface_points = n;
+        self
+    }
+
+    /// The prepared object `name` of `set` (built on first use).
+    pub fn object(&self, set: &ObjectSet, name: &str) -> Result<Arc<ObjectModel>, PoseError> {
+        if let Some(m) = self.objects.lock().ok().and_then(|m| m.get(name).cloned()) {
+            return Ok(m);
+        }
+        let mesh = set.mesh(name)?;
+        let symmetry = set.find(name).map(|e| e.symmetry).unwrap_or_default();
+        self.object_from_mesh(name, &mesh, symmetry)
+    }
+
+    /// Prepare (and cache under `name`) an object given by its mesh (object frame, resting pose) and symmetry.
+    pub fn object_from_mesh(
+        &self,
+        name: &str,
+        mesh: &Mesh,
+        symmetry: Symmetry,
+    ) -> Result<Arc<ObjectModel>, PoseError> {
+        let registration = SdfRegistration::new(mesh, self.config.registration.clone())?;
+        let caster = RayCaster::new(mesh)?;
+        let model = Arc::new(ObjectModel {
+            registration,
+            cloud: sample_surface(mesh, self.surface_points, 0),
+            symmetry,
+            caster,
+        });
+        if let Ok(mut m) = self.objects.lock() {
+            m.insert(name.to_string(), model.clone());
+        }
+        Ok(model)
+    }
+
+    /// The registration's starts: [`PoseConfig::inits`] random poses within [`PoseConfig::init_radius_m`] of the
+    /// contact centroid, drawn from `seed`.
+    pub fn random_starts(&self, seed: u64) -> InitStrategy {
+        InitStrategy::Random {
+            count: self.config.inits,
+            radius_m: self.config.init_radius_m,
+            seed,
+        }
+    }
+
+    /// Register `object` to an in-contact depth image: every hypothesis, best first; `None` without contact
+    /// ([`super::from_depth::register_depth`] with this estimator's free-space settings).
+    pub fn register_depth(
+        &self,
+        object: &ObjectModel,
+        x0: &Image,
+        ctx: &SensorContext,
+        t_world_camera: &DAffine3,
+        strategy: &InitStrategy,
+        seed: u64,
+    ) -> Result<Option<Vec<Hypothesis>>, PoseError> {
+        let view = SensorView {
+            intrinsics: &ctx.intrinsics,
+            membrane: &ctx.membrane,
+            t_world_camera,
+        };
+        super::from_depth::register_depth(
+            &object.registration,
+            x0,
+            &view,
+            &self.config.free_space,
+            strategy,
+            seed,
+        )
+    }
+
+    /// The estimates `samples` as registered: with [`PoseConfig::anchor_to_signature`] and a signature, each one's
+    /// contact depths moved onto it where the imprint says contact ([`anchor_to_signature`]), with the shifts
+    /// (metres); otherwise unchanged, with no shifts.
+    pub fn anchor(
+        &self,
+        samples: &[Image],
+        signature: Option<&Image>,
+        imprint: &Image,
+    ) -> Result<(Vec<Image>, Vec<f64>), PoseError> {
+        match signature {
+            Some(s) if self.config.anchor_to_signature => samples
+                .iter()
+                .map(|x| anchor_to_signature(x, s, imprint))
+                .collect(),
+            _ => Ok((samples.to_vec(), Vec::new())),
+        }
+    }
+
+    /// Every image of `estimates` anchored to `anchor_to` = (signature, imprint) ([`Self::anchor`]; `None`: as
+    /// given) and registered from `strategy`'s starts: the hypotheses of all of them, each image's best first, in
+    /// the order of `estimates` (images without contact give none).
+    pub fn pooled_hypotheses(
+        &self,
+        object: &ObjectModel,
+        estimates: &[Image],
+        ctx: &SensorContext,
+        t_world_camera: &DAffine3,
+        anchor_to: Option<(&Image, &Image)>,
+        strategy: &InitStrategy,
+    ) -> Result<Vec<Hypothesis>, PoseError> {
+        let seed = match strategy {
+            InitStrategy::Random { seed, .. } => *seed,
+            InitStrategy::Fixed(_) => 0,
+        };
+        let (anchored, _) = match anchor_to {
+            Some((signature, imprint)) => self.anchor(estimates, Some(signature), imprint)?,
+            None => (estimates.to_vec(), Vec::new()),
+        };
+        let mut hypotheses = Vec::new();
+        for x0 in &anchored {
+            let hyps = self.register_depth(object, x0, ctx, t_world_camera, strategy, seed)?;
+            hypotheses.extend(hyps.unwrap_or_default());
+        }
+        Ok(hypotheses)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    /// A command with the pose options, as `tnd pose`, `tnd eval` and `tnd recording track` flatten them.
+    #[derive(Parser, Debug)]
+    struct Cli {
+        #[command(flatten)]
+        pose: PoseConfig,
+    }
+
+    fn parse(args: &[&str]) -> Result<PoseConfig, clap::Error> {
+        Cli::try_parse_from(std::iter::once("tnd").chain(args.iter().copied())).map(|c| c.pose)
+    }
+
+    #[test]
+    fn the_command_lines_defaults_are_the_configs_defaults() {
+        // Two ways to the defaults (clap's attributes and `Default`) must agree, field by field.
+        assert_eq!(parse(&[]).unwrap(), PoseConfig::default());
+        let json: PoseConfig = serde_json::from_str("{}").unwrap();
+        assert_eq!(json, PoseConfig::default());
+    }
+
+    #[test]
+    fn each_option_sets_its_setting_and_only_it() {
+        let c = parse(&[
+            "--no-anchor",
+            "--no-signature-check",
+            "--no-imprint-proposals",
+            "--inits",
+            "4",
+            "--check-refine",
+            "3",
+        ])
+        .unwrap();
+        let expected = PoseConfig {
+            anchor_to_signature: false,
+            check_signature: false,
+            imprint_proposals: false,
+            inits: 4,
+            signature_check: SignatureCheckConfig {
+                refine: 3,
+                ..SignatureCheckConfig::default()
+            },
+            ..PoseConfig::default()
+        };
+        assert_eq!(c, expected);
+        // Serialized and read back (a session, a track's settings), the same settings.
+        let back: PoseConfig = serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
+        assert_eq!(back, expected);
+        // A partial file keeps the defaults for what it does not name.
+        let partial: PoseConfig = serde_json::from_str(r#"{"check_signature": false}"#).unwrap();
+        assert!(!partial.check_signature && partial.anchor_to_signature && partial.inits == 10);
+    }
+
+    #[test]
+    fn settings_out_of_range_are_named() {
+        assert!(PoseConfig::default().validate().is_ok());
+        let bad = |edit: &dyn Fn(&mut PoseConfig), name: &str| {
+            let mut c = PoseConfig::default();
+            edit(&mut c);
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains(name), "{name}: {e}");
+        };
+        bad(&|c| c.inits = 0, "inits");
+        bad(&|c| c.consensus_probability = 1.5, "consensus_probability");
+        bad(
+            &|c| c.consensus_probability = f64::NAN,
+            "consensus_probability",
+        );
+        bad(&|c| c.init_radius_m = -0.01, "init_radius_m");
+        bad(&|c| c.signature_check.scale_m = 0.0, "scale_m");
+        bad(&|c| c.posterior.temperature = -1.0, "temperature");
+        bad(&|c| c.registration.lever_m = f64::INFINITY, "lever_m");
+    }
+
+    #[test]
+    fn posterior_files_are_read_checked_and_named_in_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let good = dir.path().join("fit.json");
+        std::fs::write(&good, r#"{"temperature": 8.0}"#).unwrap();
+        let c = parse(&["--posterior", good.to_str().unwrap()]).unwrap();
+        assert_eq!(c.posterior.temperature, 8.0);
+        assert_eq!(c.posterior.max_modes, PosteriorConfig::default().max_modes);
+        assert_eq!(
+            parse(&["--posterior", BUNDLED_POSTERIOR]).unwrap(),
+            PoseConfig::default()
+        );
+        let cases = [
+            (r#"{"temperature": "hot"}"#, "not a posterior calibration"),
+            (r#"{"temperature": -1.0}"#, "temperature must be positive"),
+            (r#"{"no_such_setting": 1}"#, "unknown field"),
+        ];
+        for (text, expected) in cases {
+            let bad = dir.path().join("bad.json");
+            std::fs::write(&bad, text).unwrap();
+            let e = parse(&["--posterior", bad.to_str().unwrap()]).unwrap_err();
+            let e = e.to_string();
+            assert!(e.contains(expected) && e.contains("bad.json"), "{e}");
+            assert_eq!(e.matches("bad.json").count(), 1, "the path once: {e}");
+        }
+        let missing = dir.path().join("missing.json");
+        let e = parse(&["--posterior", missing.to_str().unwrap()])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("cannot read") && e.contains("missing.json"),
+            "{e}"
+        );
+    }
+}
