@@ -502,7 +502,8 @@ fn the_cli_records_imports_and_scores_a_press_sequence() {
 
 #[test]
 fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
-    // As a user would: tnd recording simulate -> tnd recording track (bundled model, two samples a frame); the
+    // As a user would: tnd recording simulate -> tnd recording track (bundled model, two samples of six DDIM steps a
+    // frame: the test is of tracking, resuming and scoring, not of the sampler's default); the
     // recorded pose topic is the truth the rows are scored against, never an input.
     let dir = tempfile::tempdir().unwrap();
     let tnd = env!("CARGO_BIN_EXE_tnd");
@@ -559,6 +560,8 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
         "cross_w12_s50",
         "--samples",
         "2",
+        "--steps",
+        "6",
         "--out",
         "track",
     ];
