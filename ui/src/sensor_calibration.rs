@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use anyhow::{anyhow, Result};
+use anyhow::Result;
 use egui::{TextureHandle, TextureOptions};
 use tactile_derender::recording::calibrate::{
     calibrate, CalibrateConfig, CalibrationImages, SensorCalibration,
@@ -16,7 +16,6 @@ use tactile_derender::recording::calibrate::{
 use tactile_derender::recording::{FolderOptions, Recording};
 
 use crate::colormap::to_color_image;
-use crate::command::Command;
 use crate::worker::{JobKind, WorkerMsg};
 
 /// A finished calibration and the recording it came from.
@@ -24,6 +23,57 @@ pub struct CalibrationResult {
     pub recording: PathBuf,
     pub calibration: SensorCalibration,
     pub images: CalibrationImages,
+}
+
+/// What a calibration job needs.
+pub struct CalibrationRequest {
+    pub generation: u64,
+    /// The recording (an .mcap file or a frame folder).
+    pub recording: PathBuf,
+    /// Its depth topic (`None`: the only one).
+    pub topic: Option<String>,
+    /// The sensor the calibration starts from.
+    pub given: tactile_derender::sim::SimConfig,
+    pub config: CalibrateConfig,
+}
+
+/// Run `req` on its own thread ([`calibrate`], as `tnd calibrate`), reporting progress and the result through
+/// `tx`; setting `cancel` stops it.
+pub fn spawn(
+    req: CalibrationRequest,
+    cancel: Arc<AtomicBool>,
+    tx: std::sync::mpsc::Sender<WorkerMsg>,
+    ctx: egui::Context,
+) -> Result<()> {
+    let generation = req.generation;
+    crate::worker::spawn_job(
+        JobKind::SensorCalibration,
+        generation,
+        tx,
+        ctx,
+        move |progress| {
+            let rec = Recording::open(&req.recording, &FolderOptions::default())?;
+            let stream = rec.depth_stream(req.topic.as_deref())?.clone();
+            let (calibration, images) = calibrate(
+                &rec,
+                &stream,
+                &req.given,
+                &req.config,
+                &mut |done, total| {
+                    progress(done, total);
+                    !cancel.load(Ordering::Relaxed)
+                },
+            )?;
+            Ok(WorkerMsg::SensorCalibrated {
+                generation,
+                result: Box::new(CalibrationResult {
+                    recording: req.recording,
+                    calibration,
+                    images,
+                }),
+            })
+        },
+    )
 }
 
 /// Textures of a calibration's three images, and their colour ranges (metres).
@@ -74,112 +124,5 @@ impl SensorCalibrationView {
             });
         }
         self.textures.as_ref()
-    }
-}
-
-impl crate::app::WorkbenchApp {
-    /// Calibrate the sensor from the open recording's no-contact frames, on a background thread.
-    pub(crate) fn calibrate_sensor(&mut self) -> Result<()> {
-        let path = self
-            .recording
-            .loaded
-            .as_ref()
-            .map(|l| l.path.clone())
-            .ok_or_else(|| anyhow!("open a recording first"))?;
-        let w = self
-            .worker
-            .as_ref()
-            .ok_or_else(|| anyhow!("the background worker is not running"))?;
-        let (tx, ctx) = (w.sender(), w.context());
-        self.cancel_sensor_calibration();
-        let view = &mut self.recording.sensor_calibration;
-        view.generation += 1;
-        view.running = true;
-        view.progress = None;
-        let cancel = Arc::new(AtomicBool::new(false));
-        view.cancel = Some(cancel.clone());
-        let generation = view.generation;
-        let given = self.state.sim.clone();
-        let topic = self.state.recording.topic.clone();
-        let config = CalibrateConfig {
-            reference: self.state.recording.reference,
-            ..CalibrateConfig::default()
-        };
-        let r = crate::worker::spawn_job(
-            JobKind::SensorCalibration,
-            generation,
-            tx,
-            ctx,
-            move |progress| {
-                let rec = Recording::open(&path, &FolderOptions::default())?;
-                let stream = rec.depth_stream(topic.as_deref())?.clone();
-                let (calibration, images) =
-                    calibrate(&rec, &stream, &given, &config, &mut |done, total| {
-                        progress(done, total);
-                        !cancel.load(Ordering::Relaxed)
-                    })?;
-                Ok(WorkerMsg::SensorCalibrated {
-                    generation,
-                    result: Box::new(CalibrationResult {
-                        recording: path,
-                        calibration,
-                        images,
-                    }),
-                })
-            },
-        );
-        if r.is_err() {
-            self.recording.sensor_calibration.running = false;
-        }
-        r
-    }
-
-    pub(crate) fn cancel_sensor_calibration(&mut self) {
-        let view = &mut self.recording.sensor_calibration;
-        crate::worker::raise_cancel(&mut view.cancel);
-        view.running = false;
-    }
-
-    /// Write the calibrated sensor beside the recording as `<recording>_sensor.json` (a sensor file: `tnd ... --sensor`,
-    /// `tnd-workbench --sensor`).
-    pub(crate) fn save_sensor_file(&self) -> Result<PathBuf> {
-        let r = self
-            .recording
-            .sensor_calibration
-            .result
-            .as_ref()
-            .ok_or_else(|| anyhow!("calibrate the sensor first"))?;
-        let stem = r
-            .recording
-            .file_stem()
-            .map_or_else(|| "recording".into(), |s| s.to_string_lossy().into_owned());
-        let dir = r.recording.parent().map(PathBuf::from).unwrap_or_default();
-        let path = dir.join(format!("{stem}_sensor.json"));
-        tactile_derender::sim::sensor_file::save(&path, &r.calibration.sensor)?;
-        Ok(path)
-    }
-
-    /// Take in a finished calibration: the calibrated sensor becomes the session's (undoable).
-    pub(crate) fn sensor_calibrated(&mut self, generation: u64, result: Box<CalibrationResult>) {
-        let view = &mut self.recording.sensor_calibration;
-        if generation != view.generation {
-            return;
-        }
-        view.running = false;
-        view.cancel = None;
-        view.textures = None;
-        let c = &result.calibration;
-        self.notice = Some(format!(
-            "sensor calibrated from {} no-contact frames of {}: inflation {:.2} mm, noise {} (Undo restores the \
-             previous sensor)",
-            c.no_contact_frames.len(),
-            result.recording.display(),
-            c.inflation_m * 1e3,
-            c.noise_std_m
-                .map_or("not measured".to_string(), |s| format!("{:.2} mm", s * 1e3))
-        ));
-        let sensor = c.sensor.clone();
-        self.recording.sensor_calibration.result = Some(*result);
-        self.apply(Command::SetSim(sensor));
     }
 }

@@ -2,6 +2,10 @@
 //! geometry), the frame loop (drain worker messages -> draw panels -> apply their commands), persistence and the
 //! one-shot screenshot mode.
 
+mod analysis;
+mod dispatch;
+mod recording;
+
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
