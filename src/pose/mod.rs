@@ -42,7 +42,7 @@ pub use sdf_register::{RobustLoss, SdfRegistration, SdfRegistrationConfig};
 pub enum PoseError {
     #[error("object mesh: {0}")]
     TriMesh(#[from] parry3d::shape::TriMeshBuilderError),
-    #[error("registration config: {0}")]
+    #[error("{0}")]
     Config(String),
     #[error("no contact points to register (the contact region is empty); nothing to estimate a pose from")]
     NoContact,

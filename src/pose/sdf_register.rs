@@ -135,7 +135,11 @@ impl SdfRegistrationConfig {
             ("max_step_m", self.max_step_m),
             ("step_tolerance_m", self.step_tolerance_m),
         ];
-        super::check_settings("", &positive, &[("free_weight", self.free_weight)])
+        super::check_settings(
+            "registration: ",
+            &positive,
+            &[("free_weight", self.free_weight)],
+        )
     }
 }
 
