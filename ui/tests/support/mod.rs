@@ -1,5 +1,6 @@
 //! Helpers the workbench's egui_kittest tests share (`mod support;` in each test file): the harness at the window
-//! size the tests lay out for, waiting for background jobs, a tiny random model checkpoint, and dropped files.
+//! size the tests lay out for, waiting for background jobs, a tiny random model checkpoint, dropped files, and a small
+//! generated dataset opened in the Dataset tab.
 
 #![allow(dead_code, clippy::unwrap_used, clippy::expect_used)]
 
@@ -7,11 +8,16 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use egui::accesskit::Role;
+use egui_kittest::kittest::Queryable;
 use egui_kittest::Harness;
+use tactile_derender::dataset::{generate, GenConfig};
 use tactile_derender::model::checkpoint::{build, save_model};
 use tactile_derender::model::init::init_params;
 use tactile_derender::model::UNet2DConfig;
+use tactile_derender::objects::ObjectSet;
 use tnd_workbench::app::WorkbenchApp;
+use tnd_workbench::state::State;
 
 /// The app in a 1500 x 950 window.
 pub fn harness(app: WorkbenchApp) -> Harness<'static, WorkbenchApp> {
@@ -90,4 +96,36 @@ pub fn drop_file(h: &mut Harness<'_, WorkbenchApp>, path: &Path) {
         .dropped_files
         .push(Arc::new(Dropped(path.to_path_buf())));
     h.run_ok();
+}
+
+/// A small noiseless dataset (64 x 64, 8 pairs) in `dir`.
+pub fn small_dataset(dir: &Path) -> PathBuf {
+    let data = dir.join("synth");
+    let mut sim = State::default().sim;
+    sim.signature.noise_std = 0.0;
+    let cfg = GenConfig {
+        pairs: 8,
+        seed: 3,
+        shard_pairs: 8,
+        ..GenConfig::default()
+    };
+    generate(&data, &sim, &ObjectSet::builtin(), &cfg, &|_| {}).unwrap();
+    data
+}
+
+pub fn type_into(h: &mut Harness<'_, WorkbenchApp>, field: &str, text: &str) {
+    h.get_by_role_and_label(Role::TextInput, field).click();
+    h.run_ok();
+    h.get_by_role_and_label(Role::TextInput, field)
+        .type_text(text);
+    h.run_ok();
+}
+
+pub fn open_dataset(h: &mut Harness<'_, WorkbenchApp>, data: &Path) {
+    h.get_by_label("Dataset").click();
+    h.run_ok();
+    type_into(h, "Dataset", &data.display().to_string());
+    h.get_by_label("Open dataset").click();
+    h.run_ok();
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
 }
