@@ -52,7 +52,7 @@ pub struct PoseConfig {
     #[arg(long, default_value_t = DEFAULT_INITS)]
     pub inits: usize,
     /// Random starts are within this distance of the contact centroid, metres (default 10 mm).
-    #[arg(skip = 0.01)]
+    #[arg(skip = DEFAULT_INIT_RADIUS_M)]
     pub init_radius_m: f64,
     /// Fraction of the samples that must mark a pixel as contact for their consensus, the multi-sample estimate's
     /// contact (default 0.5).
@@ -91,6 +91,8 @@ pub struct PoseConfig {
 
 /// Default of [`PoseConfig::inits`].
 pub const DEFAULT_INITS: usize = 10;
+/// Default of [`PoseConfig::init_radius_m`], metres.
+pub const DEFAULT_INIT_RADIUS_M: f64 = 0.01;
 /// Default of [`PoseConfig::consensus_probability`].
 pub const DEFAULT_CONSENSUS_PROBABILITY: f64 = 0.5;
 
@@ -101,7 +103,7 @@ impl Default for PoseConfig {
             free_space: FreeSpaceConfig::default(),
             baseline: BaselineConfig::default(),
             inits: DEFAULT_INITS,
-            init_radius_m: 0.01,
+            init_radius_m: DEFAULT_INIT_RADIUS_M,
             consensus_probability: DEFAULT_CONSENSUS_PROBABILITY,
             anchor_to_signature: true,
             check_signature: true,
@@ -140,22 +142,6 @@ fn parse_posterior(value: &str) -> Result<PosteriorConfig, InvalidInput> {
         return Ok(PosteriorConfig::default());
     }
     PosteriorConfig::read(Path::new(value))
-}
-
-impl PosteriorConfig {
-    /// A posterior calibration from a JSON file (every field optional, the defaults for the others), checked. The
-    /// error says what is wrong; the caller names the file.
-    pub fn read(path: &Path) -> Result<Self, InvalidInput> {
-        const WHAT: &str = "posterior calibration";
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| InvalidInput::new(WHAT, format!("cannot read: {e}")))?;
-        let config: Self = serde_json::from_str(&text)
-            .map_err(|e| InvalidInput::new(WHAT, format!("not a posterior calibration: {e}")))?;
-        config
-            .validate()
-            .map_err(|e| InvalidInput::new(WHAT, e.to_string()))?;
-        Ok(config)
-    }
 }
 
 /// What the estimator knows about the sensor the estimates come from: the camera, the undeformed membrane depth E

@@ -17,11 +17,14 @@
 //! [`PosePosterior::region_mass`] gives the probability mass of the highest-density region that just reaches a
 //! pose: the truth lies inside the reported p region when it is ≤ p.
 
+use std::path::Path;
+
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use super::register::wrap_angle;
+use crate::error::InvalidInput;
 use crate::objects::Symmetry;
 use crate::sensor::Se2;
 
@@ -81,6 +84,20 @@ impl Default for PosteriorConfig {
 }
 
 impl PosteriorConfig {
+    /// A posterior calibration from a JSON file (every field optional, the defaults for the others), checked. The
+    /// error says what is wrong; the caller names the file.
+    pub fn read(path: &Path) -> Result<Self, InvalidInput> {
+        const WHAT: &str = "posterior calibration";
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| InvalidInput::new(WHAT, format!("cannot read: {e}")))?;
+        let config: Self = serde_json::from_str(&text)
+            .map_err(|e| InvalidInput::new(WHAT, format!("not a posterior calibration: {e}")))?;
+        config
+            .validate()
+            .map_err(|e| InvalidInput::new(WHAT, e.to_string()))?;
+        Ok(config)
+    }
+
     /// Every setting in range; the error names the first that is not.
     pub fn validate(&self) -> Result<(), super::PoseError> {
         super::check_settings(
