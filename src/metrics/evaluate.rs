@@ -167,21 +167,26 @@ struct Registered {
 
 /// Runs the evaluation: the pose engine ([`Estimator`]) on every pair's estimates, and the scores.
 pub struct Evaluator {
-    config: EvalConfig,
-    /// The pose engine, configured by [`EvalConfig::pose`].
+    /// The pose engine, configured by [`EvalConfig::pose`]: the one copy of the pose settings the evaluation runs
+    /// with.
     pub estimator: Estimator,
+    depth: DepthMetricsConfig,
+    pose_samples: usize,
 }
 
 impl Evaluator {
     pub fn new(config: EvalConfig) -> Self {
-        let estimator =
-            Estimator::new(config.pose.clone()).with_surface_points(config.chamfer_points);
-        Self { config, estimator }
-    }
-
-    /// The settings this evaluator runs with.
-    pub fn config(&self) -> &EvalConfig {
-        &self.config
+        let EvalConfig {
+            pose,
+            depth,
+            chamfer_points,
+            pose_samples,
+        } = config;
+        Self {
+            estimator: Estimator::new(pose).with_surface_points(chamfer_points),
+            depth,
+            pose_samples,
+        }
     }
 
     /// The prepared object `name` of `set` (built on first use; [`Estimator::object`]).
@@ -206,7 +211,7 @@ impl Evaluator {
         ctx: &SensorContext,
         seed: u64,
     ) -> Result<Registered, EvalError> {
-        let depth = depth_metrics(depth, &pair.target, &self.config.depth)?;
+        let depth = depth_metrics(depth, &pair.target, &self.depth)?;
         let object = self.object(&ctx.objects, &pair.object)?;
         let strategy = self.estimator.random_starts(seed);
         let hypotheses = self
@@ -293,7 +298,7 @@ impl Evaluator {
             reason: crate::error::render(&e),
         };
         let ctx = source.context();
-        let n = self.config.pose_samples.max(1);
+        let n = self.pose_samples.max(1);
         let samples = generator.generate(&pair, ctx, n, pair_seed).map_err(fail)?;
         let first = samples
             .first()
@@ -306,7 +311,11 @@ impl Evaluator {
             .pose_result(&pair, ctx, &model_reg, true)
             .map_err(fail)?;
         // The baseline as the paper defines it (its registration's best hypothesis), and with the signature check.
-        let base_x0 = threshold_contact(&pair.signature, &pair.imprint, &self.config.pose.baseline);
+        let base_x0 = threshold_contact(
+            &pair.signature,
+            &pair.imprint,
+            &self.estimator.config.baseline,
+        );
         let base = self
             .register_pair(
                 &pair,
@@ -317,7 +326,7 @@ impl Evaluator {
             )
             .map_err(fail)?;
         let model_multi = if samples.len() > 1 {
-            let consensus = consensus_depth(&samples, self.config.pose.consensus_probability)
+            let consensus = consensus_depth(&samples, self.estimator.config.consensus_probability)
                 .map_err(|source| {
                     fail(EvalError::Pose {
                         object: object.clone(),
@@ -325,14 +334,14 @@ impl Evaluator {
                     })
                 })?;
             let mut registered = vec![consensus.clone()];
-            if self.config.pose.check_signature {
+            if self.estimator.config.check_signature {
                 registered.extend(samples.iter().cloned());
             }
             let mut pooled = self
                 .register_pair(&pair, &consensus, &registered, ctx, pair_seed)
                 .map_err(fail)?;
             // The imprint's hypotheses as registered for the baseline (same starts, same seed) close the pool.
-            if self.config.pose.check_signature && self.config.pose.imprint_proposals {
+            if self.estimator.config.check_signature && self.estimator.config.imprint_proposals {
                 pooled.hypotheses.extend_from_slice(&base.hypotheses);
             }
             Some(self.pose_result(&pair, ctx, &pooled, true).map_err(fail)?)
@@ -340,8 +349,8 @@ impl Evaluator {
             None
         };
         let baseline = self.pose_result(&pair, ctx, &base, false).map_err(fail)?;
-        let checks = self.config.pose.check_signature && ctx.signature_model.is_some();
-        let combine = checks && self.config.pose.imprint_proposals;
+        let checks = self.estimator.config.check_signature && ctx.signature_model.is_some();
+        let combine = checks && self.estimator.config.imprint_proposals;
         let baseline_checked = checks
             .then(|| self.pose_result(&pair, ctx, &base, true))
             .transpose()

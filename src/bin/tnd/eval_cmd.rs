@@ -484,7 +484,7 @@ fn uncertainty_plots(
         let base = threshold_contact(
             &pair.signature,
             &pair.imprint,
-            &evaluator.config().pose.baseline,
+            &evaluator.estimator.config.baseline,
         );
         let object = evaluator.object(&ctx.objects, &pair.object)?;
         let sig = Signature {
