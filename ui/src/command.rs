@@ -73,10 +73,9 @@ pub enum Command {
     ExportPose,
     /// Highlight one sample in the Pose tab's plots (`None`: none), as the pointer hovers it.
     HighlightSample(Option<usize>),
-    /// Turn the signature check of the next registration on or off.
-    SetSignatureCheck(bool),
-    /// Give the signature check the imprint's threshold-contact hypotheses too (on) or only the sample's (off).
-    SetImprintProposals(bool),
+    /// Replace the pose engine's settings (the Pose tab's check boxes: the signature check, imprint proposals);
+    /// they apply to the next registration and the track.
+    SetPose(tactile_derender::pose::PoseConfig),
     /// Undo the last scene, sensor or elastomer edit.
     Undo,
     /// Redo the last undone edit.

@@ -169,8 +169,7 @@ impl WorkbenchApp {
                 self.report("export", r);
             }
             Command::HighlightSample(k) => self.analysis.pose.highlight = k,
-            Command::SetSignatureCheck(on) => self.state.pose.check_signature = on,
-            Command::SetImprintProposals(on) => self.state.pose.imprint_proposals = on,
+            Command::SetPose(pose) => self.state.pose = pose,
             Command::ZoomImage(target) => self.analysis.zoom = target,
             Command::OpenRecording(path) => {
                 self.state.recording = crate::recording_view::RecordingSettings {

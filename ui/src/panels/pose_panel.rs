@@ -56,25 +56,21 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
             cmds.push(Command::RunPose);
         }
         if !pose.running {
-            let settings = &app.state.pose;
-            let mut check = settings.check_signature;
-            ui.checkbox(&mut check, "signature check").on_hover_text(
+            let mut settings = app.state.pose.clone();
+            ui.checkbox(&mut settings.check_signature, "signature check").on_hover_text(
                 "judge the registration's hypotheses by the signature each one predicts (object rendered at the \
                  pose, contact, tactile shadow) against the measured one, and refine the best; off: the \
                  registration's lowest-cost hypothesis is the estimate. Applies to the next registration.",
             );
-            if check != settings.check_signature {
-                cmds.push(Command::SetSignatureCheck(check));
-            }
-            let mut proposals = settings.imprint_proposals;
-            ui.add_enabled(check, egui::Checkbox::new(&mut proposals, "imprint proposals"))
+            let check = settings.check_signature;
+            ui.add_enabled(check, egui::Checkbox::new(&mut settings.imprint_proposals, "imprint proposals"))
                 .on_hover_text(
                     "also register the imprint's own thresholded contact and let the signature check judge its \
                      hypotheses beside the sample's (on small or shallow contacts the imprint can say more than \
                      one sample); off: only the sample's. Applies to the next registration.",
                 );
-            if proposals != settings.imprint_proposals {
-                cmds.push(Command::SetImprintProposals(proposals));
+            if settings != app.state.pose {
+                cmds.push(Command::SetPose(settings));
             }
         }
         if pose.result.is_some()
