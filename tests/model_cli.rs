@@ -530,6 +530,40 @@ fn eval_records_resume_to_the_uninterrupted_result() {
 
 /// A millimetre mesh read as metres (a 40 m cube) is refused by `tnd sim` before anything is written, naming the
 /// units that fit; with `--units mm` the same file simulates.
+/// `tnd eval --device`: `cpu` scores exactly as the default does; a name that is no device is refused in one line
+/// that names it, and nothing is scored.
+#[test]
+fn eval_runs_on_the_device_it_is_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| tnd_in(dir.path(), args);
+    let o = run(&[
+        "dataset", "gen", "-q", "--out", "ds", "--pairs", "12", "--seed", "3",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let eval = |device: &[&str]| {
+        let mut args = vec![
+            "eval", "-q", "--json", "--data", "ds", "--split", "train", "--model", "small",
+            "--steps", "2", "--limit", "2",
+        ];
+        args.extend_from_slice(device);
+        run(&args)
+    };
+    let default = eval(&[]);
+    let cpu = eval(&["--device", "cpu"]);
+    assert!(default.status.success() && cpu.status.success());
+    let json =
+        |o: &std::process::Output| serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap();
+    for key in ["model", "baseline"] {
+        assert_eq!(json(&default)[key], json(&cpu)[key], "{key}");
+    }
+    let bad = eval(&["--device", "gpu0"]);
+    assert!(!bad.status.success());
+    assert!(bad.stdout.is_empty());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("gpu0") && err.contains("cuda:N"), "{err}");
+}
+
 #[test]
 fn a_mis_scaled_mesh_is_refused_before_any_work() {
     let dir = tempfile::tempdir().unwrap();

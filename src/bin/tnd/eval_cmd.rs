@@ -57,6 +57,9 @@ pub struct EvalArgs {
     /// Seed of the sampler and the registration starts.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Device that runs the model: cpu, cuda, cuda:N or metal (GPU builds: `--features cuda` or `metal`).
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
     /// JSON only: leave out the markdown tables (on stderr) beside the JSON objects (one per split, on stdout).
     #[arg(long)]
     pub json: bool,
@@ -95,18 +98,20 @@ pub struct EvalArgs {
     pub rerun: crate::rerun_out::RerunArgs,
 }
 
-/// The generator named by `--model`, with the model's own depth mapping (none for the ground truth).
+/// The generator named by `--model` on `device`, with the model's own depth mapping (none for the ground truth).
 pub fn generator(
     model: &str,
     sampler: &SamplerConfig,
     guidance: &GuidanceConfig,
+    device: &str,
 ) -> Result<(Box<dyn Generator>, Option<TactileConfig>)> {
     if model == "ground-truth" {
         return Ok((Box::new(GroundTruthGenerator), None));
     }
     sampler.validate(None).map_err(anyhow::Error::msg)?;
     guidance.validate().map_err(anyhow::Error::msg)?;
-    let model = DiffusionModel::load(Path::new(model))?;
+    let device = tactile_derender::model::device::open_device(device)?;
+    let model = DiffusionModel::load_on(Path::new(model), &device)?;
     let mapping = model.config().tactile_derender.clone();
     let gen = ModelGenerator {
         model,
@@ -213,7 +218,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     if let Some(dir) = &a.report {
         check_writable_folder(dir)?;
     }
-    let (gen, mapping) = generator(&a.model, &a.sampler, &a.guidance)?;
+    let (gen, mapping) = generator(&a.model, &a.sampler, &a.guidance, &a.device)?;
     let dataset = Dataset::open(data)?;
     warn_if_the_model_does_not_fit(
         &a.model,
