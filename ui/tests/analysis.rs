@@ -13,7 +13,10 @@ use tnd_workbench::app::WorkbenchApp;
 use tnd_workbench::state::{State, Tab};
 
 mod support;
-use support::{harness, open_dataset, small_dataset, tiny_model, type_into, wait_for};
+use support::{
+    harness, open_dataset, select_pair, small_dataset, tiny_model, type_into, use_checkpoint,
+    wait_for,
+};
 
 #[test]
 fn dataset_inspector_shows_filters_and_selects_pairs() {
@@ -44,13 +47,7 @@ fn dataset_inspector_shows_filters_and_selects_pairs() {
         .is_some());
 
     // Select pair 0: metadata and the four full-size images.
-    h.get_by_label("train pair 0").click();
-    wait_for(&mut h, "the selected pair", |a| {
-        a.analysis
-            .dataset
-            .as_ref()
-            .is_some_and(|b| b.selected.is_some())
-    });
+    select_pair(&mut h, "train pair 0");
     let sel = h
         .state()
         .analysis
@@ -139,20 +136,13 @@ fn de_rendering_a_dataset_pair_with_a_tiny_model_matches_the_core_sampler() {
 
     let mut h = harness(WorkbenchApp::default());
     open_dataset(&mut h, &data);
-    h.get_by_label("train pair 1").click();
-    wait_for(&mut h, "the selected pair", |a| {
-        a.analysis
-            .dataset
-            .as_ref()
-            .is_some_and(|b| b.selected.is_some())
-    });
+    select_pair(&mut h, "train pair 1");
     h.get_by_label("Send to de-render").click();
     h.run_ok();
     assert_eq!(h.state().state.view.tab, Tab::Derender);
     assert!(h.query_by_label("dataset pair: train #1").is_some());
 
-    type_into(&mut h, "checkpoint", &model_path.display().to_string());
-    h.get_by_label("Use checkpoint").click();
+    use_checkpoint(&mut h, &model_path);
     h.run_ok();
     let mut d = h.state().state.derender.clone();
     d.config.sampler.steps = 4;
@@ -273,8 +263,7 @@ fn a_long_run_can_be_cancelled_and_a_bad_checkpoint_shows_an_error() {
     // A truncated checkpoint: one error naming the file.
     let bad = dir.path().join("bad.safetensors");
     std::fs::write(&bad, b"\x10\x00\x00\x00").unwrap();
-    type_into(&mut h, "checkpoint", &bad.display().to_string());
-    h.get_by_label("Use checkpoint").click();
+    use_checkpoint(&mut h, &bad);
     h.run_ok();
     h.get_by_label("Run de-rendering").click();
     wait_for(&mut h, "the error", |a| !a.analysis.derender.running);

@@ -11,7 +11,9 @@ use tactile_derender::dataset::{Dataset, SplitName};
 use tnd_workbench::app::WorkbenchApp;
 
 mod support;
-use support::{harness, open_dataset, small_dataset, tiny_model, type_into, wait_for};
+use support::{
+    harness, open_dataset, select_pair, small_dataset, tiny_model, use_checkpoint, wait_for,
+};
 
 #[test]
 fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
@@ -25,17 +27,10 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
 
     let mut h = harness(WorkbenchApp::default());
     open_dataset(&mut h, &data);
-    h.get_by_label("train pair 0").click();
-    wait_for(&mut h, "the selected pair", |a| {
-        a.analysis
-            .dataset
-            .as_ref()
-            .is_some_and(|b| b.selected.is_some())
-    });
+    select_pair(&mut h, "train pair 0");
     h.get_by_label("Send to de-render").click();
     h.run_ok();
-    type_into(&mut h, "checkpoint", &model_path.display().to_string());
-    h.get_by_label("Use checkpoint").click();
+    use_checkpoint(&mut h, &model_path);
     let mut d = h.state().state.derender.clone();
     d.config.sampler.steps = 2;
     d.config.samples = 4;

@@ -113,6 +113,23 @@ pub fn small_dataset(dir: &Path) -> PathBuf {
     data
 }
 
+/// Click the dataset inspector's pair `label` ("train pair 0") and wait until the pair is selected.
+pub fn select_pair(h: &mut Harness<'_, WorkbenchApp>, label: &str) {
+    h.get_by_label(label).click();
+    wait_for(h, "the selected pair", |a| {
+        a.analysis
+            .dataset
+            .as_ref()
+            .is_some_and(|b| b.selected.is_some())
+    });
+}
+
+/// Point the De-render tab at the checkpoint `path` ("Use checkpoint").
+pub fn use_checkpoint(h: &mut Harness<'_, WorkbenchApp>, path: &Path) {
+    type_into(h, "checkpoint", &path.display().to_string());
+    h.get_by_label("Use checkpoint").click();
+}
+
 pub fn type_into(h: &mut Harness<'_, WorkbenchApp>, field: &str, text: &str) {
     h.get_by_role_and_label(Role::TextInput, field).click();
     h.run_ok();
