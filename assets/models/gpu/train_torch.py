@@ -20,6 +20,14 @@ runs under bf16 autocast; gradients are clipped to norm 1; the learning rate war
 (cosine, to 5 %) over the last 30 % of the wall-clock budget; the run stops at a wall-clock deadline. GPU kernels
 are not bitwise deterministic, so a rerun with the same seed is close, not identical.
 
+Several GPUs (data parallel, PyTorch DDP): launch with torchrun, e.g. `torchrun --standalone --nproc_per_node 8
+train_torch.py ...` on one machine (NCCL on GPUs, gloo on the CPU). `--batch` stays the *global* batch: every rank
+draws the same global batch (indices, t and noise from the one seeded generator) and trains on its slice of it, the
+gradients are averaged across ranks, and rank 0 decides the learning rate and the stop from its clock and alone
+writes the checkpoint and the log. So N ranks train on exactly the batches of one process with the same seed (CI
+checks two CPU ranks against one process), and hyperparameters carry over unchanged. Each rank loads the train
+shards itself; the pool's common prefix (the smallest count loaded on any rank) is what is drawn from.
+
 Output (`--out NAME`): NAME.safetensors (EMA weights, f32, diffusers keys, the config and the training record in
 the metadata: the format of `tnd train`'s model.safetensors), rewritten atomically every `--save-every-s` seconds
 and at the end, and NAME.jsonl (one JSON line per log: step, pairs loaded, train loss, validation loss).
@@ -38,6 +46,7 @@ import time
 
 import numpy as np
 import torch
+import torch.distributed as dist
 from diffusers import UNet2DModel
 from safetensors import safe_open
 from safetensors.torch import load_file, save_file
@@ -187,7 +196,21 @@ def main():
 
     t_start = time.time()
     deadline = t_start + args.deadline_s
+    # torchrun sets these; a plain `python3 train_torch.py` is one rank of one.
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    rank = int(os.environ.get("RANK", "0"))
+    local_rank = int(os.environ.get("LOCAL_RANK", "0"))
+    if args.batch % world:
+        raise SystemExit(f"--batch {args.batch} is the global batch: it must divide among {world} ranks")
     dev = torch.device(args.device)
+    if world > 1:
+        if dev.type == "cuda":
+            dev = torch.device("cuda", local_rank)
+            torch.cuda.set_device(dev)
+        dist.init_process_group("nccl" if dev.type == "cuda" else "gloo")
+    lead = rank == 0
+    per_rank = args.batch // world
+    mine = slice(rank * per_rank, (rank + 1) * per_rank)
     torch.manual_seed(args.seed)
     torch.backends.cuda.matmul.allow_tf32 = True
     torch.backends.cudnn.allow_tf32 = True
@@ -200,6 +223,9 @@ def main():
     steps_T = int(td.get("num_train_timesteps", 250))
     v_pred = td.get("prediction_type", "epsilon") == "v_prediction"
     unet.to(dev).train()
+    # Data parallel: the wrapped module averages the gradients across ranks during backward (a no-op wrapper is not
+    # used for one rank, so that single-GPU runs are the code path they always were).
+    net = torch.nn.parallel.DistributedDataParallel(unet) if world > 1 else unet
     ema = UNet2DModel(**unet_kwargs(cfg)).to(dev).eval()
     ema.load_state_dict(unet.state_dict())
     for p in ema.parameters():
@@ -246,11 +272,27 @@ def main():
             raise SystemExit(f"{args.data}: fewer than {args.min_pairs} train pairs before the deadline")
         drain()
         time.sleep(0.5)
+
+    def common(value, op):
+        """`value` reduced over the ranks (itself for one rank)."""
+        if world == 1:
+            return value
+        v = torch.tensor([float(value)], dtype=torch.float64, device=dev)
+        dist.all_reduce(v, op=op)
+        return v.item()
+
+    def drawable():
+        """Pairs every rank holds: the batch is drawn from that common prefix of the pools."""
+        return int(common(loaded, dist.ReduceOp.MIN if world > 1 else None))
+
+    pool_n = drawable()
     t_train = time.time()
 
-    log = open(args.out + ".jsonl", "a")
+    log = open(args.out + ".jsonl", "a") if lead else None
 
     def emit(rec):
+        if not lead:
+            return
         log.write(json.dumps(rec) + "\n")
         log.flush()
         print(json.dumps(rec), flush=True)
@@ -271,19 +313,26 @@ def main():
         return {"trainer": "assets/models/gpu/train_torch.py", "step": step, "batch": args.batch, "lr": args.lr,
                 "ema": args.ema, "seed": args.seed,
                 "boundary_weight": args.boundary_weight, "boundary_px": args.boundary_px, "init": os.path.basename(args.init) if args.init else None,
-                "prediction": td.get("prediction_type"), "pairs_loaded": loaded, "samples": step * args.batch,
+                "prediction": td.get("prediction_type"), "pairs_loaded": pool_n, "samples": step * args.batch,
                 "wall_s": round(time.time() - t_start, 1), "final": final, "parameters": n_params,
-                "device": torch.cuda.get_device_name(0) if dev.type == "cuda" else "cpu", "torch": torch.__version__}
+                "device": (torch.cuda.get_device_name(dev) if dev.type == "cuda" else "cpu")
+                + (f" x{world}" if world > 1 else ""), "world_size": world, "torch": torch.__version__}
 
-    emit({"event": "start", "parameters": n_params, "pairs_loaded": loaded, "val_loss": val_loss(),
-          "wait_s": round(t_train - t_start, 1)})
+    if lead:
+        emit({"event": "start", "parameters": n_params, "pairs_loaded": pool_n, "val_loss": val_loss(),
+              "wait_s": round(t_train - t_start, 1), "world_size": world})
     step, last_save, loss_acc, loss_n = 0, time.time(), 0.0, 0
     warmup = 200
     while True:
         now = time.time()
-        if now >= deadline or (args.max_steps is not None and step >= args.max_steps):
-            break
         frac = (now - t_train) / max(deadline - t_train, 1e-9)
+        if world > 1:
+            # Rank 0's clock decides the stop and the learning rate (every rank takes the same steps).
+            clock = torch.tensor([frac], dtype=torch.float64, device=dev)
+            dist.broadcast(clock, 0)
+            frac = clock.item()
+        if frac >= 1.0 or (args.max_steps is not None and step >= args.max_steps):
+            break
         lr = args.lr * min(1.0, (step + 1) / warmup)
         if frac > 0.7:
             lr *= 0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * (frac - 0.7) / 0.3))
@@ -291,15 +340,18 @@ def main():
             g["lr"] = lr
         if step % 50 == 0:
             drain()
-        idx = torch.randint(0, loaded, (args.batch,), generator=gen, device=dev)
-        x0, y = pool_x[idx].float(), pool_y[idx].float()
+            pool_n = drawable()
+        # The global batch, drawn alike on every rank; each trains on its slice (all of it for one rank).
+        idx = torch.randint(0, pool_n, (args.batch,), generator=gen, device=dev)
         t = torch.randint(0, steps_T, (args.batch,), generator=gen, device=dev)
-        eps = torch.randn(x0.shape, generator=gen, device=dev)
+        eps = torch.randn((args.batch, 1, size, size), generator=gen, device=dev)
+        idx, t, eps = idx[mine], t[mine], eps[mine]
+        x0, y = pool_x[idx].float(), pool_y[idx].float()
         sa, sb = sa_all[t].view(-1, 1, 1, 1), sb_all[t].view(-1, 1, 1, 1)
         xt = sa * x0 + sb * eps
         tgt = sa * eps - sb * x0 if v_pred else eps
         with torch.autocast(dev.type, dtype=torch.bfloat16, enabled=dev.type == "cuda"):
-            pred = unet(torch.cat([xt, y], 1), t).sample
+            pred = net(torch.cat([xt, y], 1), t).sample
         sq = (pred.float() - tgt) ** 2
         if args.boundary_weight > 0:
             raw = x0 * norm["target"]["scale_m"] + norm["target"]["offset_m"]
@@ -315,17 +367,22 @@ def main():
         loss_acc += loss.detach()
         loss_n += 1
         if step % args.log_every == 0:
-            emit({"step": step, "lr": lr, "loss": float(loss_acc) / loss_n, "pairs_loaded": loaded,
+            mean = common(float(loss_acc) / loss_n, dist.ReduceOp.SUM if world > 1 else None) / world
+            emit({"step": step, "lr": lr, "loss": mean, "pairs_loaded": pool_n,
                   "wall_s": round(time.time() - t_start, 1)})
             loss_acc, loss_n = 0.0, 0
-        if time.time() - last_save > args.save_every_s:
+        if lead and time.time() - last_save > args.save_every_s:
             emit({"step": step, "val_loss": val_loss(), "wall_s": round(time.time() - t_start, 1)})
             save(args.out + ".safetensors", ema, cfg, record(step))
             last_save = time.time()
     stop.set()
-    emit({"event": "end", "step": step, "val_loss": val_loss(), "pairs_loaded": loaded,
-          "samples": step * args.batch, "wall_s": round(time.time() - t_start, 1)})
-    save(args.out + ".safetensors", ema, cfg, record(step, final=True))
+    if lead:
+        emit({"event": "end", "step": step, "val_loss": val_loss(), "pairs_loaded": pool_n,
+              "samples": step * args.batch, "wall_s": round(time.time() - t_start, 1)})
+        save(args.out + ".safetensors", ema, cfg, record(step, final=True))
+    if world > 1:
+        dist.barrier()
+        dist.destroy_process_group()
 
 
 if __name__ == "__main__":
