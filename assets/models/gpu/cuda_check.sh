@@ -1,13 +1,16 @@
 #!/usr/bin/env bash
 # The CUDA build's check on a GPU machine, in one call (README.md here, "A CUDA build of tnd"): `tnd sample`, `tnd pose`,
-# `tnd eval` and `tnd train` with `--device cuda` against the CPU build with the same seeds, and the training step
-# beside train_torch.py (PyTorch) on the same GPU. Everything goes to OUT: check.log (the verdicts and times, also
+# `tnd eval` and `tnd train` with `--device cuda` against the CPU build with the same seeds, the training step
+# beside train_torch.py (PyTorch) and the sampling step beside diffusers' DDIM loop on the same GPU. Everything goes to OUT: check.log (the verdicts and times, also
 # printed), the commands' own logs, and compare.json.
 #
-#     [SHORT_STEPS=20] [LONG_STEPS=120] assets/models/gpu/cuda_check.sh TND_CPU TND_CUDA OUT [DEVICE]
+#     [SHORT_STEPS=20] [LONG_STEPS=120] [SAMPLE_SHORT=25] [SAMPLE_LONG=225] \
+#         assets/models/gpu/cuda_check.sh TND_CPU TND_CUDA OUT [DEVICE]
 #
-# TND_CUDA is build_cuda.sh's .dev/tnd-cuda.xz (unpacked here; its libcudart beside it in cuda-lib/); the CUDA 13 cuBLAS, cuRAND and
-# NVRTC it loads are looked for in the Python packages (PyTorch's nvidia/* wheels). DEVICE defaults to cuda; with
+# TND_CUDA is build_cuda.sh's .dev/tnd-cuda.xz (unpacked here; its libcudart beside it in cuda-lib/); the CUDA 13 cuBLAS,
+# cuRAND and NVRTC it loads are looked for in the Python packages (PyTorch's nvidia/* wheels). TND_CPU may be the same
+# file: the CUDA build's CPU path is the CPU build's (the dry run below gives identical outputs from both), so one
+# binary need be carried. DEVICE defaults to cuda; with
 # DEVICE=cpu and TND_CUDA=TND_CPU the script runs its whole logic on a CPU machine (the dry run).
 #
 # Tolerances: the samples start from the same noise (drawn on the CPU from the seed) and run the same deterministic
@@ -25,11 +28,14 @@ rm -rf "$w"
 mkdir -p "$w"
 log="$out/check.log"
 cuda_lib="$(cd "$(dirname "$gpu")" && pwd)/cuda-lib"
-if [ "${gpu%.xz}" != "$gpu" ]; then
+# unpack FILE NAME: FILE itself, or FILE.xz unpacked to $w/NAME.
+unpack() {
+    if [ "${1%.xz}" = "$1" ]; then echo "$1"; return; fi
     "${PYTHON:-python3}" -c "import lzma, shutil, sys; shutil.copyfileobj(lzma.open(sys.argv[1]), open(sys.argv[2], 'wb'))" \
-        "$gpu" "$w/tnd-cuda" && chmod +x "$w/tnd-cuda" || { echo "cannot unpack $gpu" >&2; exit 1; }
-    gpu="$w/tnd-cuda"
-fi
+        "$1" "$w/$2" && chmod +x "$w/$2" && echo "$w/$2"
+}
+gpu=$(unpack "$gpu" tnd-cuda) || { echo "cannot unpack $2" >&2; exit 1; }
+if [ "$1" = "$2" ]; then cpu=$gpu; else cpu=$(unpack "$cpu" tnd-cpu) || { echo "cannot unpack $1" >&2; exit 1; }; fi
 : > "$log"
 say() { echo "$*" | tee -a "$log"; }
 py=${PYTHON:-python3}
@@ -90,6 +96,18 @@ for b in cpu dev; do
         --records "$w/eval_$b.jsonl"
 done
 
+# Sampling speed: `tnd sample --no-guidance` (the loop diffusers runs) at two step counts, so that start-up (process,
+# model load, CUDA context, kernel compilation) cancels in the difference, and diffusers' DDIM loop on the same model
+# (exported by tnd) in process, after a warm-up; both 16 samples at once, f32.
+"$cpu" model export --diffusers "$w/diffusers" > /dev/null
+s_short=${SAMPLE_SHORT:-25} s_long=${SAMPLE_LONG:-225}
+for steps in "$s_short" "$s_long"; do
+    run "sample_time_${steps}" "$gpu" sample "${imprint[@]}" --no-guidance --samples 16 --steps "$steps" --seed 3 \
+        --device "$device" --out "$w/sample_time_${steps}"
+done
+run diffusers_sample "$py" "$here/diffusers_sample_time.py" "$w/diffusers" --samples 16 --steps "$s_short" --runs 3 \
+    --device "$device"
+
 # Training: the same start, data, batch and seed; the time per step from a short and a long run (start-up cancels).
 init="$here/../default.safetensors"
 short=${SHORT_STEPS:-20} long=${LONG_STEPS:-120}
@@ -102,12 +120,15 @@ for steps in "$short" "$long"; do
 done
 
 "$py" - "$w" "$out" "${secs[train_${short}_dev]:-nan}" "${secs[train_${long}_dev]:-nan}" "${secs[torch_${short}]:-nan}" \
-    "${secs[torch_${long}]:-nan}" "$short" "$long" <<'EOF' | tee -a "$log"
+    "${secs[torch_${long}]:-nan}" "$short" "$long" "${secs[sample_time_${s_short}]:-nan}" \
+    "${secs[sample_time_${s_long}]:-nan}" "$s_short" "$s_long" <<'EOF' | tee -a "$log"
 import json, math, sys
 import numpy as np
 w, out = sys.argv[1], sys.argv[2]
 t20, t120, p20, p120 = (float(x) for x in sys.argv[3:7])
 short, long = int(sys.argv[7]), int(sys.argv[8])
+s_t_short, s_t_long = float(sys.argv[9]), float(sys.argv[10])
+s_short, s_long = int(sys.argv[11]), int(sys.argv[12])
 res, ok = {}, True
 def check(name, value, tol, unit):
     global ok
@@ -135,6 +156,19 @@ except Exception as err:  # a missing output: the step's log says why
 tnd_step, torch_step = (t120 - t20) / (long - short), (p120 - p20) / (long - short)
 res["train_s_per_step"] = {"tnd": tnd_step, "train_torch.py": torch_step, "ratio": tnd_step / torch_step}
 print(f"training step, batch 32: tnd {tnd_step:.4f} s, train_torch.py {torch_step:.4f} s, ratio {tnd_step / torch_step:.2f}")
+try:
+    peer = json.loads(open(f"{out}/diffusers_sample.log").read().strip().splitlines()[-1])
+    tnd_step = (s_t_long - s_t_short) / (s_long - s_short)
+    res["sample_s_per_step_16"] = {"tnd": tnd_step, "diffusers": peer["s_per_step"],
+                                   "ratio": tnd_step / peer["s_per_step"],
+                                   f"tnd_process_s_{s_short}_steps": s_t_short,
+                                   f"diffusers_loop_s_{s_short}_steps": peer["loop_s"]}
+    print(f"sampling step, 16 samples: tnd {tnd_step:.4f} s, diffusers {peer['s_per_step']:.4f} s, ratio "
+          f"{tnd_step / peer['s_per_step']:.2f}; {s_short} steps: tnd process {s_t_short:.2f} s (start-up included), "
+          f"diffusers loop {peer['loop_s']:.2f} s")
+except Exception as err:  # the timing runs' logs say why
+    ok = False
+    print(f"sampling timing failed: {err!r}")
 json.dump(res, open(f"{out}/compare.json", "w"), indent=1)
 print("cuda_check:", "all checks passed" if ok else "FAILED")
 sys.exit(0 if ok else 1)
