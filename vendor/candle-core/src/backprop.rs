@@ -278,13 +278,28 @@ impl Tensor {
                         let out_size =
                             (grad_h - 1) * stride + dilation * (k_h - 1) + 1 - 2 * padding;
                         let out_padding = arg.dim(2)? - out_size;
-                        let grad_arg = grad.conv_transpose2d(
-                            kernel,
-                            *padding,
-                            out_padding,
-                            *stride,
-                            *dilation,
-                        )?;
+                        // PATCHED (tactile-derender, vendor/candle-core/PATCHED.md): a stride-1 convolution's input
+                        // gradient is the convolution of `grad` with the flipped, transposed kernel, padded k-1-p.
+                        // `conv2d` is im2col + GEMM on every backend; CUDA's `conv_transpose2d` is a naive kernel.
+                        let k_w = kernel.dim(3)?;
+                        let grad_arg = if *stride == 1
+                            && *dilation == 1
+                            && out_padding == 0
+                            && k_h == k_w
+                            && *padding < k_h
+                            && arg.dim(3)? + 2 * *padding + 1 == grad.dim(3)? + k_w
+                        {
+                            let flipped = kernel.flip(&[2, 3])?.transpose(0, 1)?.contiguous()?;
+                            grad.conv2d(&flipped, k_h - 1 - *padding, 1, 1, 1)?
+                        } else {
+                            grad.conv_transpose2d(
+                                kernel,
+                                *padding,
+                                out_padding,
+                                *stride,
+                                *dilation,
+                            )?
+                        };
                         grads.accumulate(arg, &grad_arg)?;
 
                         let grad_kernel = arg
