@@ -278,19 +278,39 @@ impl Tensor {
                         let out_size =
                             (grad_h - 1) * stride + dilation * (k_h - 1) + 1 - 2 * padding;
                         let out_padding = arg.dim(2)? - out_size;
-                        // PATCHED (tactile-derender, vendor/candle-core/PATCHED.md): a stride-1 convolution's input
-                        // gradient is the convolution of `grad` with the flipped, transposed kernel, padded k-1-p.
-                        // `conv2d` is im2col + GEMM on every backend; CUDA's `conv_transpose2d` is a naive kernel.
+                        // PATCHED (tactile-derender, vendor/candle-core/PATCHED.md): the input gradient is the
+                        // output gradient spread back onto the input's grid (stride - 1 zeros between
+                        // neighbours), padded k - 1 - p (plus the rows and columns the forward never reached at
+                        // the far edges) and convolved with the kernel flipped in both spatial axes and with its
+                        // channel axes swapped. `conv2d` is im2col + GEMM on every backend, while CUDA's
+                        // `conv_transpose2d` is a naive kernel.
                         let k_w = kernel.dim(3)?;
-                        let grad_arg = if *stride == 1
-                            && *dilation == 1
-                            && out_padding == 0
-                            && k_h == k_w
-                            && *padding < k_h
-                            && arg.dim(3)? + 2 * *padding + 1 == grad.dim(3)? + k_w
-                        {
+                        let grad_arg = if *dilation == 1 && k_h == k_w && *padding < k_h {
+                            let s = *stride;
+                            let (b, c, gh, gw) = grad.dims4()?;
+                            let spread = if s == 1 {
+                                grad.clone()
+                            } else {
+                                grad.reshape((b, c, gh, 1, gw, 1))?
+                                    .pad_with_zeros(3, 0, s - 1)?
+                                    .pad_with_zeros(5, 0, s - 1)?
+                                    .reshape((b, c, gh * s, gw * s))?
+                                    .narrow(2, 0, (gh - 1) * s + 1)?
+                                    .narrow(3, 0, (gw - 1) * s + 1)?
+                            };
+                            let lead = k_h - 1 - *padding;
+                            // gh = (h + 2p - k) / s + 1, so neither can underflow.
+                            let far_h = arg.dim(2)? + 2 * *padding - (gh - 1) * s - k_h;
+                            let far_w = arg.dim(3)? + 2 * *padding - (gw - 1) * s - k_w;
                             let flipped = kernel.flip(&[2, 3])?.transpose(0, 1)?.contiguous()?;
-                            grad.conv2d(&flipped, k_h - 1 - *padding, 1, 1, 1)?
+                            if far_h == 0 && far_w == 0 {
+                                spread.conv2d(&flipped, lead, 1, 1, 1)?
+                            } else {
+                                spread
+                                    .pad_with_zeros(2, lead, lead + far_h)?
+                                    .pad_with_zeros(3, lead, lead + far_w)?
+                                    .conv2d(&flipped, 0, 1, 1, 1)?
+                            }
                         } else {
                             grad.conv_transpose2d(
                                 kernel,
