@@ -528,8 +528,6 @@ fn eval_records_resume_to_the_uninterrupted_result() {
     assert_eq!(read("old.jsonl"), old);
 }
 
-/// A millimetre mesh read as metres (a 40 m cube) is refused by `tnd sim` before anything is written, naming the
-/// units that fit; with `--units mm` the same file simulates.
 /// `tnd eval --device`: `cpu` scores exactly as the default does; a name that is no device is refused in one line
 /// that names it, and nothing is scored.
 #[test]
@@ -564,6 +562,8 @@ fn eval_runs_on_the_device_it_is_given() {
     assert!(err.contains("gpu0") && err.contains("cuda:N"), "{err}");
 }
 
+/// A millimetre mesh read as metres (a 40 m cube) is refused by `tnd sim` before anything is written, naming the
+/// units that fit; with `--units mm` the same file simulates.
 #[test]
 fn a_mis_scaled_mesh_is_refused_before_any_work() {
     let dir = tempfile::tempdir().unwrap();

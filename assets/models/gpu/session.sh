@@ -31,16 +31,18 @@ if ls "$root"/.whl/*.whl > /dev/null 2>&1; then
 fi
 note "python: $(python3 -c 'import torch, diffusers; print("torch", torch.__version__, "diffusers", diffusers.__version__)' 2>&1 | tail -n 1)"
 
-# 1. The CUDA build against its CPU path, and beside PyTorch.
-timeout "${CHECK_S:-200}" bash "$here/cuda_check.sh" "$root/.dev/tnd-cuda.xz" "$root/.dev/tnd-cuda.xz" \
-    "$out/cuda_check" "${DEVICE:-cuda}" > "$out/cuda_check.out" 2>&1
-note "cuda_check exit $? ($(tail -n 1 "$out/cuda_check.out"))"
-
-# 2. The next training run, with tnd (the CUDA build's CPU path) generating the data on the machine's cores.
+# The CUDA build, unpacked once: the check's GPU and CPU sides, then the training run's data generator.
 mkdir -p /tmp/tnd-session
 python3 -c "import lzma, shutil, sys; shutil.copyfileobj(lzma.open(sys.argv[1]), open(sys.argv[2], 'wb'))" \
     "$root/.dev/tnd-cuda.xz" /tmp/tnd-session/tnd && chmod +x /tmp/tnd-session/tnd || { note "cannot unpack tnd"; exit 1; }
 export LD_LIBRARY_PATH="$root/.dev/cuda-lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+
+# 1. The CUDA build against its CPU path, and beside PyTorch.
+timeout "${CHECK_S:-200}" bash "$here/cuda_check.sh" /tmp/tnd-session/tnd /tmp/tnd-session/tnd \
+    "$out/cuda_check" "${DEVICE:-cuda}" > "$out/cuda_check.out" 2>&1
+note "cuda_check exit $? ($(tail -n 1 "$out/cuda_check.out"))"
+
+# 2. The next training run, with tnd (the CUDA build's CPU path) generating the data on the machine's cores.
 left=$(( budget - ($(date +%s) - t0) ))
 note "training for ${left} s"
 cd "$root" || exit 1

@@ -283,7 +283,7 @@ def main():
 
     def drawable():
         """Pairs every rank holds: the batch is drawn from that common prefix of the pools."""
-        return int(common(loaded, dist.ReduceOp.MIN if world > 1 else None))
+        return int(common(loaded, dist.ReduceOp.MIN))
 
     pool_n = drawable()
     t_train = time.time()
@@ -367,7 +367,7 @@ def main():
         loss_acc += loss.detach()
         loss_n += 1
         if step % args.log_every == 0:
-            mean = common(float(loss_acc) / loss_n, dist.ReduceOp.SUM if world > 1 else None) / world
+            mean = common(float(loss_acc) / loss_n, dist.ReduceOp.SUM) / world
             emit({"step": step, "lr": lr, "loss": mean, "pairs_loaded": pool_n,
                   "wall_s": round(time.time() - t_start, 1)})
             loss_acc, loss_n = 0.0, 0
