@@ -3,7 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 /// A row-major `height x width` image of `f32`. Depth images are z-depths in metres with `0.0` meaning "no value"
-/// (ray miss or outside the contact region); masks hold `0.0`/`1.0`.
+/// (ray miss, outside the contact region, or a pixel without a return: [`Image::missing_as_zero`]); masks hold
+/// `0.0`/`1.0`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Image {
     pub width: usize,
@@ -72,5 +73,62 @@ impl Image {
                 .map(|(&a, &b)| f(a, b))
                 .collect(),
         }
+    }
+}
+
+/// Farthest depth, metres, a tactile sensor's camera can report: a value beyond it (a 16-bit driver's 65 535 mm
+/// sentinel, say) is a pixel without a return, not a depth.
+pub const MAX_DEPTH_M: f32 = 2.0;
+
+/// Whether `d` is a measured depth (metres): finite, positive and within [`MAX_DEPTH_M`]. NaN, ±inf, 0, negative
+/// and out-of-range values are how depth cameras and their drivers mark a pixel without a return (REP 118: NaN in
+/// 32FC1, 0 in 16UC1).
+#[inline]
+pub fn is_measured_depth(d: f32) -> bool {
+    d.is_finite() && d > 0.0 && d <= MAX_DEPTH_M
+}
+
+impl Image {
+    /// A depth frame with every pixel without a return ([`is_measured_depth`] false) set to 0, the value every
+    /// stage reads as missing, and how many there were.
+    pub fn missing_as_zero(mut self) -> (Image, usize) {
+        let mut missing = 0;
+        for d in &mut self.data {
+            if !is_measured_depth(*d) {
+                if *d != 0.0 {
+                    *d = 0.0;
+                }
+                missing += 1;
+            }
+        }
+        (self, missing)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn every_no_return_convention_becomes_zero() {
+        let frame = Image::from_vec(
+            7,
+            1,
+            vec![
+                0.08,
+                f32::NAN,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                0.0,
+                -0.01,
+                65.535,
+            ],
+        )
+        .unwrap();
+        let (clean, missing) = frame.missing_as_zero();
+        assert_eq!(clean.data, vec![0.08, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(missing, 6);
+        assert!(is_measured_depth(MAX_DEPTH_M) && !is_measured_depth(MAX_DEPTH_M * 1.001));
     }
 }

@@ -114,8 +114,15 @@ pub struct RecordingImportReport {
     #[serde(flatten)]
     pub written: ImportReport,
     pub reference_frames: Vec<usize>,
+    /// The membrane's largest drift between no-contact stretches, metres ([`crate::recording::drift`]).
+    pub drift_m: f64,
+    /// Whether each pair's imprint is against the no-contact stretch before it (the drift exceeded the tolerance).
+    pub local_references: bool,
     pub skipped_no_contact: usize,
     pub skipped_no_pose: usize,
+    /// Frames left out because too few of their pixels have a return, one line each naming the frame
+    /// ([`crate::recording::ProcessedRecording::unusable`]).
+    pub skipped_missing: Vec<String>,
     /// Pairs whose press depth was estimated from the imprint.
     pub press_estimated: usize,
     /// Mean absolute imprint difference at the estimated presses, metres.
@@ -198,9 +205,12 @@ pub fn import_recording(
 
     let mut skipped_no_contact = 0;
     let mut skipped_no_pose = 0;
+    let mut skipped_missing = Vec::new();
     let mut todo = Vec::new();
     for i in (0..processed.len()).step_by(config.every) {
-        if processed.contact_px[i] < config.min_contact_px {
+        if let Some(why) = processed.unusable(i) {
+            skipped_missing.push(why);
+        } else if processed.contact_px[i] < config.min_contact_px {
             skipped_no_contact += 1;
         } else if let Some(p) = poses[i] {
             todo.push((i, p));
@@ -242,7 +252,7 @@ pub fn import_recording(
                 imprint: y.clone(),
                 target: t.target,
                 signature: processed.signatures[i].clone(),
-                reference: processed.reference.clone(),
+                reference: processed.reference_for(i).clone(),
                 mask: t.mask,
             };
             (record, t.press_fit_residual_m)
@@ -255,9 +265,10 @@ pub fn import_recording(
             path: from.to_path_buf(),
             message: format!(
                 "no frame became a pair: {skipped_no_contact} frames without contact (< {} px over {} mm), \
-                 {skipped_no_pose} without a pose",
+                 {skipped_no_pose} without a pose, {} with too few pixels that have a return",
                 config.min_contact_px,
-                config.process.contact_threshold_m * 1e3
+                config.process.contact_threshold_m * 1e3,
+                skipped_missing.len()
             ),
         });
     }
@@ -292,8 +303,11 @@ pub fn import_recording(
         frames: processed.len(),
         written,
         reference_frames: processed.reference_frames.clone(),
+        drift_m: processed.drift_m(),
+        local_references: processed.reference_of.is_some(),
         skipped_no_contact,
         skipped_no_pose,
+        skipped_missing,
         press_estimated: residuals.len(),
         press_fit_residual_m: if residuals.is_empty() {
             0.0

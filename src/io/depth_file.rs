@@ -1,5 +1,6 @@
 //! Depth images as users keep them: `.npy` arrays, one array of an `.npz`, or 16-bit grayscale PNGs, read into an
-//! [`Image`] in metres with the scale each format was written at (a pair table's images, a folder of frames).
+//! [`Image`] in metres with the scale each format was written at (a pair table's images, a folder of frames). A
+//! pixel without a return (NaN, ±inf; 0 in a PNG) is read as 0, the value every stage takes for missing.
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -116,10 +117,11 @@ fn read_npz_image(path: &Path, member: Option<&str>) -> Result<Image, DepthFileE
             )))
         }
     };
-    if let Some(i) = a.data.iter().position(|x| !x.is_finite()) {
-        return Err(bad(format!(
-            "array '{name}' has a non-finite value at flat index {i}"
-        )));
-    }
-    Image::from_vec(w, h, a.data).ok_or_else(|| bad(format!("array '{name}': size mismatch")))
+    // NaN and ±inf mark pixels without a return: missing (0), as in a .npy.
+    let data = a
+        .data
+        .into_iter()
+        .map(|x| if x.is_finite() { x } else { 0.0 })
+        .collect();
+    Image::from_vec(w, h, data).ok_or_else(|| bad(format!("array '{name}': size mismatch")))
 }

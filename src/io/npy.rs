@@ -26,12 +26,6 @@ pub enum NpyError {
     Shape { path: PathBuf, shape: Vec<usize> },
     #[error("{path}: {message}")]
     Units { path: PathBuf, message: String },
-    #[error("{path}: array contains {count} NaN or infinite values (first at flat index {first})")]
-    NonFinite {
-        path: PathBuf,
-        count: usize,
-        first: usize,
-    },
 }
 
 /// An n-dimensional array read from a `.npy` file, converted to `f32`, C order.
@@ -102,8 +96,10 @@ pub fn read(path: &Path) -> Result<NpyArray, NpyError> {
 }
 
 /// Read a 2-D (or `(1, H, W)`) `.npy` depth or imprint image in **metres** (float32 or float64): integer arrays
-/// (sensor millimetres, say) and values beyond [`PLAUSIBLE_METRES`] are refused with the conversion to make, rather
-/// than read as silently wrong depths.
+/// (sensor millimetres, say) and arrays whose typical value is beyond [`PLAUSIBLE_METRES`] are refused with the
+/// conversion to make, rather than read as silently wrong depths. Pixels without a value — NaN, ±inf (how ROS
+/// drivers and numpy dumps mark a pixel without a return) or a single value beyond [`PLAUSIBLE_METRES`] — are 0,
+/// the value every stage reads as missing.
 pub fn read_metres_image(path: &Path) -> Result<Image, NpyError> {
     let a = read(path)?;
     let units = |message: String| NpyError::Units {
@@ -116,26 +112,38 @@ pub fn read_metres_image(path: &Path) -> Result<Image, NpyError> {
             a.descr
         )));
     }
-    let largest = a
+    // The typical magnitude decides the units (a few out-of-range pixels are pixels without a return).
+    let mut magnitudes: Vec<f32> = a
         .data
         .iter()
-        .filter(|v| v.is_finite())
-        .fold(0.0f32, |m, v| m.max(v.abs()));
-    if largest > PLAUSIBLE_METRES {
-        return Err(units(format!(
-            "values up to {largest}: images here are metres, and no depth of a tactile sensor is that large — millimetres? divide by 1000"
-        )));
+        .filter(|v| v.is_finite() && **v != 0.0)
+        .map(|v| v.abs())
+        .collect();
+    if !magnitudes.is_empty() {
+        let mid = magnitudes.len() / 2;
+        let (_, &mut typical, _) = magnitudes.select_nth_unstable_by(mid, f32::total_cmp);
+        if typical > PLAUSIBLE_METRES {
+            return Err(units(format!(
+                "values around {typical}: images here are metres, and no depth of a tactile sensor is that large — millimetres? divide by 1000"
+            )));
+        }
     }
-    image_of(path, a)
+    let mut img = image_of(path, a)?;
+    for v in &mut img.data {
+        if v.abs() > PLAUSIBLE_METRES {
+            *v = 0.0;
+        }
+    }
+    Ok(img)
 }
 
-/// Read a 2-D (or `(1, H, W)`) `.npy` file of any numeric dtype as an image, rejecting NaN/inf values (the caller
-/// applies units; see [`read_metres_image`] for metre images from users).
+/// Read a 2-D (or `(1, H, W)`) `.npy` file of any numeric dtype as an image (the caller applies units; see
+/// [`read_metres_image`] for metre images from users). NaN and ±inf values, a pixel without a return, are 0 (missing).
 pub fn read_image(path: &Path) -> Result<Image, NpyError> {
     image_of(path, read(path)?)
 }
 
-fn image_of(path: &Path, a: NpyArray) -> Result<Image, NpyError> {
+fn image_of(path: &Path, mut a: NpyArray) -> Result<Image, NpyError> {
     let (h, w) = match a.shape.as_slice() {
         [h, w] => (*h, *w),
         [1, h, w] => (*h, *w),
@@ -146,19 +154,10 @@ fn image_of(path: &Path, a: NpyArray) -> Result<Image, NpyError> {
             })
         }
     };
-    let bad: Vec<usize> = a
-        .data
-        .iter()
-        .enumerate()
-        .filter(|(_, x)| !x.is_finite())
-        .map(|(i, _)| i)
-        .collect();
-    if let Some(&first) = bad.first() {
-        return Err(NpyError::NonFinite {
-            path: path.to_path_buf(),
-            count: bad.len(),
-            first,
-        });
+    for x in &mut a.data {
+        if !x.is_finite() {
+            *x = 0.0;
+        }
     }
     Image::from_vec(w, h, a.data).ok_or_else(|| NpyError::Format {
         path: path.to_path_buf(),
@@ -479,12 +478,17 @@ mod tests {
     }
 
     #[test]
-    fn read_image_rejects_nan_and_names_file() {
+    fn read_image_reads_nan_as_missing_and_names_bad_shapes() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("depth.npy");
-        std::fs::write(&p, encode_f32(&[1, 2], &[1.0, f32::NAN])).unwrap();
-        let err = read_image(&p).unwrap_err().to_string();
-        assert!(err.contains("depth.npy") && err.contains("NaN"), "{err}");
+        // NaN and ±inf: a pixel without a return, 0 (missing), not a refused file.
+        std::fs::write(
+            &p,
+            encode_f32(&[1, 3], &[0.08, f32::NAN, f32::NEG_INFINITY]),
+        )
+        .unwrap();
+        assert_eq!(read_image(&p).unwrap().data, vec![0.08, 0.0, 0.0]);
+        assert_eq!(read_metres_image(&p).unwrap().data, vec![0.08, 0.0, 0.0]);
         std::fs::write(&p, encode_f32(&[2, 2, 2], &[0.0; 8])).unwrap();
         assert!(matches!(read_image(&p), Err(NpyError::Shape { .. })));
     }

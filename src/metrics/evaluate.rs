@@ -304,6 +304,10 @@ impl Evaluator {
             .first()
             .ok_or_else(|| fail(EvalError::Generator("returned no sample".into())))?;
         observe(i, &pair, &samples);
+        // The pose steps claim no free space where the frame has no return (the generator above guides with the
+        // whole membrane and leaves those pixels out itself).
+        let observed = ctx.observing(Some(&pair.signature));
+        let ctx = observed.as_ref();
         let model_reg = self
             .register_pair(&pair, first, std::slice::from_ref(first), ctx, pair_seed)
             .map_err(fail)?;

@@ -126,6 +126,8 @@ pub struct ImprintGuidance {
     imprint: Vec<f32>,
     /// E, metres (0 where the membrane is not seen: no evidence there).
     membrane: Vec<f32>,
+    /// Pixels whose imprint is evidence: the membrane seen and, with [`Self::ignoring_missing`], the frame measured.
+    observed: Vec<bool>,
     /// Cloak cone: pixel offsets (du, dv), the centre left out, and weights in (0, 1).
     cone: Vec<(isize, isize, f32)>,
     /// The cone's reach (rx, ry), pixels: the zero border the forward pass pads the image with.
@@ -181,10 +183,23 @@ impl ImprintGuidance {
             width: w,
             height: h,
             imprint: imprint.data.clone(),
+            observed: membrane.data.iter().map(|&e| e > 0.0).collect(),
             membrane: membrane.data.clone(),
             cone,
             reach: (rx.max(0) as usize, ry.max(0) as usize),
         })
+    }
+
+    /// Guidance that takes no evidence from the pixels where the measured signature `signature` (metres, this
+    /// guidance's size) has no return (0): their imprint was filled in, not measured
+    /// ([`crate::sim::signature::imprint`]).
+    pub fn ignoring_missing(mut self, signature: &Image) -> Self {
+        if signature.data.len() == self.observed.len() {
+            for (o, &s) in self.observed.iter_mut().zip(&signature.data) {
+                *o &= s > 0.0;
+            }
+        }
+        self
     }
 
     /// Whether the step at timestep `t` of a model trained with `train_steps` steps is guided.
@@ -247,14 +262,14 @@ impl ImprintGuidance {
         self.forward(z, norm).yhat
     }
 
-    /// ½ Σ (Ŷ − Y)² over the pixels where the membrane is seen, metres².
+    /// ½ Σ (Ŷ − Y)² over the observed pixels (the membrane seen, the frame measured), metres².
     pub fn loss(&self, z: &[f32], norm: &TactileConfig) -> f64 {
         self.misfit(&self.forward(z, norm))
     }
 
     fn misfit(&self, f: &Forward) -> f64 {
         (0..f.yhat.len())
-            .filter(|&i| self.membrane[i] > 0.0)
+            .filter(|&i| self.observed[i])
             .map(|i| 0.5 * f64::from(f.yhat[i] - self.imprint[i]).powi(2))
             .sum()
     }
@@ -338,7 +353,7 @@ impl ImprintGuidance {
         let mut da = vec![0.0f32; n];
         let mut dp = vec![0.0f32; n];
         for i in 0..n {
-            if self.membrane[i] <= 0.0 {
+            if !self.observed[i] {
                 continue;
             }
             let r = f.yhat[i] - self.imprint[i];

@@ -210,7 +210,10 @@ pub fn estimate_pose(
     seed: u64,
     progress: Progress<'_>,
 ) -> Result<PoseEstimate, PipelineError> {
-    let ctx = SensorContext::of_simulator(sim, ObjectSet::builtin());
+    let sensor = SensorContext::of_simulator(sim, ObjectSet::builtin());
+    // Pixels without a return give no free-space evidence.
+    let ctx = sensor.observing(input.signature);
+    let ctx = ctx.as_ref();
     let estimator = Estimator::new(config.clone());
     let model = estimator.object_from_mesh(&object.name, &object.mesh, object.symmetry)?;
     let (samples, anchor_shift_m) =
@@ -227,7 +230,7 @@ pub fn estimate_pose(
     let (registered_sample, hypotheses) = first_registration(
         &estimator,
         &model,
-        &ctx,
+        ctx,
         &input.t_world_camera,
         &samples,
         seed,
@@ -249,7 +252,7 @@ pub fn estimate_pose(
                 pool.extend(estimator.pooled_hypotheses(
                     &model,
                     std::slice::from_ref(b),
-                    &ctx,
+                    ctx,
                     &input.t_world_camera,
                     Some(m),
                     &strategy,
@@ -258,7 +261,7 @@ pub fn estimate_pose(
             match estimator.check_with_posterior(
                 &model,
                 &pool,
-                &ctx,
+                ctx,
                 &input.t_world_camera,
                 Some(m),
                 true,
@@ -296,7 +299,7 @@ pub fn estimate_pose(
     // The baseline's step is counted whether or not there is one (no signature), so that the steps keep the
     // numbers [`pose_stage`] names.
     let no_baseline = usize::from(sig.baseline.is_none());
-    let mut report = analyse_with_progress(&estimator, &model, &ctx, &sig, seed, &mut |done, _| {
+    let mut report = analyse_with_progress(&estimator, &model, ctx, &sig, seed, &mut |done, _| {
         progress(1 + done + no_baseline * usize::from(done > n), total)
     })
     .map_err(|e| match e {

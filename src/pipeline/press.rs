@@ -169,7 +169,8 @@ fn search_press(
     else {
         return Ok(least);
     };
-    let ectx = SensorContext::of_simulator(at.sim, ObjectSet::builtin());
+    let sensor = SensorContext::of_simulator(at.sim, ObjectSet::builtin());
+    let ectx = sensor.observing(Some(signature));
     let model = estimator.object_from_mesh(&at.object.name, &at.object.mesh, at.object.symmetry)?;
     let measured = Some((signature, imprint));
     let place = |press: f64| {

@@ -169,6 +169,29 @@ impl SensorContext {
     }
 }
 
+impl SensorContext {
+    /// This context as a measurement with signature `signature` (metres, the camera's size) sees the sensor: the
+    /// membrane left out (0) where the frame has no return, so that the registration claims no free space on a
+    /// pixel the camera did not measure. Borrowed when nothing is missing (every simulated signature).
+    pub fn observing(&self, signature: Option<&Image>) -> std::borrow::Cow<'_, SensorContext> {
+        use std::borrow::Cow;
+        let Some(s) = signature.filter(|s| s.data.len() == self.membrane.data.len()) else {
+            return Cow::Borrowed(self);
+        };
+        let missing = |(&e, &d): (&f32, &f32)| e > 0.0 && !(d > 0.0);
+        if !self.membrane.data.iter().zip(&s.data).any(missing) {
+            return Cow::Borrowed(self);
+        }
+        let mut ctx = self.clone();
+        for (e, &d) in ctx.membrane.data.iter_mut().zip(&s.data) {
+            if !(d > 0.0) {
+                *e = 0.0;
+            }
+        }
+        Cow::Owned(ctx)
+    }
+}
+
 /// An object prepared for registration, the signature check and scoring.
 pub struct ObjectModel {
     pub registration: SdfRegistration,

@@ -147,9 +147,13 @@ impl SignatureModel {
             width_native_px: self.shadow_px,
             spacing: self.spacing,
         };
-        crate::model::ImprintGuidance::new(*config, imprint, &membrane, cloak)
-            .map(Some)
-            .map_err(|e| PoseError::Config(crate::error::render(&e)))
+        let guidance = crate::model::ImprintGuidance::new(*config, imprint, &membrane, cloak)
+            .map_err(|e| PoseError::Config(crate::error::render(&e)))?;
+        // Where the frame has no return the imprint was filled in: no evidence there.
+        Ok(Some(match signature {
+            Some(s) => guidance.ignoring_missing(s),
+            None => guidance,
+        }))
     }
 }
 

@@ -97,6 +97,14 @@ pub struct SensorCalibration {
     pub frame_size: [usize; 2],
     /// Every setting the calibration set, beside the given value.
     pub changes: Vec<Change>,
+    /// What the no-contact frames show of the depth camera (missing returns, noise growing with depth, a fixed
+    /// pattern; [`super::camera_fit`]); `None` with fewer than three frames. Set in [`Self::sensor`] when it
+    /// shows anything.
+    #[serde(default)]
+    pub camera: Option<super::camera_fit::CameraFit>,
+    /// The membrane's largest drift between runs of no-contact frames, metres ([`super::drift`]).
+    #[serde(default)]
+    pub drift_m: f64,
     /// Things the user should know (the fit does not explain the frames, too few no-contact frames, ...).
     pub warnings: Vec<String>,
     /// The calibrated sensor: the given one with the settings above.
@@ -150,6 +158,29 @@ impl SensorCalibration {
             self.residual_max_m * 1e3,
             self.no_contact_frames.len()
         ));
+        if let Some(c) = self.camera.as_ref().filter(|c| !c.camera.is_ideal()) {
+            let d = &c.camera;
+            lines.push(format!(
+                "depth camera: noise ∝ depth^{:.1} ({:.2} mm at {:.0} mm), {:.1} % random dropouts, {:.0}-px edge band \
+                 without returns, fixed pattern {:.2} mm ({} of {} pixels never returned)",
+                d.noise_exponent,
+                self.sensor.signature.noise_std * 1e3,
+                d.noise_reference_m * 1e3,
+                d.dropout * 100.0,
+                d.edge_missing_px,
+                d.fixed_pattern_m * 1e3,
+                c.never_returned_px,
+                c.pixels
+            ));
+        }
+        if self.drift_m > super::drift::DRIFT_TOLERANCE_M {
+            lines.push(format!(
+                "membrane drift: up to {:.2} mm between runs of no-contact frames (calibrated from the {} that agree \
+                 with the fitted membrane)",
+                self.drift_m * 1e3,
+                self.no_contact_frames.len()
+            ));
+        }
         lines.extend(self.warnings.iter().map(|w| format!("warning: {w}")));
         lines
     }
@@ -191,21 +222,26 @@ pub(crate) fn frame_intrinsics(
     Ok((k, size))
 }
 
-/// Per-pixel mean over `frames` of the pixels measured in all of them (0 elsewhere).
+/// Per-pixel mean over `frames` of the frames that measured the pixel, where at least half of them did (0
+/// elsewhere: a pixel that rarely returns is missing; one that drops out now and then is still measured).
 pub fn mean_image(frames: &[&Image]) -> Image {
     let first = frames[0];
     let mut out = Image::filled(first.width, first.height, 0.0);
     for (i, o) in out.data.iter_mut().enumerate() {
-        let vals = frames.iter().map(|f| f.data[i]);
-        if vals.clone().all(|d| d > 0.0 && d.is_finite()) {
-            *o = (vals.map(f64::from).sum::<f64>() / frames.len() as f64) as f32;
+        let (sum, n) = frames
+            .iter()
+            .map(|f| f.data[i])
+            .filter(|&d| d > 0.0 && d.is_finite())
+            .fold((0.0f64, 0usize), |(s, n), d| (s + f64::from(d), n + 1));
+        if n > 0 && 2 * n >= frames.len() {
+            *o = (sum / n as f64) as f32;
         }
     }
     out
 }
 
 /// Standard deviation of the frames about their per-pixel mean `mean` (unbiased: n − 1 degrees of freedom per
-/// pixel), ignoring deviations over five standard deviations (a contact that slipped into a no-contact frame);
+/// pixel), over the pixels each frame measured, ignoring deviations over five standard deviations (a contact that slipped into a no-contact frame);
 /// `None` with fewer than two frames.
 fn spread_about(frames: &[&Image], mean: &Image) -> Option<f64> {
     let n = frames.len();
@@ -216,7 +252,7 @@ fn spread_about(frames: &[&Image], mean: &Image) -> Option<f64> {
         let (mut s, mut count) = (0.0f64, 0usize);
         for f in frames {
             for (&d, &m) in f.data.iter().zip(&mean.data) {
-                if m > 0.0 {
+                if m > 0.0 && d > 0.0 {
                     let r = f64::from(d) - f64::from(m);
                     if r.abs() <= limit {
                         s += r * r;
@@ -332,6 +368,29 @@ pub fn calibrate(
         }
     };
     calibrate_frames(&native, &model, quiet, &picks, n, given, config).map_err(frames_err)
+}
+
+/// The largest drift between runs of consecutive frames among `used` (indices into `model`, model resolution):
+/// [`super::drift`]'s measure between each run's median and the first's; 0 with one run.
+fn frames_drift(model: &[Image], used: &[usize]) -> f64 {
+    let mut runs: Vec<Vec<usize>> = Vec::new();
+    for &k in used {
+        match runs.last_mut() {
+            Some(r) if r.last().is_some_and(|&l| l + 1 == k) => r.push(k),
+            _ => runs.push(vec![k]),
+        }
+    }
+    runs.retain(|r| r.len() >= super::drift::MIN_STRETCH_FRAMES);
+    let means: Vec<Image> = runs
+        .iter()
+        .map(|r| mean_image(&r.iter().map(|&k| &model[k]).collect::<Vec<_>>()))
+        .collect();
+    means.first().map_or(0.0, |first| {
+        means
+            .iter()
+            .map(|m| super::drift::drift_between(first, m).abs())
+            .fold(0.0, f64::max)
+    })
 }
 
 /// Calibrate the sensor `given` from frames of the membrane without contact (e.g. `tnd pose --reference`), all of
@@ -476,10 +535,34 @@ fn calibrate_frames(
     let residual_max_m = residuals.iter().map(|r| r.abs()).fold(0.0, f64::max);
     let noise_floor_rms_m =
         noise_std_m.unwrap_or(given.signature.noise_std) / (used.len() as f64).sqrt();
-    // What the noise does not explain: the residual's RMS beyond the noise floor, in quadrature.
-    let model_error_rms_m = (residual_rms_m.powi(2) - noise_floor_rms_m.powi(2))
-        .max(0.0)
-        .sqrt();
+    // The camera, from the frames the fit used (the noise: theirs, or the given); its fixed pattern is part of
+    // the residual that is no error of the membrane.
+    let used_frames: Vec<&Image> = used.iter().map(|&q| &native[q]).collect();
+    let camera = super::camera_fit::fit_camera(
+        &used_frames,
+        &measured,
+        &fitted,
+        noise_std_m.unwrap_or(given.signature.noise_std),
+    );
+    let pattern = camera.as_ref().map_or(0.0, |c| c.camera.fixed_pattern_m);
+    // What the noise does not explain: the residual's RMS beyond the noise floor, in quadrature. Without a
+    // measured noise (one frame) the given noise may be off, and so would this be: there the residual's 5 x 5-window
+    // mean is judged instead (a membrane's error is smooth; noise averages down five times).
+    let model_error_rms_m = if noise_std_m.is_some() {
+        (residual_rms_m.powi(2) - noise_floor_rms_m.powi(2) - pattern.powi(2))
+            .max(0.0)
+            .sqrt()
+    } else {
+        let smooth = super::process::box_means(&residual, 2);
+        let seen: Vec<f64> = (0..smooth.len())
+            .filter(|&i| measured.data[i] > 0.0 && fitted.data[i] > 0.0)
+            .map(|i| smooth[i])
+            .collect();
+        let rms = (seen.iter().map(|r| r * r).sum::<f64>() / seen.len().max(1) as f64).sqrt();
+        (rms.powi(2) - (noise_floor_rms_m / 5.0).powi(2))
+            .max(0.0)
+            .sqrt()
+    };
     if model_error_rms_m.is_nan() || model_error_rms_m > MODEL_ERROR_WARNING_M {
         warnings.push(format!(
             "the {} membrane does not explain the no-contact frames: residual RMS {:.2} mm where the noise alone \
@@ -494,7 +577,18 @@ fn calibrate_frames(
         ));
     }
 
+    let drift_m = frames_drift(model, &quiet);
+    if drift_m > super::drift::DRIFT_WARNING_M {
+        warnings.push(format!(
+            "the membrane drifted up to {:.2} mm between runs of no-contact frames: the calibration is of their mean, \
+             and its noise includes the drift; calibrate from a recording without a press in the middle",
+            drift_m * 1e3
+        ));
+    }
     let mut sensor = given.clone();
+    if let Some(c) = camera.as_ref().filter(|c| !c.camera.is_ideal()) {
+        sensor.depth_camera = c.camera.clone();
+    }
     sensor.elastomer.footprint_x = params.footprint_m[0];
     sensor.elastomer.footprint_y = params.footprint_m[1];
     sensor.elastomer.inflation = params.inflation_m;
@@ -572,6 +666,8 @@ fn calibrate_frames(
         no_contact_frames: used.iter().map(|&q| picks[q]).collect(),
         frame_size: [width, height],
         changes,
+        camera,
+        drift_m,
         warnings,
         sensor,
     };

@@ -1,6 +1,7 @@
 //! Depth images from ROS messages: `sensor_msgs/Image` in `16UC1`/`mono16` (millimetres) or `32FC1` (metres), either
 //! byte order and any row padding, and `sensor_msgs/PointCloud2` projected through the camera's pinhole model.
-//! Pixels without a measurement (0, NaN, infinite or negative) are 0.
+//! Pixels without a measurement (0, NaN, infinite, negative or beyond [`crate::image::MAX_DEPTH_M`], e.g. 65 535 mm)
+//! are 0, missing.
 
 use super::ros::{ImageMsg, PointCloudMsg};
 use crate::image::Image;
@@ -58,7 +59,11 @@ pub fn image_depth(m: &ImageMsg) -> Result<Image, crate::error::InvalidInput> {
                     };
                     raw as f32
                 } * scale;
-                data.push(if d.is_finite() && d > 0.0 { d } else { 0.0 });
+                data.push(if crate::image::is_measured_depth(d) {
+                    d
+                } else {
+                    0.0
+                });
             }
         }
         Image::from_vec(w, h, data).ok_or_else(|| "image size".to_string())
@@ -186,7 +191,8 @@ mod tests {
             data,
         };
         let d = image_depth(&m).unwrap();
-        assert_eq!(d.data, vec![0.085, 0.0, 0.09, 65.535]);
+        // 65 535 mm, the 16-bit drivers' no-return sentinel, is beyond any tactile camera's range: missing.
+        assert_eq!(d.data, vec![0.085, 0.0, 0.09, 0.0]);
         let be = ImageMsg {
             encoding: "32FC1".into(),
             is_bigendian: true,

@@ -9,7 +9,10 @@
 //! | [`decode`] | depth images from those messages (16UC1 mm, 32FC1 m, projected clouds) |
 //! | [`source`] | opening an MCAP file or a frame folder, listing streams, reading a frame |
 //! | [`process`] | reference detection, imprint and contact area per frame |
+//! | [`drift`] | the membrane's drift between no-contact stretches; each contact's reference from the one before it |
+//! | [`frames_out`] | a recording's frames as native `.npy` files (NaN where no return) with `frames.csv` |
 //! | [`calibrate`] | the sensor (membrane, camera position, noise) fitted to the no-contact frames |
+//! | [`camera_fit`] | the depth camera's artefacts (missing returns, noise growing with depth, fixed pattern) from them |
 //! | [`measured_membrane`] | a membrane mesh made of those frames, where the parametric dome cannot explain them |
 //! | [`synth`] | writing a simulated press sequence as an MCAP recording (demos and tests) |
 //!
@@ -17,7 +20,10 @@
 //! [`crate::dataset::import_recording`].
 
 pub mod calibrate;
+pub mod camera_fit;
 pub mod decode;
+pub mod drift;
+pub mod frames_out;
 pub mod measured_membrane;
 pub mod process;
 pub mod ros;

@@ -11,6 +11,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::drift::QuietStretch;
 use super::source::{Recording, StreamInfo};
 use super::RecordingError;
 use crate::image::Image;
@@ -78,14 +79,37 @@ pub struct ProcessedRecording {
     pub stamps_ns: Vec<u64>,
     /// S per frame, metres, model resolution.
     pub signatures: Vec<Image>,
-    /// R, metres, model resolution.
+    /// R, metres, model resolution: the reference of the whole recording.
     pub reference: Image,
     /// The frames R was made of.
     pub reference_frames: Vec<usize>,
-    /// Y = R − S per frame, metres (0 where either is missing).
+    /// The runs of no-contact frames, each with its own reference and drift ([`super::drift`]; empty with a
+    /// reference frame given).
+    pub stretches: Vec<QuietStretch>,
+    /// Per frame, the stretch whose reference its imprint was taken against; `None` where the stretches agree
+    /// within [`super::drift::DRIFT_TOLERANCE_M`] and every imprint is against [`Self::reference`].
+    pub reference_of: Option<Vec<usize>>,
+    /// Y = R − S per frame, metres ([`crate::sim::signature::imprint`]: filled in where only S is missing, 0 where R
+    /// is).
     pub imprints: Vec<Image>,
     /// Pixels with Y above the threshold, per frame.
     pub contact_px: Vec<usize>,
+    /// Pixels the frame measured where its reference did, per frame (the others have no return: missing).
+    pub measured_px: Vec<usize>,
+}
+
+/// Least share of the reference's measured pixels a frame must measure itself to be de-rendered and registered
+/// (below it, holes are the frame's larger part: a glitch, a cable over the lens, an over-exposed frame).
+pub const MIN_MEASURED_SHARE: f64 = 0.5;
+
+/// Pixels measured (depth > 0) in both `reference` and `frame`.
+pub fn measured_pixels(reference: &Image, frame: &Image) -> usize {
+    reference
+        .data
+        .iter()
+        .zip(&frame.data)
+        .filter(|(&r, &s)| r > 0.0 && s > 0.0)
+        .count()
 }
 
 impl ProcessedRecording {
@@ -96,6 +120,38 @@ impl ProcessedRecording {
 
     pub fn is_empty(&self) -> bool {
         self.imprints.is_empty()
+    }
+
+    /// The reference frame `frame`'s imprint was taken against.
+    pub fn reference_for(&self, frame: usize) -> &Image {
+        self.reference_of
+            .as_ref()
+            .and_then(|of| of.get(frame))
+            .and_then(|&s| self.stretches.get(s))
+            .map_or(&self.reference, |s| &s.reference)
+    }
+
+    /// The membrane's largest drift between no-contact stretches, metres ([`super::drift`]).
+    pub fn drift_m(&self) -> f64 {
+        super::drift::largest_drift(&self.stretches)
+    }
+
+    /// Why frame `frame` cannot be used (too few of its pixels have a return, [`MIN_MEASURED_SHARE`]), in one line
+    /// naming the frame; `None` when it can.
+    pub fn unusable(&self, frame: usize) -> Option<String> {
+        let seen = self
+            .reference_for(frame)
+            .data
+            .iter()
+            .filter(|&&r| r > 0.0)
+            .count();
+        let measured = self.measured_px.get(frame).copied().unwrap_or(0);
+        ((measured as f64) < MIN_MEASURED_SHARE * seen as f64).then(|| {
+            format!(
+                "frame {frame}: only {measured} of the membrane's {seen} pixels have a return (fewer than {:.0} %); skipped",
+                100.0 * MIN_MEASURED_SHARE
+            )
+        })
     }
 
     /// Seconds from the first frame, per frame.
@@ -185,33 +241,54 @@ pub fn process(
             return Err(RecordingError::Cancelled);
         }
     }
-    let reference_frames = match config.reference {
-        ReferenceChoice::Frame(k) if k < n => vec![k],
+    let (reference_frames, stretches) = match config.reference {
+        ReferenceChoice::Frame(k) if k < n => (vec![k], Vec::new()),
         ReferenceChoice::Frame(k) => {
             return Err(frames_err(format!(
                 "reference frame {k} is beyond the last frame {}",
                 n - 1
             )))
         }
-        ReferenceChoice::Auto => quiet_frames(&signatures, config),
+        ReferenceChoice::Auto => {
+            let quiet = all_quiet_frames(&signatures, config);
+            let stretches = quiet_stretches(&signatures, &quiet, config.quiet_frames);
+            (spread_picks(quiet, config.quiet_frames), stretches)
+        }
     };
     let refs: Vec<&Image> = reference_frames.iter().map(|&k| &signatures[k]).collect();
     let reference = median_image(&refs);
-    let imprints: Vec<Image> = signatures.iter().map(|s| imprint(&reference, s)).collect();
-    let contact_px = imprints
-        .iter()
-        .map(|y| contact_pixels(y, config.contact_threshold_m))
-        .collect();
-    Ok(ProcessedRecording {
+    let reference_of = (stretches.len() >= 2
+        && super::drift::largest_drift(&stretches) > super::drift::DRIFT_TOLERANCE_M)
+        .then(|| {
+            (0..n)
+                .map(|k| super::drift::nearest_before(&stretches, k))
+                .collect::<Vec<_>>()
+        });
+    let mut processed = ProcessedRecording {
         stream: stream.name.clone(),
         source_size,
         stamps_ns,
         signatures,
         reference,
         reference_frames,
-        imprints,
-        contact_px,
-    })
+        stretches,
+        reference_of,
+        imprints: Vec::new(),
+        contact_px: Vec::new(),
+        measured_px: Vec::new(),
+    };
+    let (mut imprints, mut contact_px, mut measured_px) = (Vec::new(), Vec::new(), Vec::new());
+    for (k, s) in processed.signatures.iter().enumerate() {
+        let r = processed.reference_for(k);
+        let y = imprint(r, s);
+        contact_px.push(contact_pixels(&y, config.contact_threshold_m));
+        measured_px.push(measured_pixels(r, s));
+        imprints.push(y);
+    }
+    processed.imprints = imprints;
+    processed.contact_px = contact_px;
+    processed.measured_px = measured_px;
+    Ok(processed)
 }
 
 /// Mean of `y` over the (2·radius+1)² window around each pixel, clipped to the image (pixels that are 0 in `y`
@@ -291,8 +368,9 @@ fn is_quiet(y: &Image, threshold: f64, window_noise: f64) -> bool {
     max <= threshold.max(5.0 * window_noise)
 }
 
-/// The frames an automatic reference is made of (see the module docs; a frame is quiet as [`is_quiet`] says).
-pub fn quiet_frames(signatures: &[Image], config: &ProcessConfig) -> Vec<usize> {
+/// Every quiet frame of the recording ([`is_quiet`] against the frame of largest mean depth), in order; that frame
+/// alone when none is quiet.
+fn all_quiet_frames(signatures: &[Image], config: &ProcessConfig) -> Vec<usize> {
     if signatures.is_empty() {
         return Vec::new();
     }
@@ -302,20 +380,71 @@ pub fn quiet_frames(signatures: &[Image], config: &ProcessConfig) -> Vec<usize> 
         .unwrap_or(0);
     let r = &signatures[first];
     let noise = window_noise(signatures).unwrap_or(0.0);
+    // Judged on what a drift of the whole membrane cannot explain, so that the no-contact frames of a drifting
+    // membrane are still found; the drift is fitted on the membrane's outer part, where contacts seldom are (one
+    // at the apex would otherwise pass for a drift).
+    let shape = super::drift::profile(r);
+    let seen = r.data.iter().filter(|&&d| d > 0.0).count();
     let quiet: Vec<usize> = signatures
         .iter()
         .enumerate()
-        .filter(|(_, s)| is_quiet(&imprint(r, s), config.quiet_threshold_m, noise))
+        // A frame that lost most of its returns is no picture of the membrane (its imprint is mostly filled in).
+        .filter(|(_, s)| measured_pixels(r, s) as f64 >= MIN_MEASURED_SHARE * seen as f64)
+        .filter(|(_, s)| {
+            let (rest, _) = super::drift::without_drift(&imprint(r, s), &shape, |i| {
+                r.data[i] > 0.0 && s.data[i] > 0.0 && shape[i] < super::drift::OUTER_PROFILE
+            });
+            is_quiet(&rest, config.quiet_threshold_m, noise)
+        })
         .map(|(i, _)| i)
         .collect();
-    let k = config.quiet_frames.max(1);
-    if quiet.len() <= k {
-        return if quiet.is_empty() { vec![first] } else { quiet };
+    if quiet.is_empty() {
+        vec![first]
+    } else {
+        quiet
     }
-    // Spread over the recording: k evenly spaced picks among the quiet frames.
+}
+
+/// Up to `k` of `quiet`, evenly spaced over the recording.
+fn spread_picks(quiet: Vec<usize>, k: usize) -> Vec<usize> {
+    let k = k.max(1);
+    if quiet.len() <= k {
+        return quiet;
+    }
     (0..k)
         .map(|j| quiet[j * (quiet.len() - 1) / (k - 1).max(1)])
         .collect()
+}
+
+/// The stretches of no-contact frames ([`super::drift`]): each the median of its last `k` frames, with its drift
+/// from the first stretch.
+fn quiet_stretches(signatures: &[Image], quiet: &[usize], k: usize) -> Vec<QuietStretch> {
+    let mut stretches: Vec<QuietStretch> = super::drift::runs(quiet)
+        .into_iter()
+        .map(|(first, last)| {
+            let start = (last + 1).saturating_sub(k.max(1)).max(first);
+            let frames: Vec<usize> = (start..=last).collect();
+            let refs: Vec<&Image> = frames.iter().map(|&f| &signatures[f]).collect();
+            QuietStretch {
+                first,
+                last,
+                reference: median_image(&refs),
+                reference_frames: frames,
+                drift_m: 0.0,
+            }
+        })
+        .collect();
+    if let Some(first) = stretches.first().map(|s| s.reference.clone()) {
+        for s in &mut stretches {
+            s.drift_m = super::drift::drift_between(&first, &s.reference);
+        }
+    }
+    stretches
+}
+
+/// The frames an automatic reference is made of (see the module docs; a frame is quiet as [`is_quiet`] says).
+pub fn quiet_frames(signatures: &[Image], config: &ProcessConfig) -> Vec<usize> {
+    spread_picks(all_quiet_frames(signatures, config), config.quiet_frames)
 }
 
 #[cfg(test)]

@@ -64,7 +64,8 @@ impl Default for FolderOptions {
     }
 }
 
-/// A depth frame at the camera's resolution, metres (0 where the camera measured nothing).
+/// A depth frame at the camera's resolution, metres (0 where the camera measured nothing, whatever way the file or
+/// message marked it: [`crate::image::is_measured_depth`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct DepthFrame {
     /// Time stamp, nanoseconds (header stamp, or the MCAP log time when the header's is 0).
@@ -217,8 +218,13 @@ impl Recording {
                 .map(str::to_ascii_lowercase);
             let is_frame = ext.is_some_and(|e| FRAME_EXTENSIONS.contains(&e.as_str()));
             let name = p.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-            // A reference frame or a pair table beside the frames is not a frame.
-            if is_frame && p.is_file() && !name.starts_with("reference.") {
+            // A reference frame (`reference.npy`, `reference_000012.npy` as `tnd recording frames` writes them) or
+            // a pair table beside the frames is not a frame.
+            if is_frame
+                && p.is_file()
+                && !name.starts_with("reference.")
+                && !name.starts_with("reference_")
+            {
                 files.push(p);
             }
         }
@@ -330,7 +336,8 @@ impl Recording {
                     })?;
                 Ok(DepthFrame {
                     stamp_ns: (index as f64 * 1e9 / options.fps).round() as u64,
-                    depth,
+                    // NaN, inf, negative and out-of-range pixels have no return: 0, as the MCAP decoders give them.
+                    depth: depth.missing_as_zero().0,
                 })
             }
             Data::Mcap(topics) => {

@@ -44,6 +44,14 @@ pub struct PressSequence {
     pub depth_topic: String,
     /// Pose topic name (`None`: no pose topic).
     pub pose_topic: Option<String>,
+    /// How `32FC1` frames mark a pixel without a return: NaN (REP 118, the default) or 0. `16UC1` frames always use
+    /// 0; point clouds leave the point out.
+    #[serde(default)]
+    pub missing_as_zero: bool,
+    /// How much the membrane's inflation changes from the first frame to the last, linearly, metres (air leaking
+    /// out: negative; 0: none, the default). The sensor stays where it is, so the contact's press changes with it.
+    #[serde(default)]
+    pub drift_m: f64,
 }
 
 impl PressSequence {
@@ -63,6 +71,8 @@ impl PressSequence {
             seed: 0,
             depth_topic: "/bubble/depth/image_rect_raw".into(),
             pose_topic: Some("/object/pose".into()),
+            missing_as_zero: false,
+            drift_m: 0.0,
         }
     }
 }
@@ -103,14 +113,40 @@ pub fn write_press_recording(
         None => None,
     };
     let t0_ns: u64 = 1_700_000_000_000_000_000;
+    if seq.drift_m != 0.0 && sim_config.elastomer.mesh_file.is_some() {
+        return Err(RecordingError::Frames {
+            path: path.to_path_buf(),
+            message:
+                "a drifting membrane needs the parametric membrane (its inflation), not a mesh file"
+                    .into(),
+        });
+    }
+    let last = seq.presses.len().saturating_sub(1).max(1) as f64;
     for (i, &press) in seq.presses.iter().enumerate() {
+        // The membrane of this frame: the inflation drifted by its share of `drift_m`.
+        let drifted;
+        let frame_sim = if seq.drift_m == 0.0 {
+            &sim
+        } else {
+            let mut c = sim_config.clone();
+            c.elastomer.inflation += seq.drift_m * i as f64 / last;
+            drifted = Simulator::native(c)?;
+            &drifted
+        };
         let stamp = t0_ns + (i as f64 * seq.frame_period_s * 1e9).round() as u64;
         let scene = Scene {
             object: seq.pose,
             sensor: sim.pressing_pose(object, 0.0, 0.0, 0.0, press),
         };
-        let out = sim.simulate(object, &scene, seq.seed.wrapping_add(i as u64));
-        let s = &out.signature;
+        let frame_seed = seq.seed.wrapping_add(i as u64);
+        let out = frame_sim.simulate(object, &scene, frame_seed);
+        // The depth camera's own artefacts (missing returns as 0), on the native frame.
+        let s = &sim_config.depth_camera.apply(
+            &out.signature,
+            sim_config.signature.noise_std,
+            frame_seed,
+        );
+        let nan = if seq.missing_as_zero { 0.0 } else { f32::NAN };
         let data = match seq.encoding {
             DepthEncoding::Mm16 | DepthEncoding::F32 => {
                 let (encoding, bytes_per_px, data): (&str, u32, Vec<u8>) = match seq.encoding {
@@ -125,7 +161,10 @@ pub fn write_press_recording(
                     _ => (
                         "32FC1",
                         4,
-                        s.data.iter().flat_map(|d| d.to_le_bytes()).collect(),
+                        s.data
+                            .iter()
+                            .flat_map(|&d| if d > 0.0 { d } else { nan }.to_le_bytes())
+                            .collect(),
                     ),
                 };
                 let m = ImageMsg {

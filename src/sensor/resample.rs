@@ -64,7 +64,14 @@ pub fn crop(image: &Image, rows: (usize, usize), cols: (usize, usize)) -> Image 
     }
 }
 
-/// Area-resample a depth image (0 = missing) to `width x height`.
+/// Whether a pixel of a frame on its way to the model resolution holds a value: not 0, finite and within
+/// [`crate::image::MAX_DEPTH_M`] (a depth, or an imprint, which may be negative); the others are missing.
+#[inline]
+fn has_value(d: f32) -> bool {
+    d != 0.0 && d.is_finite() && d.abs() <= crate::image::MAX_DEPTH_M
+}
+
+/// Area-resample a depth image (0, NaN, ±inf or out of range = missing) to `width x height`.
 pub fn resample_depth(image: &Image, width: usize, height: usize) -> Image {
     let sx = image.width as f64 / width as f64;
     let sy = image.height as f64 / height as f64;
@@ -81,7 +88,7 @@ pub fn resample_depth(image: &Image, width: usize, height: usize) -> Image {
                     let a = wx * wy;
                     area += a;
                     let d = image.get(ix, iy);
-                    if d != 0.0 && d.is_finite() {
+                    if has_value(d) {
                         sum += a * f64::from(d);
                         valid += a;
                     }
@@ -95,12 +102,21 @@ pub fn resample_depth(image: &Image, width: usize, height: usize) -> Image {
     out
 }
 
-/// Bring a depth frame to the model resolution: crop if native, resample if not at the model size.
+/// Bring a depth frame to the model resolution: crop if native, resample if not at the model size. Pixels without a
+/// value come out as 0 (missing) whatever way the frame marked them.
 pub fn to_model(camera: &CameraConfig, image: &Image) -> Result<Image, crate::error::InvalidInput> {
     crate::error::InvalidInput::wrap("depth image size", || {
         let (w, h) = camera.resolution;
         match classify(camera, image.width, image.height)? {
-            InputSize::Model => Ok(image.clone()),
+            InputSize::Model => Ok(Image {
+                width: image.width,
+                height: image.height,
+                data: image
+                    .data
+                    .iter()
+                    .map(|&d| if has_value(d) { d } else { 0.0 })
+                    .collect(),
+            }),
             InputSize::Cropped => Ok(resample_depth(image, w, h)),
             InputSize::Native => Ok(resample_depth(
                 &crop(image, camera.crop_rows, camera.crop_cols),
@@ -118,17 +134,30 @@ mod tests {
 
     #[test]
     fn block_average_and_coverage_rule() {
-        // 4x4 -> 2x2: each output pixel is the mean of a 2x2 block.
-        let img = Image::from_vec(4, 4, (1..=16).map(|x| x as f32).collect()).unwrap();
+        // 4x4 -> 2x2: each output pixel is the mean of a 2x2 block (depths of 10..160 mm).
+        let img = Image::from_vec(4, 4, (1..=16).map(|x| x as f32 * 0.01).collect()).unwrap();
         let out = resample_depth(&img, 2, 2);
-        assert_eq!(out.data, vec![3.5, 5.5, 11.5, 13.5]);
+        let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6);
+        assert!(
+            close(&out.data, &[0.035, 0.055, 0.115, 0.135]),
+            "{:?}",
+            out.data
+        );
         // A block with one valid pixel of four (25 % < 50 %) is missing; two of four (50 %) is their mean.
         let mut img = Image::filled(4, 2, 0.0);
-        *img.get_mut(0, 0) = 1.0;
-        *img.get_mut(2, 0) = 2.0;
-        *img.get_mut(3, 1) = 4.0;
+        *img.get_mut(0, 0) = 0.01;
+        *img.get_mut(2, 0) = 0.02;
+        *img.get_mut(3, 1) = 0.04;
         let out = resample_depth(&img, 2, 1);
-        assert_eq!(out.data, vec![0.0, 3.0]);
+        assert!(close(&out.data, &[0.0, 0.03]), "{:?}", out.data);
+        // NaN, ±inf and out-of-range values (a 65 535 mm sentinel) are missing like 0.
+        let mut img = Image::filled(2, 2, 0.05);
+        *img.get_mut(0, 0) = f32::NAN;
+        *img.get_mut(1, 0) = 65.535;
+        *img.get_mut(0, 1) = f32::INFINITY;
+        assert_eq!(resample_depth(&img, 1, 1).data, vec![0.0]);
+        *img.get_mut(0, 1) = 0.07;
+        assert!(close(&resample_depth(&img, 1, 1).data, &[0.06]));
     }
 
     #[test]
@@ -136,14 +165,19 @@ mod tests {
         // 175 -> 64 columns: non-integer blocks. Area resampling conserves the integral (sum of value x block width
         // equals the input sum), each output lies within half a pixel of the ramp at its block centre, and a constant
         // stays constant.
-        let img = Image::from_vec(175, 1, (0..175).map(|x| x as f32 + 0.5).collect()).unwrap();
+        // A ramp of 5 .. 1745 mm, 10 mm a pixel.
+        let img =
+            Image::from_vec(175, 1, (0..175).map(|x| (x as f32 + 0.5) * 0.01).collect()).unwrap();
         let out = resample_depth(&img, 64, 1);
         let input: f64 = img.data.iter().map(|&x| f64::from(x)).sum();
         let output: f64 = out.data.iter().map(|&x| f64::from(x) * 175.0 / 64.0).sum();
         assert!((input - output).abs() < 1e-3 * input, "{input} vs {output}");
         for u in 0..64 {
-            let centre = (u as f64 + 0.5) * 175.0 / 64.0;
-            assert!((f64::from(out.get(u, 0)) - centre).abs() <= 0.5, "{u}");
+            let centre = (u as f64 + 0.5) * 175.0 / 64.0 * 0.01;
+            assert!(
+                (f64::from(out.get(u, 0)) - centre).abs() <= 0.005 + 1e-6,
+                "{u}"
+            );
         }
         let c = resample_depth(&Image::filled(175, 140, 0.09), 64, 64);
         assert!(c.data.iter().all(|&x| (x - 0.09).abs() < 1e-7));

@@ -8,6 +8,7 @@
 
 pub mod calibration;
 pub mod contact;
+pub mod depth_camera;
 pub mod render;
 pub mod sensor_file;
 pub mod shadows;
@@ -24,6 +25,7 @@ use crate::sensor::pose::CameraMount;
 use crate::sensor::{
     CameraConfig, ElastomerConfig, ElastomerError, Intrinsics, Scene, Se2, SensorPose,
 };
+pub use depth_camera::DepthCameraConfig;
 pub use signature::SignatureConfig;
 
 /// Press depth of the membrane apex below the object's highest point that every front end starts from (`tnd sim`,
@@ -52,6 +54,10 @@ pub struct SimConfig {
     pub mount: CameraMount,
     pub elastomer: ElastomerConfig,
     pub signature: SignatureConfig,
+    /// The depth camera's artefacts beyond the signature's noise (missing returns, depth-dependent noise, flying
+    /// pixels, a fixed pattern), applied to native frames ([`depth_camera`]); left out of files when ideal.
+    #[serde(skip_serializing_if = "DepthCameraConfig::is_ideal")]
+    pub depth_camera: DepthCameraConfig,
 }
 
 /// An object mesh prepared for rendering (BVH built once; reuse it across poses).
@@ -171,6 +177,10 @@ impl Simulator {
 
     fn with_intrinsics(config: SimConfig, intrinsics: Intrinsics) -> Result<Self, SimError> {
         config.signature.validate().map_err(SimError::Signature)?;
+        config
+            .depth_camera
+            .validate()
+            .map_err(SimError::Signature)?;
         let t_sensor_camera = config.mount.t_sensor_camera();
         let elastomer_mesh = config.elastomer.build()?;
         let caster = RayCaster::new(&elastomer_mesh)?;

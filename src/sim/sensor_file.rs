@@ -53,12 +53,19 @@ pub fn load(path: &Path) -> Result<SimConfig, SensorFileError> {
     if !value.is_object() {
         return Err(format("expected a JSON object".into()));
     }
-    let template = serde_json::to_value(SimConfig::default()).map_err(|e| format(e.to_string()))?;
+    let mut template =
+        serde_json::to_value(SimConfig::default()).map_err(|e| format(e.to_string()))?;
+    // An ideal depth camera is left out of files, not out of what they may hold.
+    if let Value::Object(m) = &mut template {
+        let camera = serde_json::to_value(super::DepthCameraConfig::default())
+            .map_err(|e| format(e.to_string()))?;
+        m.insert("depth_camera".into(), camera);
+    }
     let mut unknown = Vec::new();
     unknown_keys(&value, &template, "", &mut unknown);
     if !unknown.is_empty() {
         return Err(format(format!(
-            "unknown setting(s) {}; a sensor file has camera, mount, elastomer and signature",
+            "unknown setting(s) {}; a sensor file has camera, mount, elastomer, signature and depth_camera",
             unknown.join(", ")
         )));
     }

@@ -60,13 +60,64 @@ pub struct Signature {
     pub imprint: Image,
 }
 
-/// The imprint Y = R − S where both depths are measured (> 0), else 0: simulated signatures, imported pairs and
-/// recordings all use this rule.
+/// The imprint Y = R − S where both depths are measured (> 0); 0 where the reference R is missing (the membrane
+/// not seen, or a pixel that never returns); and where R is measured but the frame S has no return there (a
+/// time-of-flight camera's dropouts, steep or dark surfaces), Y filled in from the measured pixels around it
+/// ([`fill_gaps`]), so that a contact reaches the model without holes. Simulated signatures, imported pairs and
+/// recordings all use this rule; what is measured is S's own non-zero pixels.
 pub fn imprint(reference: &Image, signature: &Image) -> Image {
-    reference.zip_map(
+    let mut y = reference.zip_map(
         signature,
         |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 },
-    )
+    );
+    let gaps: Vec<usize> = (0..y.data.len())
+        .filter(|&i| reference.data[i] > 0.0 && !(signature.data[i] > 0.0))
+        .collect();
+    if !gaps.is_empty() {
+        let known: Vec<bool> = reference
+            .data
+            .iter()
+            .zip(&signature.data)
+            .map(|(&r, &s)| r > 0.0 && s > 0.0)
+            .collect();
+        fill_gaps(&mut y, known, gaps);
+    }
+    y
+}
+
+/// Fill the pixels `gaps` of `y` from the pixels `known` (row-major flags) ring by ring: each pass gives every gap
+/// pixel with a known 8-neighbour the mean of those neighbours, then counts it known. Gaps no known pixel reaches
+/// keep their value.
+pub fn fill_gaps(y: &mut Image, mut known: Vec<bool>, mut gaps: Vec<usize>) {
+    let (w, h) = (y.width, y.height);
+    let mut filled = Vec::new();
+    while !gaps.is_empty() {
+        filled.clear();
+        gaps.retain(|&i| {
+            let (u, v) = (i % w, i / w);
+            let (mut sum, mut n) = (0.0f32, 0u32);
+            for vv in v.saturating_sub(1)..(v + 2).min(h) {
+                for uu in u.saturating_sub(1)..(u + 2).min(w) {
+                    let j = vv * w + uu;
+                    if known[j] {
+                        sum += y.data[j];
+                        n += 1;
+                    }
+                }
+            }
+            if n > 0 {
+                filled.push((i, sum / n as f32));
+            }
+            n == 0
+        });
+        if filled.is_empty() {
+            break;
+        }
+        for &(i, value) in &filled {
+            y.data[i] = value;
+            known[i] = true;
+        }
+    }
 }
 
 /// Build S, R and Y from the object depth D, the nominal elastomer depth E and the contact mask M. `spacing` is the
@@ -156,5 +207,50 @@ mod tests {
             43,
         );
         assert_ne!(other.signature, s.signature);
+    }
+
+    #[test]
+    fn frame_dropouts_are_filled_from_their_neighbours_and_unseen_pixels_stay_zero() {
+        // A 5 x 3 membrane at 90 mm pressed in by a plane tilted along u (imprint 1..5 mm by column); the reference
+        // does not see column 4 (never returns), the frame has no return at (2, 1) and at the whole column 1.
+        let r = Image::from_vec(
+            5,
+            3,
+            (0..15)
+                .map(|i| if i % 5 == 4 { 0.0 } else { 0.09 })
+                .collect(),
+        )
+        .unwrap();
+        let mut s = Image::from_vec(
+            5,
+            3,
+            (0..15).map(|i| 0.09 - 0.001 * (1 + i % 5) as f32).collect(),
+        )
+        .unwrap();
+        for v in 0..3 {
+            *s.get_mut(1, v) = 0.0;
+        }
+        *s.get_mut(2, 1) = f32::NAN;
+        let y = imprint(&r, &s);
+        for v in 0..3 {
+            assert_eq!(y.get(4, v), 0.0, "not seen by the reference");
+            assert!((y.get(0, v) - 0.001).abs() < 1e-6 && (y.get(3, v) - 0.004).abs() < 1e-6);
+            // Column 1 lies between columns 0 (1 mm) and 2 (3 mm): filled between them, never 0.
+            assert!(
+                y.get(1, v) > 0.0015 && y.get(1, v) < 0.0026,
+                "{}",
+                y.get(1, v)
+            );
+        }
+        // (2, 1): the mean of its measured neighbours (columns 2 and 3, 3 and 4 mm).
+        assert!(
+            y.get(2, 1) > 0.002 && y.get(2, 1) < 0.004,
+            "{}",
+            y.get(2, 1)
+        );
+        // Nothing missing, nothing filled: Y = R − S exactly.
+        let full = Image::filled(5, 3, 0.085);
+        let plain = imprint(&Image::filled(5, 3, 0.09), &full);
+        assert!(plain.data.iter().all(|&v| (v - 0.005).abs() < 1e-7));
     }
 }

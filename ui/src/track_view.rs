@@ -62,9 +62,11 @@ pub struct TrackRequest {
 }
 
 impl TrackRequest {
-    /// The frames to track: those with contact.
+    /// The frames to track: those with contact and enough pixels with a return
+    /// ([`tactile_derender::recording::ProcessedRecording::unusable`], as `tnd recording track`).
     pub fn frames(&self) -> Vec<usize> {
         (0..self.recording.len())
+            .filter(|&k| self.recording.unusable(k).is_none())
             .filter(|&k| self.recording.contact_px[k] >= MIN_CONTACT_PX)
             .collect()
     }

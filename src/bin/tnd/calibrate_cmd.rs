@@ -116,6 +116,36 @@ pub fn tell_calibration(from: &Path, cal: Option<&SensorCalibration>, failed: Op
     }
 }
 
+/// Say on stderr how far the membrane drifted between the recording's no-contact stretches, when it did, and what
+/// was done about it ([`tactile_derender::recording::drift`]).
+pub fn tell_drift(from: &Path, p: &tactile_derender::recording::ProcessedRecording) {
+    use tactile_derender::recording::drift::{DRIFT_TOLERANCE_M, DRIFT_WARNING_M};
+    let drift = p.drift_m();
+    if drift <= DRIFT_TOLERANCE_M {
+        return;
+    }
+    let per_stretch: Vec<String> = p
+        .stretches
+        .iter()
+        .map(|s| format!("frames {}-{}: {:+.2} mm", s.first, s.last, s.drift_m * 1e3))
+        .collect();
+    eprintln!(
+        "{}{}: the membrane drifted up to {:.2} mm between no-contact stretches ({}); each frame's imprint is taken \
+         against the stretch just before it",
+        if drift > DRIFT_WARNING_M { "warning: " } else { "" },
+        from.display(),
+        drift * 1e3,
+        per_stretch.join(", ")
+    );
+    if drift > DRIFT_WARNING_M {
+        eprintln!(
+            "  past {:.1} mm a contact long after its no-contact frames may carry the drift in its imprint; record \
+             an undeformed frame before every press",
+            DRIFT_WARNING_M * 1e3
+        );
+    }
+}
+
 /// The tactile-shadow width from the recording's contact frames with a known pose of `name` (set in `cal`).
 fn fit_shadow_width(
     a: &CalibrateArgs,

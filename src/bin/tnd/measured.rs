@@ -14,6 +14,7 @@ use tactile_derender::io::npy;
 use tactile_derender::recording::calibrate::{
     calibrate_references, mean_image, CalibrateConfig, SensorCalibration,
 };
+use tactile_derender::recording::process::{measured_pixels, MIN_MEASURED_SHARE};
 use tactile_derender::sim::signature::imprint as imprint_of;
 use tactile_derender::sim::SimConfig;
 
@@ -34,8 +35,13 @@ pub struct MeasuredArgs {
     #[arg(long)]
     pub reference: Vec<PathBuf>,
     /// Use the sensor as given even when --reference frames could calibrate it.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "calibrate")]
     pub no_calibrate: bool,
+    /// Re-fit a sensor given with --sensor from the --reference frames. Without it a sensor file is used as it is
+    /// (one or two frames fit the inflation less well than the recording it came from); without a sensor file the
+    /// references always calibrate the nominal sensor.
+    #[arg(long)]
+    pub calibrate: bool,
 }
 
 /// The measured images at the model resolution, and the sensor they were measured with.
@@ -53,16 +59,37 @@ pub fn read_model(path: &Path, sim: &SimConfig) -> Result<Image> {
     resample::to_model(&sim.camera, &img).map_err(|e| anyhow!("{}: {e}", path.display()))
 }
 
+/// A depth frame (.npy, metres), saying on stderr how many of its pixels have no return (NaN, ±inf, 0, negative or
+/// out of range: missing, left out by every stage).
+fn read_frame(path: &Path) -> Result<Image> {
+    let (img, missing) = npy::read_metres_image(path)?.missing_as_zero();
+    if missing > 0 {
+        eprintln!(
+            "{}: {missing} of {} pixels without a return, read as missing",
+            path.display(),
+            img.data.len()
+        );
+    }
+    Ok(img)
+}
+
 impl MeasuredArgs {
-    /// Read the images for the sensor `given` (calibrated from the references where there are any). With
-    /// `imprint_any_size`, an imprint alone (no signature, no reference) of a size no stage of the sensor has is
-    /// taken as it is (`tnd sample` with a model of another resolution; the model checks its size).
-    pub fn read(&self, given: SimConfig, imprint_any_size: bool) -> Result<Measured> {
+    /// Read the images for the sensor `given` (calibrated from the references where there are any, unless it came
+    /// from a sensor file, `from_file`, and --calibrate is not given). With `imprint_any_size`, an imprint alone (no
+    /// signature, no reference) of a size no stage of the sensor has is taken as it is (`tnd sample` with a model
+    /// of another resolution; the model checks its size).
+    pub fn read(
+        &self,
+        given: SimConfig,
+        from_file: bool,
+        imprint_any_size: bool,
+    ) -> Result<Measured> {
         let mut references = Vec::with_capacity(self.reference.len());
         for p in &self.reference {
-            references.push(npy::read_metres_image(p)?);
+            references.push(read_frame(p)?);
         }
-        let calibration = if references.is_empty() || self.no_calibrate {
+        let refit = !self.no_calibrate && (self.calibrate || !from_file);
+        let calibration = if references.is_empty() || !refit {
             None
         } else {
             let (cal, _) =
@@ -75,7 +102,10 @@ impl MeasuredArgs {
         let signature = self
             .signature
             .as_deref()
-            .map(|p| read_model(p, &sim))
+            .map(|p| {
+                let frame = read_frame(p)?;
+                resample::to_model(&sim.camera, &frame).map_err(|e| anyhow!("{}: {e}", p.display()))
+            })
             .transpose()?;
         let imprint = match (&self.imprint, &signature, references.is_empty()) {
             (Some(p), None, true) if imprint_any_size => {
@@ -89,7 +119,18 @@ impl MeasuredArgs {
                     .zip(&self.reference)
                     .map(|(r, p)| resample::to_model(&sim.camera, r).map_err(|e| anyhow!("{}: {e}", p.display())))
                     .collect::<Result<_>>()?;
-                imprint_of(&mean_image(&model.iter().collect::<Vec<_>>()), s)
+                let reference = mean_image(&model.iter().collect::<Vec<_>>());
+                let seen = reference.data.iter().filter(|&&r| r > 0.0).count();
+                let measured = measured_pixels(&reference, s);
+                if (measured as f64) < MIN_MEASURED_SHARE * seen as f64 {
+                    let path = self.signature.as_deref().unwrap_or(Path::new("--signature"));
+                    bail!(
+                        "{}: only {measured} of the membrane's {seen} pixels have a return (fewer than {:.0} %): too few to de-render",
+                        path.display(),
+                        100.0 * MIN_MEASURED_SHARE
+                    );
+                }
+                imprint_of(&reference, s)
             }
             _ => bail!("give the imprint (--imprint Y.npy), or the signature and a frame without contact (--signature S.npy --reference R.npy)"),
         };

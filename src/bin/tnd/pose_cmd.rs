@@ -67,7 +67,9 @@ pub struct PoseArgs {
 
 pub fn run(a: PoseArgs) -> Result<()> {
     let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
-    let measured = a.measured.read(a.sensor.sim_config()?, false)?;
+    let measured = a
+        .measured
+        .read(a.sensor.sim_config()?, a.sensor.sensor.is_some(), false)?;
     let sim = Simulator::new(measured.sim.clone())?;
     let rrd = a.rerun.open("tnd pose")?;
     let (imprint, signature) = (measured.imprint, measured.signature);

@@ -46,7 +46,9 @@ pub fn run(a: SampleArgs) -> Result<()> {
     let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
     let device = tactile_derender::model::device::open_device(&a.derender.device)?;
     let model = DiffusionModel::load_on(&a.model, &device)?;
-    let measured = a.measured.read(a.sensor.sim_config()?, true)?;
+    let measured = a
+        .measured
+        .read(a.sensor.sim_config()?, a.sensor.sensor.is_some(), true)?;
     let imprint = measured.imprint;
     let rrd = a.rerun.open("tnd sample")?;
     let mut bar = super::progress::bar("sampling", " steps", 0);

@@ -276,6 +276,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
     );
     progress::finish(&mut bar);
     let processed = processed?;
+    crate::calibrate_cmd::tell_drift(&a.recording, &processed);
     let recorded = match &poses {
         Some(p) => frame_poses(&rec, &processed.stamps_ns, p, DEFAULT_MAX_POSE_GAP_S)?,
         None => vec![None; processed.len()],
@@ -286,6 +287,13 @@ pub fn run(a: TrackArgs) -> Result<()> {
     }
     let todo: Vec<usize> = (0..processed.len())
         .step_by(a.every)
+        .filter(|&k| match processed.unusable(k) {
+            Some(why) => {
+                eprintln!("{}: {why}", a.recording.display());
+                false
+            }
+            None => true,
+        })
         .filter(|&k| processed.contact_px[k] >= a.min_contact_px)
         .collect();
     if todo.is_empty() {

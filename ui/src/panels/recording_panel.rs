@@ -95,6 +95,16 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             "none recorded (registering finds the press from the samples)"
         }
     ));
+    if p.drift_m() > tactile_derender::recording::drift::DRIFT_TOLERANCE_M {
+        ui.colored_label(
+            ui.visuals().warn_fg_color,
+            format!(
+                "the membrane drifted up to {:.2} mm between no-contact stretches: each frame's imprint is taken \
+                 against the stretch just before it",
+                p.drift_m() * 1e3
+            ),
+        );
+    }
     // Timeline.
     let times = p.times_s();
     ui.horizontal(|ui| {
@@ -114,8 +124,10 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         }
     });
     let k = s.frame.min(n.saturating_sub(1));
+    let seen = p.reference_for(k).data.iter().filter(|&&r| r > 0.0).count();
+    let missing = seen.saturating_sub(p.measured_px.get(k).copied().unwrap_or(0));
     ui.label(format!(
-        "frame {k} of {n}, t = {:.3} s, contact {} px (imprint > 3 mm){}",
+        "frame {k} of {n}, t = {:.3} s, contact {} px (imprint > 3 mm), {missing} px without a return{}",
         times.get(k).copied().unwrap_or(0.0),
         p.contact_px.get(k).copied().unwrap_or(0),
         loaded

@@ -1,0 +1,211 @@
+//! **Frames out**: a recording's depth frames as the files `tnd pose` and numpy take — each frame at the camera's
+//! native resolution as a float32 `.npy` in metres with NaN where the camera had no return (REP 118's convention),
+//! the no-contact reference the recording's processing chose as `reference.npy` (the per-pixel median of its
+//! frames, native; with a drifting membrane also each no-contact stretch's, [`super::drift`]), and `frames.csv` with
+//! each frame's time stamp, contact area, measured pixels and the reference file its imprint is against.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use super::process::ProcessedRecording;
+use super::source::{Recording, StreamInfo};
+use super::RecordingError;
+use crate::image::Image;
+use crate::sensor::Intrinsics;
+
+/// The table written beside the frames.
+pub const FRAMES_CSV: &str = "frames.csv";
+/// The reference frame's file.
+pub const REFERENCE_NPY: &str = "reference.npy";
+
+/// One frame written.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FrameFile {
+    /// Frame number in the recording (0-based).
+    pub frame: usize,
+    pub file: PathBuf,
+    pub stamp_ns: u64,
+    /// Contact area at the model resolution, pixels ([`ProcessedRecording::contact_px`]).
+    pub contact_px: usize,
+    /// Pixels of the native frame with a return.
+    pub measured_px: usize,
+    /// Whether the frame is one the reference was made of (no contact).
+    pub reference: bool,
+    /// The reference file its imprint is taken against: [`REFERENCE_NPY`], or with a drifting membrane the
+    /// reference of the no-contact stretch before it (`reference_<first frame>.npy`).
+    pub reference_file: String,
+}
+
+/// The reference file of stretch `s` of `processed`, or [`REFERENCE_NPY`].
+fn reference_file(processed: &ProcessedRecording, frame: usize) -> String {
+    match (&processed.reference_of, processed.stretches.is_empty()) {
+        (Some(of), false) => processed
+            .stretches
+            .get(of[frame])
+            .map_or(REFERENCE_NPY.to_string(), |s| {
+                format!("reference_{:06}.npy", s.first)
+            }),
+        _ => REFERENCE_NPY.to_string(),
+    }
+}
+
+/// The file name of frame `k`.
+pub fn frame_name(k: usize) -> String {
+    format!("frame_{k:06}.npy")
+}
+
+/// A native frame with its missing pixels (0) as NaN, as drivers and numpy mark them.
+fn with_nan(depth: &Image) -> Image {
+    Image {
+        width: depth.width,
+        height: depth.height,
+        data: depth
+            .data
+            .iter()
+            .map(|&d| if d > 0.0 { d } else { f32::NAN })
+            .collect(),
+    }
+}
+
+/// Per-pixel median of `frames` over the frames that measured the pixel, where at least half did (0 elsewhere).
+fn median_native(frames: &[Image]) -> Option<Image> {
+    let first = frames.first()?;
+    let mut out = Image::filled(first.width, first.height, 0.0);
+    let mut vals = Vec::with_capacity(frames.len());
+    for (i, o) in out.data.iter_mut().enumerate() {
+        vals.clear();
+        vals.extend(frames.iter().map(|f| f.data[i]).filter(|&d| d > 0.0));
+        if !vals.is_empty() && 2 * vals.len() >= frames.len() {
+            vals.sort_by(f32::total_cmp);
+            let m = vals.len() / 2;
+            *o = if vals.len() % 2 == 1 {
+                vals[m]
+            } else {
+                0.5 * (vals[m - 1] + vals[m])
+            };
+        }
+    }
+    Some(out)
+}
+
+/// Write `frames` of `stream` (all of them when empty), the reference and [`FRAMES_CSV`] into the folder `dir`
+/// (which the caller owns: created, files of these names replaced atomically). `processed` is the same stream
+/// processed; `native` projects point clouds. `progress(done, total)` returning false cancels.
+pub fn write_frames(
+    rec: &Recording,
+    stream: &StreamInfo,
+    processed: &ProcessedRecording,
+    native: &Intrinsics,
+    frames: &[usize],
+    dir: &Path,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+) -> Result<Vec<FrameFile>, RecordingError> {
+    let all: Vec<usize> = (0..processed.len()).collect();
+    let frames = if frames.is_empty() { &all[..] } else { frames };
+    if let Some(&k) = frames.iter().find(|&&k| k >= processed.len()) {
+        return Err(RecordingError::Frames {
+            path: rec.path().to_path_buf(),
+            message: format!(
+                "there is no frame {k}: the recording has {} (0..{})",
+                processed.len(),
+                processed.len().saturating_sub(1)
+            ),
+        });
+    }
+    std::fs::create_dir_all(dir).map_err(|e| RecordingError::io(dir, e))?;
+    let write = |name: &str, img: &Image| -> Result<PathBuf, RecordingError> {
+        let path = dir.join(name);
+        crate::io::npy::write_image(&path, img).map_err(|e| RecordingError::Format {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        Ok(path)
+    };
+    // With a drifting membrane every stretch's reference too (their frames).
+    let mut reference_sets: Vec<(String, Vec<usize>)> = vec![(
+        REFERENCE_NPY.to_string(),
+        processed.reference_frames.clone(),
+    )];
+    if processed.reference_of.is_some() {
+        for s in &processed.stretches {
+            reference_sets.push((
+                format!("reference_{:06}.npy", s.first),
+                s.reference_frames.clone(),
+            ));
+        }
+    }
+    let total = frames.len() + reference_sets.iter().map(|(_, f)| f.len()).sum::<usize>();
+    let mut rows = Vec::with_capacity(frames.len());
+    for (n, &k) in frames.iter().enumerate() {
+        let f = rec.depth_frame(stream, k, native)?;
+        let file = write(&frame_name(k), &with_nan(&f.depth))?;
+        rows.push(FrameFile {
+            frame: k,
+            file,
+            stamp_ns: f.stamp_ns,
+            contact_px: processed.contact_px[k],
+            measured_px: f.depth.data.iter().filter(|&&d| d > 0.0).count(),
+            reference: processed.reference_frames.contains(&k),
+            reference_file: reference_file(processed, k),
+        });
+        if !progress(n + 1, total) {
+            return Err(RecordingError::Cancelled);
+        }
+    }
+    let mut done = frames.len();
+    for (name, set) in &reference_sets {
+        let mut refs = Vec::with_capacity(set.len());
+        for &k in set {
+            refs.push(rec.depth_frame(stream, k, native)?.depth);
+            done += 1;
+            if !progress(done, total) {
+                return Err(RecordingError::Cancelled);
+            }
+        }
+        if let Some(r) = median_native(&refs) {
+            write(name, &with_nan(&r))?;
+        }
+    }
+    let mut csv =
+        String::from("frame,file,stamp_ns,contact_px,measured_px,reference,reference_file\n");
+    for r in &rows {
+        csv += &format!(
+            "{},{},{},{},{},{},{}\n",
+            r.frame,
+            frame_name(r.frame),
+            r.stamp_ns,
+            r.contact_px,
+            r.measured_px,
+            u8::from(r.reference),
+            r.reference_file
+        );
+    }
+    let path = dir.join(FRAMES_CSV);
+    crate::io::write_atomic(&path, csv.as_bytes()).map_err(|e| RecordingError::io(&path, e))?;
+    Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn the_reference_is_the_median_of_the_frames_that_returned() {
+        let a = Image::from_vec(3, 1, vec![0.09, 0.0, 0.0]).unwrap();
+        let b = Image::from_vec(3, 1, vec![0.08, 0.07, 0.0]).unwrap();
+        let c = Image::from_vec(3, 1, vec![0.10, 0.05, 0.06]).unwrap();
+        // Pixel 1: two of three returned (their mean); pixel 2: one of three (missing).
+        let m = median_native(&[a, b, c]).unwrap();
+        assert_eq!(m.data[0], 0.09);
+        assert!(
+            (m.data[1] - 0.06).abs() < 1e-7 && m.data[2] == 0.0,
+            "{:?}",
+            m.data
+        );
+        let nan = with_nan(&m);
+        assert_eq!(nan.data[..2], m.data[..2]);
+        assert!(nan.data[2].is_nan());
+    }
+}
