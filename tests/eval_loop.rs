@@ -233,6 +233,7 @@ fn the_diffusion_model_is_a_generator() {
         membrane: Image::filled(8, 8, 0.09),
         objects: ObjectSet::builtin(),
         signature_model: None,
+        unmeasured: None,
     };
     let imprint = Image::from_vec(8, 8, (0..64).map(|i| 0.0001 * i as f32).collect()).unwrap();
     let pair = EvalPair {

@@ -138,7 +138,7 @@ def main():
         print(json.dumps(row), flush=True)
         rows.append(row)
     clean = next((r["pipeline_mm"] for r in rows if r["condition"] == "clean"), None)
-    print("\n| recordings | imported | pairs | pipeline [mm] | threshold baseline | baseline + check | "
+    print("\n| condition | imported | pairs | pipeline [mm] | threshold baseline | baseline + check | "
           "pipeline / baseline | pipeline / clean |")
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:

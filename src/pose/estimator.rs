@@ -155,6 +155,9 @@ pub struct SensorContext {
     /// How a contact becomes a signature on this sensor (the shadow cloak), for the signature check; `None` when
     /// unknown (the check is then skipped).
     pub signature_model: Option<SignatureModel>,
+    /// Pixels of the measurement without a return ([`Self::observing`]): no free-space evidence there. `None`: every
+    /// pixel measured.
+    pub unmeasured: Option<std::sync::Arc<Vec<bool>>>,
 }
 
 impl SensorContext {
@@ -165,30 +168,51 @@ impl SensorContext {
             membrane: sim.nominal_depth().clone(),
             objects,
             signature_model: Some(SignatureModel::of_simulator(sim)),
+            unmeasured: None,
         }
     }
 }
 
 impl SensorContext {
     /// This context as a measurement with signature `signature` (metres, the camera's size) sees the sensor: the
-    /// membrane left out (0) where the frame has no return, so that the registration claims no free space on a
-    /// pixel the camera did not measure. Borrowed when nothing is missing (every simulated signature).
+    /// pixels where the frame has no return but the membrane is seen are marked [`Self::unmeasured`], so that the
+    /// registration claims no free space on a pixel the camera did not measure (the signature check keeps the whole
+    /// membrane for its predictions; its cost leaves those pixels out itself). Borrowed when nothing is missing.
     pub fn observing(&self, signature: Option<&Image>) -> std::borrow::Cow<'_, SensorContext> {
         use std::borrow::Cow;
         let Some(s) = signature.filter(|s| s.data.len() == self.membrane.data.len()) else {
             return Cow::Borrowed(self);
         };
-        let missing = |(&e, &d): (&f32, &f32)| e > 0.0 && !(d > 0.0);
-        if !self.membrane.data.iter().zip(&s.data).any(missing) {
+        let missing: Vec<bool> = self
+            .membrane
+            .data
+            .iter()
+            .zip(&s.data)
+            .map(|(&e, &d)| e > 0.0 && !(d > 0.0))
+            .collect();
+        if !missing.iter().any(|&m| m) {
             return Cow::Borrowed(self);
         }
         let mut ctx = self.clone();
-        for (e, &d) in ctx.membrane.data.iter_mut().zip(&s.data) {
-            if !(d > 0.0) {
-                *e = 0.0;
-            }
-        }
+        ctx.unmeasured = Some(std::sync::Arc::new(missing));
         Cow::Owned(ctx)
+    }
+
+    /// The membrane depth the registration's free space is placed on: E, 0 where [`Self::unmeasured`].
+    pub fn free_space_membrane(&self) -> std::borrow::Cow<'_, Image> {
+        use std::borrow::Cow;
+        match &self.unmeasured {
+            Some(m) if m.len() == self.membrane.data.len() => {
+                let mut e = self.membrane.clone();
+                for (d, &gone) in e.data.iter_mut().zip(m.iter()) {
+                    if gone {
+                        *d = 0.0;
+                    }
+                }
+                Cow::Owned(e)
+            }
+            _ => Cow::Borrowed(&self.membrane),
+        }
     }
 }
 
@@ -279,9 +303,10 @@ impl Estimator {
         strategy: &InitStrategy,
         seed: u64,
     ) -> Result<Option<Vec<Hypothesis>>, PoseError> {
+        let membrane = ctx.free_space_membrane();
         let view = SensorView {
             intrinsics: &ctx.intrinsics,
-            membrane: &ctx.membrane,
+            membrane: &membrane,
             t_world_camera,
         };
         super::from_depth::register_depth(
@@ -355,6 +380,32 @@ mod tests {
 
     fn parse(args: &[&str]) -> Result<PoseConfig, clap::Error> {
         Cli::try_parse_from(std::iter::once("tnd").chain(args.iter().copied())).map(|c| c.pose)
+    }
+
+    #[test]
+    fn pixels_without_a_return_give_no_free_space_and_keep_the_membrane() {
+        let ctx = SensorContext {
+            intrinsics: crate::sim::SimConfig::default()
+                .camera
+                .intrinsics()
+                .resized(3, 1),
+            membrane: Image::from_vec(3, 1, vec![0.09, 0.09, 0.0]).unwrap(),
+            objects: ObjectSet::builtin(),
+            signature_model: None,
+            unmeasured: None,
+        };
+        // Every seen pixel measured (the unseen one is not the frame's to measure): nothing changes.
+        let full = Image::from_vec(3, 1, vec![0.08, 0.09, 0.0]).unwrap();
+        assert!(matches!(
+            ctx.observing(Some(&full)),
+            std::borrow::Cow::Borrowed(_)
+        ));
+        // Pixel 1 without a return: no free space on it; the membrane itself stays for the signature check.
+        let holed = Image::from_vec(3, 1, vec![0.08, 0.0, 0.0]).unwrap();
+        let seen = ctx.observing(Some(&holed));
+        assert_eq!(seen.membrane, ctx.membrane);
+        assert_eq!(seen.free_space_membrane().data, vec![0.09, 0.0, 0.0]);
+        assert_eq!(ctx.free_space_membrane().data, ctx.membrane.data);
     }
 
     #[test]

@@ -79,14 +79,30 @@ pub fn drift_between(first: &Image, other: &Image) -> f64 {
 /// (its rim), 1 where it is deepest (its apex), in between in proportion to the depth — inflation moves the apex
 /// most and the clamped rim not at all. 0 where not measured.
 pub fn profile(reference: &Image) -> Vec<f32> {
-    let Some((lo, hi)) = reference.range_where(|d| d > 0.0) else {
+    // The 1st and 99th percentiles of the depth, so that a stray return does not squash the shape.
+    let mut depths: Vec<f32> = reference
+        .data
+        .iter()
+        .copied()
+        .filter(|&d| d > 0.0)
+        .collect();
+    if depths.is_empty() {
         return vec![0.0; reference.data.len()];
-    };
+    }
+    depths.sort_by(f32::total_cmp);
+    let at = |q: f64| depths[((depths.len() - 1) as f64 * q).round() as usize];
+    let (lo, hi) = (at(0.01), at(0.99));
     let span = (hi - lo).max(f32::MIN_POSITIVE);
     reference
         .data
         .iter()
-        .map(|&d| if d > 0.0 { (d - lo) / span } else { 0.0 })
+        .map(|&d| {
+            if d > 0.0 {
+                ((d - lo) / span).clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        })
         .collect()
 }
 

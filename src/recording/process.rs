@@ -146,6 +146,12 @@ impl ProcessedRecording {
             .filter(|&&r| r > 0.0)
             .count();
         let measured = self.measured_px.get(frame).copied().unwrap_or(0);
+        if seen == 0 {
+            return Some(format!(
+                "frame {frame}: its reference has no pixel with a return (are the depths in the units the reader \
+                 assumed?); skipped"
+            ));
+        }
         ((measured as f64) < MIN_MEASURED_SHARE * seen as f64).then(|| {
             format!(
                 "frame {frame}: only {measured} of the membrane's {seen} pixels have a return (fewer than {:.0} %); skipped",

@@ -2,8 +2,9 @@
 //! Soft Bubble's PMD pico flexx) does to a frame. Applied to a frame at the camera's native resolution (simulated
 //! recordings, `tnd recording simulate`), so that every tool can be tried on frames that look like a real sensor's:
 //!
-//! - **depth-dependent noise**: σ(d) = `signature.noise_std` · (d / `noise_reference_m`)^`noise_exponent` (a ToF
-//!   camera's return weakens with distance; exponent 0 keeps the noise constant);
+//! - **depth-dependent noise**: σ(d) = `signature.noise_std` · (d / `noise_reference_m`)^`noise_exponent` beyond the
+//!   reference depth, the signature's σ nearer (a ToF camera's return weakens with distance; exponent 0 keeps the
+//!   noise constant);
 //! - **missing returns**: a share of pixels at random (`dropout`) and a band at the image's edges
 //!   (`edge_missing_px`, where the membrane is seen at a grazing angle and the lens vignettes);
 //! - **flying pixels** where depth jumps by more than `flying_jump_m` between neighbours: the pixel lands anywhere

@@ -87,36 +87,58 @@ pub fn imprint(reference: &Image, signature: &Image) -> Image {
 
 /// Fill the pixels `gaps` of `y` from the pixels `known` (row-major flags) ring by ring: each pass gives every gap
 /// pixel with a known 8-neighbour the mean of those neighbours, then counts it known. Gaps no known pixel reaches
-/// keep their value.
-pub fn fill_gaps(y: &mut Image, mut known: Vec<bool>, mut gaps: Vec<usize>) {
+/// keep their value. Each pass looks only at the gaps beside the pixels the last one filled, so the whole fill
+/// costs a few visits per pixel however far the gaps reach.
+pub fn fill_gaps(y: &mut Image, mut known: Vec<bool>, gaps: Vec<usize>) {
     let (w, h) = (y.width, y.height);
+    let mut is_gap = vec![false; w * h];
+    for &i in &gaps {
+        is_gap[i] = true;
+    }
+    let neighbours = move |i: usize| {
+        let (u, v) = (i % w, i / w);
+        (v.saturating_sub(1)..(v + 2).min(h))
+            .flat_map(move |vv| (u.saturating_sub(1)..(u + 2).min(w)).map(move |uu| vv * w + uu))
+    };
+    // The first ring: gaps beside a known pixel.
+    let mut front: Vec<usize> = gaps
+        .into_iter()
+        .filter(|&i| neighbours(i).any(|j| known[j]))
+        .collect();
+    let mut queued = vec![false; w * h];
+    for &i in &front {
+        queued[i] = true;
+    }
     let mut filled = Vec::new();
-    while !gaps.is_empty() {
+    while !front.is_empty() {
         filled.clear();
-        gaps.retain(|&i| {
-            let (u, v) = (i % w, i / w);
+        for &i in &front {
             let (mut sum, mut n) = (0.0f32, 0u32);
-            for vv in v.saturating_sub(1)..(v + 2).min(h) {
-                for uu in u.saturating_sub(1)..(u + 2).min(w) {
-                    let j = vv * w + uu;
-                    if known[j] {
-                        sum += y.data[j];
-                        n += 1;
-                    }
+            for j in neighbours(i) {
+                if known[j] {
+                    sum += y.data[j];
+                    n += 1;
                 }
             }
             if n > 0 {
                 filled.push((i, sum / n as f32));
             }
-            n == 0
-        });
-        if filled.is_empty() {
-            break;
         }
+        let mut next = Vec::new();
         for &(i, value) in &filled {
             y.data[i] = value;
             known[i] = true;
+            is_gap[i] = false;
         }
+        for &(i, _) in &filled {
+            for j in neighbours(i) {
+                if is_gap[j] && !queued[j] {
+                    queued[j] = true;
+                    next.push(j);
+                }
+            }
+        }
+        front = next;
     }
 }
 

@@ -38,7 +38,8 @@ pub enum RecordingCommand {
 pub struct FramesArgs {
     /// The recording: an .mcap file or a folder of depth frames.
     pub recording: PathBuf,
-    /// Output folder (created; its frame files, reference.npy and frames.csv are replaced, nothing else).
+    /// Output folder (created; its frame files, reference.npy / reference_NNNNNN.npy and frames.csv are replaced,
+    /// nothing else — write a new folder for another export, or old frame files stay beside the new).
     #[arg(long)]
     pub out: PathBuf,
     /// Frames to write: all (default), contact (those with contact), or a list such as 0,5,10-20 (0-based).
@@ -274,6 +275,13 @@ fn frame_list(text: &str, contact_px: &[usize]) -> Result<Vec<usize>> {
                 let (a, b) = (number(a)?, number(b)?);
                 if b < a {
                     anyhow::bail!("--frames {text}: the range {part} runs backwards");
+                }
+                if b >= contact_px.len() {
+                    anyhow::bail!(
+                        "--frames {text}: the recording has {} frames (0..{})",
+                        contact_px.len(),
+                        contact_px.len().saturating_sub(1)
+                    );
                 }
                 out.extend(a..=b);
             }
