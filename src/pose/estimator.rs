@@ -188,7 +188,7 @@ impl SensorContext {
             .data
             .iter()
             .zip(&s.data)
-            .map(|(&e, &d)| e > 0.0 && !(d > 0.0))
+            .map(|(&e, &d)| e > 0.0 && !crate::image::is_measured_depth(d))
             .collect();
         if !missing.iter().any(|&m| m) {
             return Cow::Borrowed(self);

@@ -371,7 +371,7 @@ pub fn calibrate(
 }
 
 /// The largest drift between runs of consecutive frames among `used` (indices into `model`, model resolution):
-/// [`super::drift`]'s measure between each run's median and the first's; 0 with one run.
+/// [`super::drift`]'s measure of each run's mean from the first's, their spread; 0 with one run.
 fn frames_drift(model: &[Image], used: &[usize]) -> f64 {
     let mut runs: Vec<Vec<usize>> = Vec::new();
     for &k in used {
@@ -385,11 +385,13 @@ fn frames_drift(model: &[Image], used: &[usize]) -> f64 {
         .iter()
         .map(|r| mean_image(&r.iter().map(|&k| &model[k]).collect::<Vec<_>>()))
         .collect();
+    // The spread of the runs' drifts from the first (the first's own is 0).
     means.first().map_or(0.0, |first| {
-        means
+        let (lo, hi) = means
             .iter()
-            .map(|m| super::drift::drift_between(first, m).abs())
-            .fold(0.0, f64::max)
+            .map(|m| super::drift::drift_between(first, m))
+            .fold((0.0f64, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
+        hi - lo
     })
 }
 

@@ -143,12 +143,13 @@ pub fn nearest_before(stretches: &[QuietStretch], frame: usize) -> usize {
         .unwrap_or(0)
 }
 
-/// The largest drift of any stretch from the first, metres (0 with one stretch).
+/// The largest drift between any two stretches, metres (0 with one stretch): the spread of their drifts.
 pub fn largest_drift(stretches: &[QuietStretch]) -> f64 {
-    stretches
+    let (lo, hi) = stretches
         .iter()
-        .map(|s| s.drift_m.abs())
-        .fold(0.0, f64::max)
+        .map(|s| s.drift_m)
+        .fold((0.0f64, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
+    hi - lo
 }
 
 #[cfg(test)]
@@ -191,6 +192,11 @@ mod tests {
             .collect();
         assert_eq!(of, vec![0, 0, 0, 1, 1, 2]);
         assert!((largest_drift(&stretches) - 2e-3).abs() < 1e-12);
+        // Two later stretches 0.2 mm either side of the first are 0.4 mm apart.
+        let mut apart = [s(0, 4), s(10, 14), s(20, 24)];
+        apart[1].drift_m = 2e-4;
+        apart[2].drift_m = -2e-4;
+        assert!((largest_drift(&apart) - 4e-4).abs() < 1e-12);
     }
 
     #[test]

@@ -71,7 +71,7 @@ pub fn imprint(reference: &Image, signature: &Image) -> Image {
         |r, s| if r > 0.0 && s > 0.0 { r - s } else { 0.0 },
     );
     let gaps: Vec<usize> = (0..y.data.len())
-        .filter(|&i| reference.data[i] > 0.0 && !(signature.data[i] > 0.0))
+        .filter(|&i| reference.data[i] > 0.0 && !crate::image::is_measured_depth(signature.data[i]))
         .collect();
     if !gaps.is_empty() {
         let known: Vec<bool> = reference
