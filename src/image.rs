@@ -88,6 +88,22 @@ pub fn is_measured_depth(d: f32) -> bool {
     d.is_finite() && d > 0.0 && d <= MAX_DEPTH_M
 }
 
+/// The median magnitude of the finite, non-zero `values` (`None` without any): the scale a frame is in, which a
+/// few out-of-range pixels (a driver's no-return sentinel) do not move.
+pub fn typical_magnitude(values: &[f32]) -> Option<f32> {
+    let mut m: Vec<f32> = values
+        .iter()
+        .filter(|v| v.is_finite() && **v != 0.0)
+        .map(|v| v.abs())
+        .collect();
+    if m.is_empty() {
+        return None;
+    }
+    let mid = m.len() / 2;
+    let (_, &mut typical, _) = m.select_nth_unstable_by(mid, f32::total_cmp);
+    Some(typical)
+}
+
 impl Image {
     /// A depth frame with every pixel without a return ([`is_measured_depth`] false) set to 0, the value every
     /// stage reads as missing, and how many there were.

@@ -113,20 +113,12 @@ pub fn read_metres_image(path: &Path) -> Result<Image, NpyError> {
         )));
     }
     // The typical magnitude decides the units (a few out-of-range pixels are pixels without a return).
-    let mut magnitudes: Vec<f32> = a
-        .data
-        .iter()
-        .filter(|v| v.is_finite() && **v != 0.0)
-        .map(|v| v.abs())
-        .collect();
-    if !magnitudes.is_empty() {
-        let mid = magnitudes.len() / 2;
-        let (_, &mut typical, _) = magnitudes.select_nth_unstable_by(mid, f32::total_cmp);
-        if typical > PLAUSIBLE_METRES {
-            return Err(units(format!(
-                "values around {typical}: images here are metres, and no depth of a tactile sensor is that large — millimetres? divide by 1000"
-            )));
-        }
+    if let Some(typical) =
+        crate::image::typical_magnitude(&a.data).filter(|&t| t > PLAUSIBLE_METRES)
+    {
+        return Err(units(format!(
+            "values around {typical}: images here are metres, and no depth of a tactile sensor is that large — millimetres? divide by 1000"
+        )));
     }
     let mut img = image_of(path, a)?;
     for v in &mut img.data {

@@ -373,25 +373,12 @@ pub fn calibrate(
 /// The largest drift between runs of consecutive frames among `used` (indices into `model`, model resolution):
 /// [`super::drift`]'s measure of each run's mean from the first's, their spread; 0 with one run.
 fn frames_drift(model: &[Image], used: &[usize]) -> f64 {
-    let mut runs: Vec<Vec<usize>> = Vec::new();
-    for &k in used {
-        match runs.last_mut() {
-            Some(r) if r.last().is_some_and(|&l| l + 1 == k) => r.push(k),
-            _ => runs.push(vec![k]),
-        }
-    }
-    runs.retain(|r| r.len() >= super::drift::MIN_STRETCH_FRAMES);
-    let means: Vec<Image> = runs
-        .iter()
-        .map(|r| mean_image(&r.iter().map(|&k| &model[k]).collect::<Vec<_>>()))
+    let means: Vec<Image> = super::drift::runs(used)
+        .into_iter()
+        .map(|(a, b)| mean_image(&(a..=b).map(|k| &model[k]).collect::<Vec<_>>()))
         .collect();
-    // The spread of the runs' drifts from the first (the first's own is 0).
     means.first().map_or(0.0, |first| {
-        let (lo, hi) = means
-            .iter()
-            .map(|m| super::drift::drift_between(first, m))
-            .fold((0.0f64, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
-        hi - lo
+        super::drift::spread(means.iter().map(|m| super::drift::drift_between(first, m)))
     })
 }
 

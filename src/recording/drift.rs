@@ -145,10 +145,12 @@ pub fn nearest_before(stretches: &[QuietStretch], frame: usize) -> usize {
 
 /// The largest drift between any two stretches, metres (0 with one stretch): the spread of their drifts.
 pub fn largest_drift(stretches: &[QuietStretch]) -> f64 {
-    let (lo, hi) = stretches
-        .iter()
-        .map(|s| s.drift_m)
-        .fold((0.0f64, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
+    spread(stretches.iter().map(|s| s.drift_m))
+}
+
+/// The spread (largest minus smallest) of drifts measured from a first stretch, whose own drift is 0.
+pub fn spread(drifts: impl Iterator<Item = f64>) -> f64 {
+    let (lo, hi) = drifts.fold((0.0f64, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
     hi - lo
 }
 

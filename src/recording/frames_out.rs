@@ -70,23 +70,8 @@ fn with_nan(depth: &Image) -> Image {
 
 /// Per-pixel median of `frames` over the frames that measured the pixel, where at least half did (0 elsewhere).
 fn median_native(frames: &[Image]) -> Option<Image> {
-    let first = frames.first()?;
-    let mut out = Image::filled(first.width, first.height, 0.0);
-    let mut vals = Vec::with_capacity(frames.len());
-    for (i, o) in out.data.iter_mut().enumerate() {
-        vals.clear();
-        vals.extend(frames.iter().map(|f| f.data[i]).filter(|&d| d > 0.0));
-        if !vals.is_empty() && 2 * vals.len() >= frames.len() {
-            vals.sort_by(f32::total_cmp);
-            let m = vals.len() / 2;
-            *o = if vals.len() % 2 == 1 {
-                vals[m]
-            } else {
-                0.5 * (vals[m - 1] + vals[m])
-            };
-        }
-    }
-    Some(out)
+    let refs: Vec<&Image> = frames.iter().collect();
+    (!refs.is_empty()).then(|| super::process::median_where_measured(&refs, 0.5))
 }
 
 /// Write `frames` of `stream` (all of them when empty), the reference and [`FRAMES_CSV`] into the folder `dir`

@@ -102,6 +102,22 @@ pub struct ProcessedRecording {
 /// (below it, holes are the frame's larger part: a glitch, a cable over the lens, an over-exposed frame).
 pub const MIN_MEASURED_SHARE: f64 = 0.5;
 
+/// Why a frame that measured `measured` of the `seen` pixels its reference measured cannot be used
+/// ([`MIN_MEASURED_SHARE`]); `None` when it can.
+pub fn too_few_returns(measured: usize, seen: usize) -> Option<String> {
+    if seen == 0 {
+        return Some(
+            "its reference has no pixel with a return (are the depths in the units the reader assumed?)".into(),
+        );
+    }
+    ((measured as f64) < MIN_MEASURED_SHARE * seen as f64).then(|| {
+        format!(
+            "only {measured} of the membrane's {seen} pixels have a return (fewer than {:.0} %)",
+            100.0 * MIN_MEASURED_SHARE
+        )
+    })
+}
+
 /// Pixels measured (depth > 0) in both `reference` and `frame`.
 pub fn measured_pixels(reference: &Image, frame: &Image) -> usize {
     reference
@@ -139,25 +155,9 @@ impl ProcessedRecording {
     /// Why frame `frame` cannot be used (too few of its pixels have a return, [`MIN_MEASURED_SHARE`]), in one line
     /// naming the frame; `None` when it can.
     pub fn unusable(&self, frame: usize) -> Option<String> {
-        let seen = self
-            .reference_for(frame)
-            .data
-            .iter()
-            .filter(|&&r| r > 0.0)
-            .count();
+        let seen = self.reference_for(frame).count_nonzero();
         let measured = self.measured_px.get(frame).copied().unwrap_or(0);
-        if seen == 0 {
-            return Some(format!(
-                "frame {frame}: its reference has no pixel with a return (are the depths in the units the reader \
-                 assumed?); skipped"
-            ));
-        }
-        ((measured as f64) < MIN_MEASURED_SHARE * seen as f64).then(|| {
-            format!(
-                "frame {frame}: only {measured} of the membrane's {seen} pixels have a return (fewer than {:.0} %); skipped",
-                100.0 * MIN_MEASURED_SHARE
-            )
-        })
+        too_few_returns(measured, seen).map(|why| format!("frame {frame}: {why}; skipped"))
     }
 
     /// Seconds from the first frame, per frame.
@@ -189,13 +189,19 @@ fn mean_valid(img: &Image) -> f64 {
 }
 
 fn median_image(images: &[&Image]) -> Image {
+    median_where_measured(images, 0.0)
+}
+
+/// Per-pixel median of `images` over those that measured the pixel (> 0), where at least `min_share` of them did
+/// (0 elsewhere).
+pub(crate) fn median_where_measured(images: &[&Image], min_share: f64) -> Image {
     let first = images[0];
     let mut out = Image::filled(first.width, first.height, 0.0);
     let mut vals = Vec::with_capacity(images.len());
     for (i, o) in out.data.iter_mut().enumerate() {
         vals.clear();
         vals.extend(images.iter().map(|im| im.data[i]).filter(|&d| d > 0.0));
-        if !vals.is_empty() {
+        if !vals.is_empty() && vals.len() as f64 >= min_share * images.len() as f64 {
             vals.sort_by(f32::total_cmp);
             let m = vals.len() / 2;
             *o = if vals.len() % 2 == 1 {
@@ -390,12 +396,12 @@ fn all_quiet_frames(signatures: &[Image], config: &ProcessConfig) -> Vec<usize> 
     // membrane are still found; the drift is fitted on the membrane's outer part, where contacts seldom are (one
     // at the apex would otherwise pass for a drift).
     let shape = super::drift::profile(r);
-    let seen = r.data.iter().filter(|&&d| d > 0.0).count();
+    let seen = r.count_nonzero();
     let quiet: Vec<usize> = signatures
         .iter()
         .enumerate()
         // A frame that lost most of its returns is no picture of the membrane (its imprint is mostly filled in).
-        .filter(|(_, s)| measured_pixels(r, s) as f64 >= MIN_MEASURED_SHARE * seen as f64)
+        .filter(|(_, s)| too_few_returns(measured_pixels(r, s), seen).is_none())
         .filter(|(_, s)| {
             let (rest, _) = super::drift::without_drift(&imprint(r, s), &shape, |i| {
                 r.data[i] > 0.0 && s.data[i] > 0.0 && shape[i] < super::drift::OUTER_PROFILE

@@ -335,23 +335,15 @@ impl Recording {
                         message: e.message,
                     })?;
                 // Depths mostly beyond any tactile camera's range are in other units, not missing.
-                let mut far: Vec<f32> = depth
-                    .data
-                    .iter()
-                    .copied()
-                    .filter(|d| d.is_finite() && *d > 0.0)
-                    .collect();
-                if !far.is_empty() {
-                    let mid = far.len() / 2;
-                    let (_, &mut typical, _) = far.select_nth_unstable_by(mid, f32::total_cmp);
-                    if typical > crate::image::MAX_DEPTH_M {
-                        return Err(RecordingError::Format {
-                            path: file.clone(),
-                            message: format!(
-                                "depths around {typical} m: millimetres? read .npy/.npz frames with --npy-scale 0.001"
-                            ),
-                        });
-                    }
+                if let Some(typical) = crate::image::typical_magnitude(&depth.data)
+                    .filter(|&t| t > crate::image::MAX_DEPTH_M)
+                {
+                    return Err(RecordingError::Format {
+                        path: file.clone(),
+                        message: format!(
+                            "depths around {typical} m: millimetres? read .npy/.npz frames with --npy-scale 0.001"
+                        ),
+                    });
                 }
                 Ok(DepthFrame {
                     stamp_ns: (index as f64 * 1e9 / options.fps).round() as u64,

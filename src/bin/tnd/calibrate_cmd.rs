@@ -118,24 +118,30 @@ pub fn tell_calibration(from: &Path, cal: Option<&SensorCalibration>, failed: Op
 
 /// Say on stderr how far the membrane drifted between the recording's no-contact stretches, when it did, and what
 /// was done about it ([`tactile_derender::recording::drift`]).
-pub fn tell_drift(from: &Path, p: &tactile_derender::recording::ProcessedRecording) {
+pub fn tell_drift(
+    from: &Path,
+    drift: f64,
+    stretches: &[tactile_derender::recording::drift::QuietStretch],
+) {
     use tactile_derender::recording::drift::{DRIFT_TOLERANCE_M, DRIFT_WARNING_M};
-    let drift = p.drift_m();
     if drift <= DRIFT_TOLERANCE_M {
         return;
     }
-    let per_stretch: Vec<String> = p
-        .stretches
+    let per_stretch: Vec<String> = stretches
         .iter()
         .map(|s| format!("frames {}-{}: {:+.2} mm", s.first, s.last, s.drift_m * 1e3))
         .collect();
+    let listed = if per_stretch.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", per_stretch.join(", "))
+    };
     eprintln!(
-        "{}{}: the membrane drifted up to {:.2} mm between no-contact stretches ({}); each frame's imprint is taken \
-         against the stretch just before it",
+        "{}{}: the membrane drifted up to {:.2} mm between no-contact stretches{listed}; each frame's imprint is \
+         taken against the stretch just before it",
         if drift > DRIFT_WARNING_M { "warning: " } else { "" },
         from.display(),
         drift * 1e3,
-        per_stretch.join(", ")
     );
     if drift > DRIFT_WARNING_M {
         eprintln!(

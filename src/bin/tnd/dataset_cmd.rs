@@ -388,19 +388,7 @@ fn run_import(a: ImportArgs) -> Result<()> {
         report.calibration.as_ref(),
         report.calibration_failed.as_deref(),
     );
-    if report.drift_m > tactile_derender::recording::drift::DRIFT_TOLERANCE_M {
-        eprintln!(
-            "{}{}: the membrane drifted up to {:.2} mm between no-contact stretches; each pair's imprint is against \
-             the stretch just before it",
-            if report.drift_m > tactile_derender::recording::drift::DRIFT_WARNING_M {
-                "warning: "
-            } else {
-                ""
-            },
-            a.from.display(),
-            report.drift_m * 1e3
-        );
-    }
+    crate::calibrate_cmd::tell_drift(&a.from, report.drift_m, &[]);
     for why in &report.skipped_missing {
         eprintln!("{}: {why}", a.from.display());
     }

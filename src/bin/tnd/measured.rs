@@ -14,7 +14,7 @@ use tactile_derender::io::npy;
 use tactile_derender::recording::calibrate::{
     calibrate_references, mean_image, CalibrateConfig, SensorCalibration,
 };
-use tactile_derender::recording::process::{measured_pixels, MIN_MEASURED_SHARE};
+use tactile_derender::recording::process::{measured_pixels, too_few_returns};
 use tactile_derender::sim::signature::imprint as imprint_of;
 use tactile_derender::sim::SimConfig;
 
@@ -120,15 +120,9 @@ impl MeasuredArgs {
                     .map(|(r, p)| resample::to_model(&sim.camera, r).map_err(|e| anyhow!("{}: {e}", p.display())))
                     .collect::<Result<_>>()?;
                 let reference = mean_image(&model.iter().collect::<Vec<_>>());
-                let seen = reference.data.iter().filter(|&&r| r > 0.0).count();
-                let measured = measured_pixels(&reference, s);
-                if (measured as f64) < MIN_MEASURED_SHARE * seen as f64 {
+                if let Some(why) = too_few_returns(measured_pixels(&reference, s), reference.count_nonzero()) {
                     let path = self.signature.as_deref().unwrap_or(Path::new("--signature"));
-                    bail!(
-                        "{}: only {measured} of the membrane's {seen} pixels have a return (fewer than {:.0} %): too few to de-render",
-                        path.display(),
-                        100.0 * MIN_MEASURED_SHARE
-                    );
+                    bail!("{}: {why}: too few to de-render", path.display());
                 }
                 imprint_of(&reference, s)
             }

@@ -175,7 +175,7 @@ fn open_processed(
     );
     progress::finish(&mut bar);
     let processed = processed?;
-    crate::calibrate_cmd::tell_drift(path, &processed);
+    crate::calibrate_cmd::tell_drift(path, processed.drift_m(), &processed.stretches);
     Ok((rec, stream, processed))
 }
 

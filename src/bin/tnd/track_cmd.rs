@@ -276,7 +276,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
     );
     progress::finish(&mut bar);
     let processed = processed?;
-    crate::calibrate_cmd::tell_drift(&a.recording, &processed);
+    crate::calibrate_cmd::tell_drift(&a.recording, processed.drift_m(), &processed.stretches);
     let recorded = match &poses {
         Some(p) => frame_poses(&rec, &processed.stamps_ns, p, DEFAULT_MAX_POSE_GAP_S)?,
         None => vec![None; processed.len()],

@@ -124,7 +124,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         }
     });
     let k = s.frame.min(n.saturating_sub(1));
-    let seen = p.reference_for(k).data.iter().filter(|&&r| r > 0.0).count();
+    let seen = p.reference_for(k).count_nonzero();
     let missing = seen.saturating_sub(p.measured_px.get(k).copied().unwrap_or(0));
     ui.label(format!(
         "frame {k} of {n}, t = {:.3} s, contact {} px (imprint > 3 mm), {missing} px without a return{}",
