@@ -113,6 +113,7 @@ fn uncertainty_analysis_reports_each_registration_and_can_cancel() {
         truth: Some(pair.object_pose),
         init: None,
         measured: Some((&pair.signature, &pair.imprint)),
+        prior: None,
     };
     // K-start search + 2 samples + baseline + the multi-sample estimate.
     let mut seen = Vec::new();
@@ -453,6 +454,7 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
             imprint: &pair.imprint,
             signature: Some(&pair.signature),
             truth: Some(pair.object_pose),
+            prior: None,
         },
     };
     let pose = |imprint_proposals: bool| {
@@ -460,7 +462,8 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
             imprint_proposals,
             ..PoseConfig::default()
         };
-        estimate_pose(&object, &sim, &input, &config, 7, &mut |_, _| true).unwrap()
+        let engine = tactile_derender::pose::Estimator::new(config);
+        estimate_pose(&object, &sim, &input, &engine, 7, &mut |_, _| true).unwrap()
     };
     let error = |p: Se2| (p.x - pair.object_pose.x).hypot(p.y - pair.object_pose.y) * 1e3;
     let (pooled, alone) = (pose(true), pose(false));
@@ -503,6 +506,7 @@ fn pose_estimate_steps_are_counted_and_named() {
                 imprint: &pair.imprint,
                 signature,
                 truth: Some(pair.object_pose),
+                prior: None,
             },
         };
         let mut seen = Vec::new();
@@ -510,7 +514,7 @@ fn pose_estimate_steps_are_counted_and_named() {
             &object,
             &sim,
             &input,
-            &PoseConfig::default(),
+            &tactile_derender::pose::Estimator::new(PoseConfig::default()),
             7,
             &mut |d, t| {
                 seen.push((d, t));

@@ -253,7 +253,7 @@ fn press_from_the_true_contact_puts_its_highest_point_on_the_object_s_top() {
             std::slice::from_ref(&out.target),
             Some(&out.signature),
             &out.imprint,
-            &eval,
+            &tactile_derender::pose::Estimator::new(eval.clone()),
             0.03,
         )
         .unwrap()
@@ -271,7 +271,7 @@ fn press_from_the_true_contact_puts_its_highest_point_on_the_object_s_top() {
         std::slice::from_ref(&empty),
         Some(&empty),
         &empty,
-        &eval,
+        &tactile_derender::pose::Estimator::new(eval.clone()),
         0.03,
     );
     assert_eq!(none.unwrap(), None);

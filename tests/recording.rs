@@ -594,6 +594,13 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
         );
         assert!(xx > 0.0 && yy > 0.0 && tt > 0.0, "{line}");
     }
+    // The press's first contact frame is estimated from scratch; the frames after it carry its estimate forward.
+    let carried: Vec<&str> = lines[1..]
+        .iter()
+        .map(|l| l.split(',').nth(col("carried")).unwrap())
+        .collect();
+    assert_eq!(carried[0], "0", "{csv}");
+    assert!(carried[1..].iter().all(|c| *c == "1"), "{csv}");
     assert_eq!(
         summary["pose_track"]["messages"].as_u64(),
         Some(with_contact as u64),

@@ -198,25 +198,56 @@ fn the_press_is_found_from_the_contact_and_the_noisy_signature() {
             press,
             0.00138,
         );
+        let engine = tactile_derender::pose::Estimator::new(eval.clone());
         let at = SensorPlacement {
             sim: &s.sim,
             object: &object,
             prepared: &prepared,
-            pose: &eval,
+            engine: &engine,
         };
         let samples = std::slice::from_ref(&s.out.target);
         let (sig, imprint) = (&s.out.signature, &s.out.imprint);
         let searched = at
-            .press(PressChoice::Auto, samples, Some(sig), imprint, 0)
+            .press(PressChoice::Auto, samples, Some(sig), imprint, None, 0)
             .unwrap();
         let highest = at
-            .press(PressChoice::Auto, samples, None, imprint, 0)
+            .press(PressChoice::Auto, samples, None, imprint, None, 0)
             .unwrap();
         for (how, got) in [("searched", searched), ("highest point", highest)] {
             let got = got.unwrap();
             assert!((got - press).abs() < 5e-4, "{how}: {got} for {press}");
         }
-        let fixed = at.press(PressChoice::Fixed(0.006), samples, Some(sig), imprint, 0);
+        // A track's previous frame, 1 mm off the press and a little off the pose: searched around it, the press
+        // simulated.
+        let prior = tactile_derender::pose::PosePrior {
+            poses: vec![Se2::new(0.0035, -0.002, 0.45)],
+            random_starts: 0,
+            press_m: Some(press + 0.001),
+            posterior: None,
+        };
+        let carried = at
+            .press(
+                PressChoice::Auto,
+                samples,
+                Some(sig),
+                imprint,
+                Some(&prior),
+                0,
+            )
+            .unwrap()
+            .unwrap();
+        assert!(
+            (carried - press).abs() < 5e-4,
+            "carried: {carried} for {press}"
+        );
+        let fixed = at.press(
+            PressChoice::Fixed(0.006),
+            samples,
+            Some(sig),
+            imprint,
+            None,
+            0,
+        );
         assert_eq!(fixed.unwrap(), Some(0.006));
     }
 }

@@ -8,7 +8,7 @@
 //! |---|---|---|
 //! | load the object a user names | [`ObjectSpec`] | [`ObjectSpec::load`] |
 //! | de-render: N samples of X0 for one imprint | [`DerenderConfig`] | [`derender()`] |
-//! | estimate the pose from the samples (one and many) | [`crate::metrics::evaluate::EvalConfig`] + seed | [`estimate_pose`] |
+//! | estimate the pose from the samples (one and many) | a [`crate::pose::Estimator`] (its [`crate::pose::PoseConfig`]) + seed | [`estimate_pose`], [`place_and_estimate`] |
 //! | export its geometry for Open3D / trimesh (PLY) | [`crate::io::ply::PlyEncoding`] | [`write_pose_geometry`] |
 //! | draw its figures (KDE, SE(2) fits; SVG + PNG) | [`crate::io::figure::FigureConfig`] | [`write_fit_figure`], [`crate::uncertainty::UncertaintyReport::write_with`] |
 //! | simulate a press | [`crate::sim::SimConfig`] | [`crate::sim::Simulator::simulate`] |
@@ -16,7 +16,7 @@
 //! | train | [`crate::model::train::TrainConfig`] | [`crate::model::train::train`] |
 //! | evaluate | [`crate::metrics::evaluate::EvalConfig`] | [`crate::metrics::evaluate::Evaluator::evaluate`] |
 //! | place the sensor: find how far it is pressed | [`press::PressChoice`] | [`press::SensorPlacement::press`] |
-//! | estimate the pose on every contact frame of a recording | [`track::TrackContext`] | [`track::track_frame`] |
+//! | estimate the pose on every contact frame of a recording | [`track::TrackContext`], [`track::TrackingConfig`] | [`track::Tracker::track`] |
 //! | calibrate the inflation | a [`crate::sim::SimConfig`] and the inflations | [`crate::sim::calibration::sweep_inflation`] |
 //!
 //! Configs are serde (the workbench stores them in its session) and `clap::Args` (the CLI flattens them), with

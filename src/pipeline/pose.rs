@@ -12,7 +12,7 @@ use crate::objects::ObjectSet;
 use crate::pose::posterior::PosePosterior;
 use crate::pose::signature_check::Rival;
 use crate::pose::{threshold_contact, Hypothesis};
-use crate::pose::{Estimator, PoseConfig, SensorContext};
+use crate::pose::{Estimator, PoseConfig, PosePrior, SensorContext};
 use crate::recon::is_valid_depth;
 use crate::sensor::Se2;
 use crate::sim::Simulator;
@@ -120,6 +120,9 @@ pub struct Observation<'a> {
     pub signature: Option<&'a Image>,
     /// The true pose `t_world_object`, when known (errors are then measured against it).
     pub truth: Option<Se2>,
+    /// What earlier frames of the same contact said (a track's), `None` for an observation on its own: the
+    /// registrations start from its poses and the press search stays near its press.
+    pub prior: Option<&'a PosePrior>,
 }
 
 /// A pose estimate with the sensor placement it was made at.
@@ -145,7 +148,8 @@ impl PlacedEstimate {
 
 /// **The pose use case** that `tnd pose`, `tnd recording track` and the workbench's Pose job share: place the sensor
 /// over `object` ([`Placement`]; `prepared` is the same object prepared for rendering, built here when `None` and a
-/// press is to be found), then [`estimate_pose`]. [`PipelineError::NoContact`] when no sample has contact.
+/// press is to be found), then [`estimate_pose`], both with `engine` (which keeps the object's prepared model for
+/// the next call). [`PipelineError::NoContact`] when no sample has contact.
 #[allow(clippy::too_many_arguments)]
 pub fn place_and_estimate(
     object: &LoadedObject,
@@ -153,11 +157,11 @@ pub fn place_and_estimate(
     sim: &Simulator,
     observation: &Observation<'_>,
     placement: Placement,
-    config: &PoseConfig,
+    engine: &Estimator,
     seed: u64,
     progress: Progress<'_>,
 ) -> Result<PlacedEstimate, PipelineError> {
-    config.validate()?;
+    engine.config.validate()?;
     let (press_m, t_world_camera) = match placement {
         Placement::Camera(t) => (None, t),
         Placement::Press(choice) => {
@@ -173,7 +177,7 @@ pub fn place_and_estimate(
                 sim,
                 object,
                 prepared,
-                pose: config,
+                engine,
             };
             let press = placement
                 .press(
@@ -181,6 +185,7 @@ pub fn place_and_estimate(
                     observation.samples,
                     observation.signature,
                     observation.imprint,
+                    observation.prior,
                     seed,
                 )?
                 .ok_or(PipelineError::NoContact)?;
@@ -192,7 +197,7 @@ pub fn place_and_estimate(
         t_world_camera,
         observation: *observation,
     };
-    let estimate = estimate_pose(object, sim, &input, config, seed, progress)?;
+    let estimate = estimate_pose(object, sim, &input, engine, seed, progress)?;
     Ok(PlacedEstimate {
         press_m,
         t_world_camera,
@@ -201,21 +206,25 @@ pub fn place_and_estimate(
 }
 
 /// Register `input`'s samples to `object` seen by `sim`'s sensor (see the module docs). `progress` counts the
-/// K-start registration, every sample, the baseline and the multi-sample estimate.
+/// K-start registration, every sample, the baseline and the multi-sample estimate. With a prior
+/// ([`Observation::prior`]) every registration starts from its poses (and a few random ones) instead of
+/// [`PoseConfig::inits`] random starts.
 pub fn estimate_pose(
     object: &LoadedObject,
     sim: &Simulator,
     input: &PoseInput<'_>,
-    config: &PoseConfig,
+    engine: &Estimator,
     seed: u64,
     progress: Progress<'_>,
 ) -> Result<PoseEstimate, PipelineError> {
+    let config: &PoseConfig = &engine.config;
     let sensor = SensorContext::of_simulator(sim, ObjectSet::builtin());
     // Pixels without a return give no free-space evidence.
     let ctx = sensor.observing(input.signature);
     let ctx = ctx.as_ref();
-    let estimator = Estimator::new(config.clone());
+    let estimator = engine;
     let model = estimator.object_from_mesh(&object.name, &object.mesh, object.symmetry)?;
+    let strategy = estimator.starts(seed, input.prior);
     let (samples, anchor_shift_m) =
         estimator.anchor(input.samples, input.signature, input.imprint)?;
     let with_contact: Vec<usize> = input
@@ -228,11 +237,12 @@ pub fn estimate_pose(
     // The first sample with contact that registers gives the start; one that fails is skipped here (the analysis
     // records it with the others).
     let (registered_sample, hypotheses) = first_registration(
-        &estimator,
+        estimator,
         &model,
         ctx,
         &input.t_world_camera,
         &samples,
+        &strategy,
         seed,
     )?
     .ok_or(PipelineError::NoContact)?;
@@ -243,12 +253,11 @@ pub fn estimate_pose(
         .signature
         .map(|s| (s, input.imprint))
         .filter(|_| config.check_signature);
-    let (checked, checked_from_imprint, posterior) = match measured {
+    let (checked, checked_from_imprint, mut posterior) = match measured {
         Some(m) => {
             // The imprint's own contact proposes poses too; the check scores them beside the sample's.
             let mut pool = hypotheses.clone();
             if let (true, Some(b)) = (config.imprint_proposals, &baseline) {
-                let strategy = estimator.random_starts(seed);
                 pool.extend(estimator.pooled_hypotheses(
                     &model,
                     std::slice::from_ref(b),
@@ -272,6 +281,17 @@ pub fn estimate_pose(
         }
         None => (None, false, None),
     };
+    // A track's previous frame reweighs the modes (the object has not moved): the pick is the fused posterior's top.
+    let prior_posterior = input.prior.and_then(|p| p.posterior.as_ref());
+    let fused_top = match (&posterior, prior_posterior) {
+        (Some(p), Some(before)) => {
+            let fused = crate::pose::fusion::fuse(p, before, &model.symmetry);
+            let top = fused.top().map(|m| m.pose());
+            posterior = Some(fused);
+            top
+        }
+        _ => None,
+    };
     let truth_region = posterior.as_ref().zip(input.truth).and_then(|(p, t)| {
         p.region_mass(t, &model.symmetry, crate::metrics::evaluate::REGION_DRAWS)
     });
@@ -280,7 +300,10 @@ pub fn estimate_pose(
         c.rival
             .filter(|r| !same_pose(r.pose, c.pose, &model.symmetry))
     });
-    let checked = checked.map(|c| c.pose);
+    let checked = checked.map(|c| match fused_top {
+        Some(top) if !same_pose(top, c.pose, &model.symmetry) => top,
+        _ => c.pose,
+    });
     let n = input.samples.len();
     let total = pose_steps(n);
     if !progress(1, total) {
@@ -295,11 +318,12 @@ pub fn estimate_pose(
         // their spread and modes describe the uncertainty around it, not around a hypothesis the check rejected.
         init: checked.or_else(|| hypotheses.first().map(|h| h.pose)),
         measured: input.signature.map(|s| (s, input.imprint)),
+        prior: input.prior,
     };
     // The baseline's step is counted whether or not there is one (no signature), so that the steps keep the
     // numbers [`pose_stage`] names.
     let no_baseline = usize::from(sig.baseline.is_none());
-    let mut report = analyse_with_progress(&estimator, &model, ctx, &sig, seed, &mut |done, _| {
+    let mut report = analyse_with_progress(estimator, &model, ctx, &sig, seed, &mut |done, _| {
         progress(1 + done + no_baseline * usize::from(done > n), total)
     })
     .map_err(|e| match e {

@@ -7,7 +7,9 @@
 //! object's top ([`press_from_samples`]: the object lies on the table and the sensor comes down on it, so the part
 //! pressed first is its top); with a signature the press is then searched around it ([`PRESS_SEARCH_M`]: the
 //! contact may be on a lower part than the top), each press judged by how well the pose registered there explains
-//! the signature (the signature check's cost), and refined on a parabola through the best three.
+//! the signature (the signature check's cost), and refined on a parabola through the best three. With a prior (a
+//! track's previous frame, [`PosePrior`]) the search is a narrower one around its press, registered from its poses
+//! only ([`CARRIED_PRESS_SEARCH_M`]): the object has not moved and the press changes little from frame to frame.
 
 use std::fmt;
 use std::str::FromStr;
@@ -20,7 +22,7 @@ use crate::dataset::import_recording::DEFAULT_MAX_PRESS_M;
 use crate::image::Image;
 use crate::objects::ObjectSet;
 use crate::pose::InitStrategy;
-use crate::pose::{Estimator, PoseConfig, SensorContext};
+use crate::pose::{Estimator, PosePrior, SensorContext};
 use crate::sim::{PreparedObject, Simulator};
 
 /// Deepest press a [`PressChoice::Fixed`] takes, metres: the whole sensor is about 90 mm deep.
@@ -74,19 +76,21 @@ pub struct SensorPlacement<'a> {
     pub object: &'a LoadedObject,
     /// The same object, prepared for rendering (its top and ray caster).
     pub prepared: &'a PreparedObject,
-    pub pose: &'a PoseConfig,
+    /// The pose engine (its settings and prepared object models).
+    pub engine: &'a Estimator,
 }
 
 impl SensorPlacement<'_> {
     /// The press for `samples` of one imprint (module docs): `choice`'s own for [`PressChoice::Fixed`]; for
-    /// [`PressChoice::Auto`] found from the samples, and searched with the `signature` when there is one. `None`:
-    /// no sample has contact. `seed` draws the registration's starts.
+    /// [`PressChoice::Auto`] found from the samples, and searched with the `signature` when there is one (near the
+    /// `prior`'s press when it has one). `None`: no sample has contact. `seed` draws the registration's starts.
     pub fn press(
         &self,
         choice: PressChoice,
         samples: &[Image],
         signature: Option<&Image>,
         imprint: &Image,
+        prior: Option<&PosePrior>,
         seed: u64,
     ) -> Result<Option<f64>, PipelineError> {
         let least = match choice {
@@ -97,15 +101,22 @@ impl SensorPlacement<'_> {
                 samples,
                 signature,
                 imprint,
-                self.pose,
+                self.engine,
                 DEFAULT_MAX_PRESS_M,
             )?,
         };
-        match (least, signature) {
-            (Some(least), Some(signature)) => {
+        // The previous frame's estimate alone: another press moves the pose little.
+        let carried = prior
+            .filter(|p| !p.poses.is_empty())
+            .and_then(|p| p.press_m.map(|press| (press, &p.poses[..1])));
+        match (least, signature, carried) {
+            (Some(_), Some(signature), Some((press, starts))) => {
+                search_carried_press(self, samples, signature, imprint, press, starts).map(Some)
+            }
+            (Some(least), Some(signature), None) => {
                 search_press(self, samples, signature, imprint, least, seed).map(Some)
             }
-            (least, _) => Ok(least),
+            (least, _, _) => Ok(least),
         }
     }
 }
@@ -118,12 +129,12 @@ pub fn press_from_samples(
     samples: &[Image],
     signature: Option<&Image>,
     imprint: &Image,
-    config: &PoseConfig,
+    engine: &Estimator,
     max_press: f64,
 ) -> Result<Option<f64>, PipelineError> {
     // At press 0 the sensor's apex is on the object's top; pressing p deeper moves every back-projected point p down.
     let t_world_camera = sim.t_world_camera(&sim.pressing_pose(object, 0.0, 0.0, 0.0, 0.0));
-    let (anchored, _) = Estimator::new(config.clone()).anchor(samples, signature, imprint)?;
+    let (anchored, _) = engine.anchor(samples, signature, imprint)?;
     let mut presses: Vec<f64> = anchored
         .iter()
         .filter_map(|s| {
@@ -152,6 +163,34 @@ pub const PRESS_SEARCH_M: [f64; 11] = [
 /// Starts of the registrations at the searched presses: the pick at the least press and its next-best poses.
 const SEARCH_STARTS: usize = 3;
 
+/// The first sample with contact, the sensor as the frame sees it, the object's model.
+type SearchInputs<'s> = (
+    &'s Image,
+    SensorContext,
+    std::sync::Arc<crate::pose::ObjectModel>,
+);
+
+/// What a press search registers: the first of `samples` with contact, the sensor as a frame with `signature` sees
+/// it (no free space where it has no return) and the object's model; `None` when no sample has contact.
+fn search_inputs<'s>(
+    at: &SensorPlacement<'_>,
+    samples: &'s [Image],
+    signature: &Image,
+) -> Result<Option<SearchInputs<'s>>, PipelineError> {
+    let Some(first) = samples
+        .iter()
+        .find(|s| s.data.iter().any(|&d| crate::recon::is_valid_depth(d)))
+    else {
+        return Ok(None);
+    };
+    let sensor = SensorContext::of_simulator(at.sim, ObjectSet::builtin());
+    let seen = sensor.observing(Some(signature)).into_owned();
+    let model = at
+        .engine
+        .object_from_mesh(&at.object.name, &at.object.mesh, at.object.symmetry)?;
+    Ok(Some((first, seen, model)))
+}
+
 /// The press of [`PRESS_SEARCH_M`] around `least` whose pose (the first sample with contact registered from
 /// the evaluation's random starts, then the signature check) best explains the signature.
 fn search_press(
@@ -162,16 +201,10 @@ fn search_press(
     least: f64,
     seed: u64,
 ) -> Result<f64, PipelineError> {
-    let estimator = Estimator::new(at.pose.clone());
-    let Some(first) = samples
-        .iter()
-        .find(|s| s.data.iter().any(|&d| crate::recon::is_valid_depth(d)))
-    else {
+    let estimator = at.engine;
+    let Some((first, ectx, model)) = search_inputs(at, samples, signature)? else {
         return Ok(least);
     };
-    let sensor = SensorContext::of_simulator(at.sim, ObjectSet::builtin());
-    let ectx = sensor.observing(Some(signature));
-    let model = estimator.object_from_mesh(&at.object.name, &at.object.mesh, at.object.symmetry)?;
     let measured = Some((signature, imprint));
     let place = |press: f64| {
         at.sim
@@ -228,6 +261,60 @@ fn search_press(
     }
     scores.sort_by(|a, b| a.0.total_cmp(&b.0));
     Ok(parabola_minimum(&scores).unwrap_or(least))
+}
+
+/// Presses tried around a track's previous press, metres: the sensor moves a little between frames, either way
+/// (the parabola through the best three refines it; a 30 fps recording of a 1 s press moves ~0.5 mm a frame).
+pub const CARRIED_PRESS_SEARCH_M: [f64; 7] = [-0.0015, -0.001, -0.0005, 0.0, 0.0005, 0.001, 0.0015];
+
+/// The press of [`CARRIED_PRESS_SEARCH_M`] around `previous` whose pose, registered from `starts` (the previous
+/// frame's estimate) alone, best explains the signature; the presses are registered in parallel.
+fn search_carried_press(
+    at: &SensorPlacement<'_>,
+    samples: &[Image],
+    signature: &Image,
+    imprint: &Image,
+    previous: f64,
+    starts: &[crate::sensor::Se2],
+) -> Result<f64, PipelineError> {
+    let estimator = at.engine;
+    let Some((first, ectx, model)) = search_inputs(at, samples, signature)? else {
+        return Ok(previous);
+    };
+    let measured = Some((signature, imprint));
+    let strategy = InitStrategy::Carried {
+        starts: starts.to_vec(),
+        random: 0,
+        radius_m: 0.0,
+        seed: 0,
+    };
+    let presses: Vec<f64> = CARRIED_PRESS_SEARCH_M
+        .iter()
+        .map(|dp| previous + dp)
+        .filter(|p| (0.0..=DEFAULT_MAX_PRESS_M).contains(p))
+        .collect();
+    let scored: Result<Vec<Option<(f64, f64)>>, PipelineError> = presses
+        .par_iter()
+        .map(|&press| {
+            let t = at
+                .sim
+                .t_world_camera(&at.sim.pressing_pose(at.prepared, 0.0, 0.0, 0.0, press));
+            let hypotheses = estimator.pooled_hypotheses(
+                &model,
+                std::slice::from_ref(first),
+                &ectx,
+                &t,
+                measured,
+                &strategy,
+            )?;
+            Ok(estimator
+                .choose_scored(&model, &hypotheses, &ectx, &t, measured)?
+                .and_then(|(_, _, cost)| cost.map(|c| (press, c))))
+        })
+        .collect();
+    let mut scores: Vec<(f64, f64)> = scored?.into_iter().flatten().collect();
+    scores.sort_by(|a, b| a.0.total_cmp(&b.0));
+    Ok(parabola_minimum(&scores).unwrap_or(previous))
 }
 
 /// The lowest of the `(x, cost)` points (in increasing x), moved to the minimum of the parabola through it and

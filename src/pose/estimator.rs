@@ -26,7 +26,7 @@ use crate::image::Image;
 use crate::mesh::{Mesh, RayCaster};
 use crate::objects::{ObjectSet, Symmetry};
 use crate::recon::FreeSpaceConfig;
-use crate::sensor::Intrinsics;
+use crate::sensor::{Intrinsics, Se2};
 
 /// The value of `--posterior` that names the bundled calibration ([`PosteriorConfig::default`]).
 pub const BUNDLED_POSTERIOR: &str = "bundled";
@@ -226,6 +226,45 @@ pub struct ObjectModel {
     pub caster: RayCaster,
 }
 
+/// A hash of `mesh`'s vertices and triangles: the same name with another mesh (a workbench that loaded a new file)
+/// is not served the old one's model.
+fn mesh_fingerprint(mesh: &Mesh) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for v in mesh.vertices() {
+        [v.x, v.y, v.z].map(f32::to_bits).hash(&mut h);
+    }
+    mesh.triangles().hash(&mut h);
+    h.finish()
+}
+
+/// What earlier observations of the same contact say about the pose: a track's previous frame, whose object has
+/// not moved (the sensor presses it against the table). The registrations start from its poses (plus a few random
+/// starts, so that a pose it missed can still be found) and the press search stays near its press.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PosePrior {
+    /// Poses `t_world_object` to start from, most likely first.
+    pub poses: Vec<Se2>,
+    /// Random starts beside them.
+    pub random_starts: usize,
+    /// The press the sensor was at, metres (`None`: found from the samples as without a prior).
+    pub press_m: Option<f64>,
+    /// The earlier frames' pose posterior: it reweighs this observation's modes ([`super::fusion::fuse`]).
+    #[serde(default)]
+    pub posterior: Option<super::posterior::PosePosterior>,
+}
+
+impl PosePrior {
+    /// The same prior without random starts: the registrations after the first (imprint proposals, the
+    /// multi-sample estimate) start from the carried poses alone; the first one explores.
+    pub fn carried_only(&self) -> PosePrior {
+        PosePrior {
+            random_starts: 0,
+            ..self.clone()
+        }
+    }
+}
+
 /// Default of the surface samples per object ([`Estimator::with_surface_points`]).
 pub const DEFAULT_SURFACE_POINTS: usize = 1000;
 
@@ -261,13 +300,21 @@ impl Estimator {
         self.object_from_mesh(name, &mesh, symmetry)
     }
 
-    /// Prepare (and cache under `name`) an object given by its mesh (object frame, resting pose) and symmetry.
+    /// Prepare (and cache under `name`) an object given by its mesh (object frame, resting pose) and symmetry; the
+    /// cached model when this estimator has prepared the same mesh under that name before (a track's frames, a
+    /// press search and the estimate after it build the SDF grid once).
     pub fn object_from_mesh(
         &self,
         name: &str,
         mesh: &Mesh,
         symmetry: Symmetry,
     ) -> Result<Arc<ObjectModel>, PoseError> {
+        let key = format!("{name}#{:016x}", mesh_fingerprint(mesh));
+        if let Some(m) = self.objects.lock().ok().and_then(|m| m.get(&key).cloned()) {
+            if m.symmetry == symmetry {
+                return Ok(m);
+            }
+        }
         let registration = SdfRegistration::new(mesh, self.config.registration.clone())?;
         let caster = RayCaster::new(mesh)?;
         let model = Arc::new(ObjectModel {
@@ -278,6 +325,7 @@ impl Estimator {
         });
         if let Ok(mut m) = self.objects.lock() {
             m.insert(name.to_string(), model.clone());
+            m.insert(key, model.clone());
         }
         Ok(model)
     }
@@ -289,6 +337,20 @@ impl Estimator {
             count: self.config.inits,
             radius_m: self.config.init_radius_m,
             seed,
+        }
+    }
+
+    /// The registration's starts for an observation with `prior`: its poses and [`PosePrior::random_starts`]
+    /// random ones; [`Self::random_starts`] without a prior (or one without poses).
+    pub fn starts(&self, seed: u64, prior: Option<&PosePrior>) -> InitStrategy {
+        match prior.filter(|p| !p.poses.is_empty()) {
+            Some(p) => InitStrategy::Carried {
+                starts: p.poses.clone(),
+                random: p.random_starts,
+                radius_m: self.config.init_radius_m,
+                seed,
+            },
+            None => self.random_starts(seed),
         }
     }
 
@@ -350,7 +412,7 @@ impl Estimator {
         strategy: &InitStrategy,
     ) -> Result<Vec<Hypothesis>, PoseError> {
         let seed = match strategy {
-            InitStrategy::Random { seed, .. } => *seed,
+            InitStrategy::Random { seed, .. } | InitStrategy::Carried { seed, .. } => *seed,
             InitStrategy::Fixed(_) => 0,
         };
         let (anchored, _) = match anchor_to {
@@ -380,6 +442,38 @@ mod tests {
 
     fn parse(args: &[&str]) -> Result<PoseConfig, clap::Error> {
         Cli::try_parse_from(std::iter::once("tnd").chain(args.iter().copied())).map(|c| c.pose)
+    }
+
+    #[test]
+    fn an_object_is_prepared_once_per_mesh_and_again_for_another_mesh_of_that_name() {
+        let set = ObjectSet::builtin();
+        let names: Vec<String> = set
+            .entries()
+            .iter()
+            .take(2)
+            .map(|e| e.name.clone())
+            .collect();
+        let (a, b) = (set.mesh(&names[0]).unwrap(), set.mesh(&names[1]).unwrap());
+        let engine = Estimator::new(PoseConfig::default()).with_surface_points(10);
+        let first = engine
+            .object_from_mesh("obj", &a, Symmetry::default())
+            .unwrap();
+        let again = engine
+            .object_from_mesh("obj", &a, Symmetry::default())
+            .unwrap();
+        assert!(
+            Arc::ptr_eq(&first, &again),
+            "the same mesh is served from the cache"
+        );
+        let other = engine
+            .object_from_mesh("obj", &b, Symmetry::default())
+            .unwrap();
+        assert!(
+            !Arc::ptr_eq(&first, &other),
+            "another mesh under the same name is prepared anew"
+        );
+        // By name (the object set's lookup) the latest one.
+        assert!(Arc::ptr_eq(&engine.object(&set, "obj").unwrap(), &other));
     }
 
     #[test]

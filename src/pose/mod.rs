@@ -13,6 +13,7 @@ pub mod estimator;
 pub mod export;
 pub mod figure;
 pub mod from_depth;
+pub mod fusion;
 pub mod outline;
 pub mod posterior;
 pub mod register;
@@ -23,7 +24,7 @@ pub mod signature_check;
 
 pub use crate::mesh::sample_surface;
 pub use baseline::{threshold_contact, BaselineConfig};
-pub use estimator::{Estimator, ObjectModel, PoseConfig, SensorContext};
+pub use estimator::{Estimator, ObjectModel, PoseConfig, PosePrior, SensorContext};
 pub use register::{
     initial_poses, register, Hypothesis, InitStrategy, Registration, RegistrationProblem,
 };

@@ -457,7 +457,7 @@ fn cholesky3(a: &Mat3) -> Option<Mat3> {
 }
 
 /// `rows · cov · rowsᵀ`.
-fn project(cov: &Mat3, rows: &[[f64; 3]]) -> Vec<Vec<f64>> {
+pub(crate) fn project(cov: &Mat3, rows: &[[f64; 3]]) -> Vec<Vec<f64>> {
     rows.iter()
         .map(|r| {
             rows.iter()
@@ -472,7 +472,7 @@ fn project(cov: &Mat3, rows: &[[f64; 3]]) -> Vec<Vec<f64>> {
 }
 
 /// log N(e; 0, c) for a k-dimensional `e` (k ≤ 3); −∞ when `c` is not positive definite.
-fn gaussian_log_density(e: &[f64], c: &[Vec<f64>]) -> f64 {
+pub(crate) fn gaussian_log_density(e: &[f64], c: &[Vec<f64>]) -> f64 {
     let k = e.len();
     let mut full = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     for i in 0..k {
@@ -493,7 +493,7 @@ fn gaussian_log_density(e: &[f64], c: &[Vec<f64>]) -> f64 {
     -0.5 * (quad + log_det + k as f64 * (std::f64::consts::TAU).ln())
 }
 
-fn log_sum_exp(terms: &[f64]) -> f64 {
+pub(crate) fn log_sum_exp(terms: &[f64]) -> f64 {
     let max = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     if !max.is_finite() {
         return max;

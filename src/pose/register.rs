@@ -74,7 +74,7 @@ pub trait Registration: Send + Sync {
 }
 
 /// How starting poses are chosen.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum InitStrategy {
     /// `count` starts: yaw uniform in [0, 2pi), position the surface centroid's (x, y) plus a uniform offset in
@@ -86,6 +86,14 @@ pub enum InitStrategy {
     },
     /// One given start (the uncertainty analysis registers every sample from the same pose).
     Fixed(Se2),
+    /// Given starts (what an earlier frame of the same contact found), then `random` random ones drawn as
+    /// [`InitStrategy::Random`] does, so that a pose the earlier frames missed can still be found.
+    Carried {
+        starts: Vec<Se2>,
+        random: usize,
+        radius_m: f64,
+        seed: u64,
+    },
 }
 
 impl Default for InitStrategy {
@@ -105,6 +113,30 @@ pub fn initial_poses(
 ) -> Result<Vec<Se2>, PoseError> {
     match *strategy {
         InitStrategy::Fixed(pose) => Ok(vec![pose]),
+        InitStrategy::Carried {
+            ref starts,
+            random,
+            radius_m,
+            seed,
+        } => {
+            let mut poses = starts.clone();
+            if random > 0 {
+                poses.extend(initial_poses(
+                    &InitStrategy::Random {
+                        count: random,
+                        radius_m,
+                        seed,
+                    },
+                    problem,
+                )?);
+            }
+            if poses.is_empty() {
+                return Err(PoseError::Config(
+                    "carried initialisation needs at least one start".into(),
+                ));
+            }
+            Ok(poses)
+        }
         InitStrategy::Random {
             count,
             radius_m,
@@ -156,6 +188,48 @@ pub fn wrap_angle(angle: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn carried_starts_come_first_then_the_random_ones_random_would_draw() {
+        let surface = [DVec3::new(0.01, 0.02, 0.0), DVec3::new(0.03, 0.0, 0.0)];
+        let problem = RegistrationProblem {
+            surface: &surface,
+            free: &[],
+        };
+        let given = vec![Se2::new(0.001, 0.002, 0.3), Se2::new(-0.001, 0.0, 2.0)];
+        let carried = InitStrategy::Carried {
+            starts: given.clone(),
+            random: 3,
+            radius_m: 0.005,
+            seed: 9,
+        };
+        let random = InitStrategy::Random {
+            count: 3,
+            radius_m: 0.005,
+            seed: 9,
+        };
+        let poses = initial_poses(&carried, &problem).unwrap();
+        assert_eq!(poses[..2], given[..]);
+        assert_eq!(poses[2..], initial_poses(&random, &problem).unwrap()[..]);
+        // Without random starts the given ones alone; with neither, an error naming the strategy.
+        let only = InitStrategy::Carried {
+            starts: given.clone(),
+            random: 0,
+            radius_m: 0.0,
+            seed: 0,
+        };
+        assert_eq!(initial_poses(&only, &problem).unwrap(), given);
+        let none = InitStrategy::Carried {
+            starts: vec![],
+            random: 0,
+            radius_m: 0.0,
+            seed: 0,
+        };
+        assert!(initial_poses(&none, &problem)
+            .unwrap_err()
+            .to_string()
+            .contains("carried"));
+    }
 
     #[test]
     fn random_starts_are_seeded_and_around_the_centroid() {

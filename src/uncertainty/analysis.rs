@@ -32,24 +32,27 @@ pub struct Signature<'a> {
     /// [`crate::pose::PoseConfig::check_signature`]) the multi-sample estimate is the signature check's
     /// pick among the consensus's and every sample's hypotheses.
     pub measured: Option<(&'a Image, &'a Image)>,
+    /// What earlier frames of the same contact said ([`crate::pose::PosePrior`]): the K-start registrations start
+    /// from its poses; `None`: [`crate::pose::PoseConfig::inits`] random starts.
+    pub prior: Option<&'a crate::pose::PosePrior>,
 }
 
-/// The K-start registration that gives an analysis its fixed start: the first of `samples` with contact that
-/// registers, as `(index, every hypothesis best first)`; `None` when no sample has contact. A sample that fails is
-/// skipped here (the analysis records it with the others); the error of the last one is returned when none
-/// registers.
+/// The K-start registration (from `strategy`'s starts) that gives an analysis its fixed start: the first of
+/// `samples` with contact that registers, as `(index, every hypothesis best first)`; `None` when no sample has
+/// contact. A sample that fails is skipped here (the analysis records it with the others); the error of the last
+/// one is returned when none registers.
 pub fn first_registration(
     estimator: &Estimator,
     object: &ObjectModel,
     ctx: &SensorContext,
     t_world_camera: &DAffine3,
     samples: &[Image],
+    strategy: &InitStrategy,
     seed: u64,
 ) -> Result<Option<(usize, Vec<Hypothesis>)>, PoseError> {
-    let strategy = estimator.random_starts(seed);
     let mut last_error = None;
     for (i, s) in samples.iter().enumerate() {
-        match estimator.register_depth(object, s, ctx, t_world_camera, &strategy, seed) {
+        match estimator.register_depth(object, s, ctx, t_world_camera, strategy, seed) {
             Ok(Some(h)) if !h.is_empty() => return Ok(Some((i, h))),
             Ok(_) => {}
             Err(e) => last_error = Some(e),
@@ -94,7 +97,7 @@ pub fn analyse_with_progress(
             Err(EvalError::Cancelled)
         }
     };
-    let strategy = estimator.random_starts(seed);
+    let strategy = estimator.starts(seed, sig.prior);
     let init = match sig.init {
         Some(i) => i,
         None => {
@@ -104,6 +107,7 @@ pub fn analyse_with_progress(
                 ctx,
                 &sig.t_world_camera,
                 sig.samples,
+                &strategy,
                 seed,
             )
             .map_err(|source| EvalError::Pose {
@@ -174,6 +178,12 @@ pub fn analyse_with_progress(
         step(&mut done)?;
     }
     let multi_sample = if multi {
+        // With a prior, from its poses alone (the first registration explored).
+        let carried = sig.prior.map(crate::pose::PosePrior::carried_only);
+        let strategy = match &carried {
+            Some(_) => estimator.starts(seed, carried.as_ref()),
+            None => strategy,
+        };
         let estimate = multi_sample_estimate(estimator, object, ctx, sig, &strategy);
         step(&mut done)?;
         match estimate {

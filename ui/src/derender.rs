@@ -103,7 +103,12 @@ pub enum InputSource {
         index: usize,
     },
     /// An `.npy` imprint in metres (no ground truth).
-    Npy(PathBuf),
+    Npy {
+        path: PathBuf,
+        /// The sensor it was measured with: a native or cropped frame is brought to the model resolution as `tnd
+        /// pose` brings it.
+        sim: Box<tactile_derender::sim::SimConfig>,
+    },
     /// A frame of a loaded recording.
     RecordingFrame(Box<RecordingFrameInput>),
 }
@@ -195,8 +200,13 @@ impl InputSource {
                     truth: Some(pair.target),
                 })
             }
-            InputSource::Npy(path) => {
-                let imprint = tactile_derender::io::npy::read_metres_image(&path)?;
+            InputSource::Npy { path, sim } => {
+                // As `tnd pose --imprint`: a native (e.g. 224x171) or cropped frame is cropped and resampled to the
+                // model resolution, a model-size one taken as it is (pixels without a value: 0); another size is
+                // left for the model to refuse by name.
+                let read = tactile_derender::io::npy::read_metres_image(&path)?;
+                let imprint = tactile_derender::sensor::resample::to_model(&sim.camera, &read)
+                    .unwrap_or(read);
                 Ok(RunInput {
                     label: format!("measurement {}", path.display()),
                     imprint,
@@ -319,4 +329,40 @@ pub fn spawn(
             req, &cancel, progress,
         )?)))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_native_frame_is_brought_to_the_model_resolution_as_the_cli_does() {
+        let dir = tempfile::tempdir().unwrap();
+        let sim = tactile_derender::sim::SimConfig::default();
+        let native = &sim.camera.native;
+        let (w, h) = (native.width, native.height);
+        // A flat imprint of 4 mm at the sensor's native size (224 x 171): the model sees 64 x 64 of 4 mm.
+        let path = dir.path().join("native.npy");
+        let frame = tactile_derender::image::Image::filled(w, h, 0.004);
+        tactile_derender::io::npy::write_image(&path, &frame).unwrap();
+        let input = InputSource::Npy {
+            path: path.clone(),
+            sim: Box::new(sim.clone()),
+        }
+        .resolve()
+        .unwrap();
+        let (mw, mh) = sim.camera.resolution;
+        assert_eq!((input.imprint.width, input.imprint.height), (mw, mh));
+        assert!(input.imprint.data.iter().all(|&v| (v - 0.004).abs() < 1e-7));
+        // A model-size one is taken as it is.
+        let model = tactile_derender::image::Image::filled(mw, mh, 0.002);
+        tactile_derender::io::npy::write_image(&path, &model).unwrap();
+        let input = InputSource::Npy {
+            path,
+            sim: Box::new(sim),
+        }
+        .resolve()
+        .unwrap();
+        assert_eq!(input.imprint, model);
+    }
 }

@@ -53,6 +53,7 @@ pub fn run(
         imprint: &req.imprint,
         signature: Some(&c.signature),
         truth: c.truth,
+        prior: None,
     };
     let placed = pipeline::place_and_estimate(
         &object,
@@ -60,7 +61,7 @@ pub fn run(
         &sim,
         &observation,
         placement,
-        &req.config,
+        &tactile_derender::pose::Estimator::new(req.config.clone()),
         req.seed,
         &mut |done, total| {
             progress(done, total);

@@ -10,7 +10,9 @@ use std::sync::Arc;
 
 use anyhow::{anyhow, Context, Result};
 use tactile_derender::model::DiffusionModel;
-use tactile_derender::pipeline::track::{track_frame, FrameTrack, PressChoice, TrackContext};
+use tactile_derender::pipeline::track::{
+    FrameTrack, PressChoice, TrackContext, Tracker, TrackingConfig,
+};
 use tactile_derender::pipeline::{DerenderConfig, PipelineError};
 use tactile_derender::pose::PoseConfig;
 use tactile_derender::recording::ProcessedRecording;
@@ -19,9 +21,6 @@ use tactile_derender::sim::{PreparedObject, SimConfig, Simulator};
 
 use crate::state::ObjectSource;
 use crate::worker::{JobKind, WorkerMsg};
-
-/// Frames with fewer contact pixels than this are not tracked (as `tnd recording track`'s default).
-pub const MIN_CONTACT_PX: usize = 10;
 
 /// Live state of the track.
 #[derive(Default)]
@@ -59,16 +58,15 @@ pub struct TrackRequest {
     pub sim: SimConfig,
     /// The pose engine's settings (the session's).
     pub pose: PoseConfig,
+    /// Which frames, and what each hands to the next (`tnd recording track`'s defaults).
+    pub tracking: TrackingConfig,
 }
 
 impl TrackRequest {
     /// The frames to track: those with contact and enough pixels with a return
     /// ([`tactile_derender::recording::ProcessedRecording::unusable`], as `tnd recording track`).
     pub fn frames(&self) -> Vec<usize> {
-        (0..self.recording.len())
-            .filter(|&k| self.recording.unusable(k).is_none())
-            .filter(|&k| self.recording.contact_px[k] >= MIN_CONTACT_PX)
-            .collect()
+        self.tracking.frames(&self.recording, 1, &mut |_, _| {})
     }
 }
 
@@ -97,10 +95,12 @@ pub fn spawn(
             derender: &req.derender,
             pose: &req.pose,
             press: PressChoice::Auto,
+            tracking: &req.tracking,
         };
+        let mut tracker = Tracker::new(track)?;
         let mut cancelled = false;
         for (i, &k) in frames.iter().enumerate() {
-            let mut row = match track_frame(&track, &req.recording, k, &mut |_, _| {
+            let mut row = match tracker.track(&req.recording, k, &mut |_, _| {
                 !cancel.load(Ordering::Relaxed)
             }) {
                 Ok(row) => row,

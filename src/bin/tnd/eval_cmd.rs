@@ -499,6 +499,7 @@ fn uncertainty_plots(
             truth: Some(pair.object_pose),
             init: None,
             measured: Some((&pair.signature, &pair.imprint)),
+            prior: None,
         };
         let r = analyse(&evaluator.estimator, &object, ctx, &sig, a.seed)?;
         let sub = dir.join(format!("{split}_{i}"));

@@ -127,6 +127,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         imprint: &imprint,
         signature: signature.as_ref(),
         truth,
+        prior: None,
     };
     let mut bar = progress::bar("registering", " fits", 0);
     let placed = match pipeline::place_and_estimate(
@@ -135,7 +136,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         &sim,
         &observation,
         pipeline::Placement::Press(a.press),
-        &a.pose,
+        &tactile_derender::pose::Estimator::new(a.pose.clone()),
         a.derender.seed,
         &mut progress::callback(&mut bar),
     ) {

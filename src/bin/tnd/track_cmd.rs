@@ -12,7 +12,9 @@ use serde_json::{json, Value};
 use tactile_derender::dataset::import_recording::{calibrate_or_explain, frame_poses, PoseSource};
 use tactile_derender::io::write_atomic;
 use tactile_derender::model::DiffusionModel;
-use tactile_derender::pipeline::track::{track_frame, FrameTrack, PressChoice, TrackContext};
+use tactile_derender::pipeline::track::{
+    Carry, FrameTrack, PressChoice, TrackContext, Tracker, TrackingConfig,
+};
 use tactile_derender::pipeline::{DerenderConfig, ObjectSpec};
 use tactile_derender::pose::PoseConfig;
 use tactile_derender::recording::source::DEFAULT_MAX_POSE_GAP_S;
@@ -23,8 +25,9 @@ use crate::args::SensorArgs;
 use crate::progress;
 use crate::recording_cmd::RecordingReadArgs;
 
+/// What a track reads and how it estimates: `tnd recording track` and `tnd bench track` take the same.
 #[derive(Args, Debug)]
-pub struct TrackArgs {
+pub struct TrackInputArgs {
     /// The recording: an .mcap file or a folder of depth frames (16-bit PNG in mm, .npy/.npz).
     pub recording: PathBuf,
     #[command(flatten)]
@@ -51,18 +54,23 @@ pub struct TrackArgs {
     /// The recording's object-pose topic to score against.
     #[arg(long)]
     pub pose_topic: Option<String>,
-    /// Track every n-th frame.
-    #[arg(long, default_value_t = 1)]
-    pub every: usize,
-    /// Frames with fewer contact pixels (imprint over --contact-threshold) are not tracked.
-    #[arg(long, default_value_t = 10)]
-    pub min_contact_px: usize,
+    #[command(flatten)]
+    pub tracking: TrackingConfig,
     /// Use the given sensor as it is, instead of calibrating it from the recording's no-contact frames (membrane
     /// inflation and footprint, camera position, noise; see tnd calibrate).
     #[arg(long)]
     pub no_calibrate: bool,
     #[command(flatten)]
     pub pose: PoseConfig,
+}
+
+#[derive(Args, Debug)]
+pub struct TrackArgs {
+    #[command(flatten)]
+    pub input: TrackInputArgs,
+    /// Track every n-th frame.
+    #[arg(long, default_value_t = 1)]
+    pub every: usize,
     /// Output directory: track.csv (one row per frame) and track.json; a run killed part-way resumes into it.
     #[arg(long)]
     pub out: PathBuf,
@@ -76,25 +84,25 @@ fn canonical(path: &Path) -> PathBuf {
 /// The settings a track's rows depend on; a resumed run must have the same. (The recorded poses are not among
 /// them: every run scores all rows against the poses it is given.)
 fn settings(a: &TrackArgs, sim: &tactile_derender::sim::SimConfig) -> Value {
-    let mut object = a.object.clone();
+    let mut object = a.input.object.clone();
     if Path::new(&object.object).exists() {
         object.object = canonical(Path::new(&object.object)).display().to_string();
     }
-    let model = if Path::new(&a.model).exists() {
-        canonical(Path::new(&a.model)).display().to_string()
+    let model = if Path::new(&a.input.model).exists() {
+        canonical(Path::new(&a.input.model)).display().to_string()
     } else {
-        a.model.clone()
+        a.input.model.clone()
     };
     let mut settings = json!({
-        "recording": canonical(&a.recording), "topic": a.read.topic, "reference": a.read.reference,
-        "contact_threshold_m": a.read.contact_threshold, "npy_scale": a.read.npy_scale,
-        "png_scale": a.read.png_scale, "fps": a.read.fps,
-        "object": object, "model": model, "derender": a.derender, "press": a.press.to_string(),
-        "every": a.every, "min_contact_px": a.min_contact_px, "sim": sim, "calibrate": !a.no_calibrate,
+        "recording": canonical(&a.input.recording), "topic": a.input.read.topic, "reference": a.input.read.reference,
+        "contact_threshold_m": a.input.read.contact_threshold, "npy_scale": a.input.read.npy_scale,
+        "png_scale": a.input.read.png_scale, "fps": a.input.read.fps,
+        "object": object, "model": model, "derender": a.input.derender, "press": a.input.press.to_string(),
+        "every": a.every, "min_contact_px": a.input.tracking.min_contact_px, "tracking": a.input.tracking, "sim": sim, "calibrate": !a.input.no_calibrate,
     });
     // Only when not the defaults: a track made before the pose options resumes under the same settings.
-    if a.pose != PoseConfig::default() {
-        settings["pose"] = json!(a.pose);
+    if a.input.pose != PoseConfig::default() {
+        settings["pose"] = json!(a.input.pose);
     }
     settings
 }
@@ -189,6 +197,27 @@ fn earlier_rows(out: &Path) -> Result<Vec<FrameTrack>> {
         .collect()
 }
 
+/// The file of what each tracked frame handed to the next ([`Carry`], by frame), so that a resumed run goes on as
+/// an unbroken one would.
+const CARRY_FILE: &str = "carry.json";
+
+type Carries = std::collections::BTreeMap<usize, Option<Carry>>;
+
+fn read_carries(out: &Path) -> Result<Carries> {
+    let path = out.join(CARRY_FILE);
+    match std::fs::read_to_string(&path) {
+        Ok(text) => serde_json::from_str::<Carries>(&text)
+            .map_err(|e| anyhow!("{}: not a track's carry file: {e}", path.display())),
+        Err(_) => Ok(Carries::new()),
+    }
+}
+
+fn write_carries(out: &Path, carries: &Carries) -> Result<()> {
+    let path = out.join(CARRY_FILE);
+    write_atomic(&path, serde_json::to_string(carries)?.as_bytes())
+        .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))
+}
+
 fn write_rows(out: &Path, rows: &[FrameTrack]) -> Result<()> {
     let path = out.join("track.csv");
     write_atomic(&path, FrameTrack::csv(rows).as_bytes())
@@ -210,18 +239,41 @@ fn mean_median(mut v: Vec<f64>) -> Value {
     json!({"mean": v.iter().sum::<f64>() / v.len() as f64, "median": v[v.len() / 2], "frames": v.len()})
 }
 
-pub fn run(a: TrackArgs) -> Result<()> {
-    if a.every == 0 {
-        bail!("--every must be at least 1");
+/// A recording opened for tracking: the sensor calibrated from it (unless told not to), the frames processed, the
+/// recorded poses found, the object and the model loaded.
+pub(crate) struct Opened {
+    pub stream: String,
+    pub calibration: Option<tactile_derender::recording::calibrate::SensorCalibration>,
+    pub sim: Simulator,
+    pub poses: Option<PoseSource>,
+    pub recorded: Vec<Option<tactile_derender::dataset::import_recording::FramePose>>,
+    pub object: tactile_derender::pipeline::LoadedObject,
+    pub prepared: PreparedObject,
+    pub model: DiffusionModel,
+    pub processed: ProcessedRecording,
+}
+
+impl Opened {
+    /// The context the tracker runs in.
+    pub fn context<'a>(&'a self, a: &'a TrackInputArgs) -> TrackContext<'a> {
+        TrackContext {
+            model: &self.model,
+            object: &self.object,
+            prepared: &self.prepared,
+            sim: &self.sim,
+            derender: &a.derender,
+            pose: &a.pose,
+            press: a.press,
+            tracking: &a.tracking,
+        }
     }
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
-    let sim_config = a.sensor.sim_config()?;
-    let settings = settings(&a, &sim_config);
-    // Refuse another run's folder before any long work; nothing is written until the track can start.
-    let earlier = earlier_run(&a.out)?;
-    if let Some(e) = &earlier {
-        check_same(&a.out, e, "settings", &settings, "other settings")?;
-    }
+}
+
+/// Open `a`'s recording for tracking with the sensor `sim_config` (module docs of [`Opened`]).
+pub(crate) fn open(
+    a: &TrackInputArgs,
+    sim_config: tactile_derender::sim::SimConfig,
+) -> Result<Opened> {
     let rec = Recording::open(&a.recording, &a.read.folder())?;
     let stream = rec.depth_stream(a.read.topic.as_deref())?.clone();
     // The sensor that made the recording, from its no-contact frames, unless told to keep the given one.
@@ -281,21 +333,60 @@ pub fn run(a: TrackArgs) -> Result<()> {
         Some(p) => frame_poses(&rec, &processed.stamps_ns, p, DEFAULT_MAX_POSE_GAP_S)?,
         None => vec![None; processed.len()],
     };
+    Ok(Opened {
+        stream: stream.name.clone(),
+        calibration,
+        sim,
+        poses,
+        recorded,
+        object,
+        prepared,
+        model,
+        processed,
+    })
+}
+
+pub fn run(a: TrackArgs) -> Result<()> {
+    if a.every == 0 {
+        bail!("--every must be at least 1");
+    }
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
+    let sim_config = a.input.sensor.sim_config()?;
+    let settings = settings(&a, &sim_config);
+    // Refuse another run's folder before any long work; nothing is written until the track can start.
+    let earlier = earlier_run(&a.out)?;
+    if let Some(e) = &earlier {
+        check_same(&a.out, e, "settings", &settings, "other settings")?;
+    }
+    let Opened {
+        stream,
+        calibration,
+        sim,
+        poses,
+        recorded,
+        object,
+        prepared,
+        model,
+        processed,
+    } = open(&a.input, sim_config)?;
     let frames = fingerprint(&processed);
     if let Some(e) = &earlier {
         check_same(&a.out, e, "recording", &frames, "another recording")?;
     }
-    let todo: Vec<usize> = (0..processed.len())
-        .step_by(a.every)
-        .filter(|&k| match processed.unusable(k) {
-            Some(why) => {
-                eprintln!("{}: {why}", a.recording.display());
-                false
-            }
-            None => true,
-        })
-        .filter(|&k| processed.contact_px[k] >= a.min_contact_px)
-        .collect();
+    let ctx = TrackContext {
+        model: &model,
+        object: &object,
+        prepared: &prepared,
+        sim: &sim,
+        derender: &a.input.derender,
+        pose: &a.input.pose,
+        press: a.input.press,
+        tracking: &a.input.tracking,
+    };
+    let mut tracker = Tracker::new(ctx)?;
+    let todo = a.input.tracking.frames(&processed, a.every, &mut |_, why| {
+        eprintln!("{}: {why}", a.input.recording.display())
+    });
     if todo.is_empty() {
         let (peak, px) = (0..processed.len())
             .map(|k| (k, processed.contact_px[k]))
@@ -304,9 +395,9 @@ pub fn run(a: TrackArgs) -> Result<()> {
         bail!(
             "{}: no frame has {} contact pixels (imprint over {} mm) to track; the most is {px} at frame {peak} \
              (lower --min-contact-px or --contact-threshold, or check --reference and the sensor options)",
-            a.recording.display(),
-            a.min_contact_px,
-            a.read.contact_threshold * 1e3
+            a.input.recording.display(),
+            a.input.tracking.min_contact_px,
+            a.input.read.contact_threshold * 1e3
         );
     }
     std::fs::create_dir_all(&a.out)
@@ -322,15 +413,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
             todo.len()
         );
     }
-    let ctx = TrackContext {
-        model: &model,
-        object: &object,
-        prepared: &prepared,
-        sim: &sim,
-        derender: &a.derender,
-        pose: &a.pose,
-        press: a.press,
-    };
+    let mut carries = read_carries(&a.out)?;
     let score = |row: &mut FrameTrack| {
         let r = recorded.get(row.frame).copied().flatten();
         row.score(r.map(|p| (p.pose, p.press)), &object.symmetry);
@@ -339,10 +422,20 @@ pub fn run(a: TrackArgs) -> Result<()> {
     let mut this_run = 0;
     for (i, &k) in todo.iter().enumerate() {
         if !done.contains(&k) {
-            let mut row = track_frame(&ctx, &processed, k, &mut |_, _| true)?;
+            // Resumed after the frame before: go on with what it handed on, as an unbroken run would.
+            let before = i.checked_sub(1).map(|j| todo[j]);
+            if let Some(Some(c)) = before
+                .filter(|b| done.contains(b))
+                .and_then(|b| carries.get(&b))
+            {
+                tracker.resume(c.clone());
+            }
+            let mut row = tracker.track(&processed, k, &mut |_, _| true)?;
             score(&mut row);
             rows.push(row);
             rows.sort_by_key(|r| r.frame);
+            carries.insert(k, tracker.carry().cloned());
+            write_carries(&a.out, &carries)?;
             write_rows(&a.out, &rows)?;
             this_run += 1;
         }
@@ -358,7 +451,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
         mean_median(rows.iter().filter_map(get).collect())
     };
     let summary = json!({
-        "recording": crate::path_json(&a.recording), "depth_topic": stream.name, "object": object.name,
+        "recording": crate::path_json(&a.input.recording), "depth_topic": stream, "object": object.name,
         "frames": processed.len(), "reference_frames": processed.reference_frames,
         "tracked": rows.len(), "this_run": this_run,
         "pose_track": {"file": crate::path_json(a.out.join(POSE_TRACK)), "topic": POSE_TOPIC, "messages": pose_messages},

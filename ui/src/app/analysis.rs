@@ -209,7 +209,10 @@ impl WorkbenchApp {
                     },
                 }
             }
-            DerenderInput::Measurement { path } => InputSource::Npy(path.clone()),
+            DerenderInput::Measurement { path } => InputSource::Npy {
+                path: path.clone(),
+                sim: Box::new(self.state.sim.clone()),
+            },
             DerenderInput::RecordingFrame { path, frame } => {
                 let loaded = self
                     .recording
@@ -359,6 +362,7 @@ impl WorkbenchApp {
                 imprint: &req.imprint,
                 signature: Some(&c.signature),
                 truth: c.truth,
+                prior: None,
             },
         };
         let files = tactile_derender::pipeline::write_pose_geometry(

@@ -12,7 +12,8 @@ use super::WorkbenchApp;
 use crate::command::Command;
 use crate::recording_view::{spawn_load, RecordingMsg, RecordingSettings};
 use crate::sensor_calibration::{CalibrationRequest, CalibrationResult};
-use crate::track_view::{TrackMsg, TrackRequest, MIN_CONTACT_PX};
+use crate::track_view::{TrackMsg, TrackRequest};
+use tactile_derender::pipeline::track::TrackingConfig;
 
 impl WorkbenchApp {
     /// (Re)load the recording of the saved settings on a background thread.
@@ -232,11 +233,13 @@ impl WorkbenchApp {
             derender: self.state.derender.config.clone(),
             sim: self.state.sim.clone(),
             pose: self.state.pose.clone(),
+            tracking: TrackingConfig::default(),
         };
         let frames = req.frames().len();
         if frames == 0 {
             return Err(anyhow!(
-                "no frame has {MIN_CONTACT_PX} contact pixels (imprint over 3 mm) to track"
+                "no frame has {} contact pixels (imprint over 3 mm) to track",
+                req.tracking.min_contact_px
             ));
         }
         view.rows.clear();

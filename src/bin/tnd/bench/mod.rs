@@ -4,6 +4,7 @@
 mod gemm;
 mod pose;
 mod posterior;
+mod track;
 mod unet;
 
 use std::path::{Path, PathBuf};
@@ -38,6 +39,8 @@ pub enum BenchCommand {
     Pose(pose::PoseBenchArgs),
     /// The N-sample pose posterior of `tnd pose`'s pipeline (sampling, press, registration, check), stage by stage.
     Posterior(Box<posterior::PosteriorBenchArgs>),
+    /// `tnd recording track` on one recording: seconds per contact frame and errors, carried against per-frame.
+    Track(Box<track::TrackBenchArgs>),
     /// U-Net forward and training step against `../shared/peers/unet_torch.py`.
     Unet(unet::UnetBenchArgs),
     /// The tiled convolution's three GEMM patterns, our AVX-512 kernels against the `gemm` crate (GFLOP/s).
@@ -68,6 +71,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         BenchCommand::Sim(s) => bench_sim(&s),
         BenchCommand::Pose(p) => pose::run(&p),
         BenchCommand::Posterior(p) => posterior::run(&p),
+        BenchCommand::Track(t) => track::run(&t),
         BenchCommand::Unet(u) => unet::run(&u),
         BenchCommand::Gemm(g) => gemm::run(&g),
     }

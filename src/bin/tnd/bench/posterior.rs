@@ -173,6 +173,7 @@ fn time_run(
         imprint: &contact.imprint,
         signature: Some(&contact.signature),
         truth: Some(truth),
+        prior: None,
     };
     // The first progress call comes once the press, the first registration, the check and the posterior are done;
     // the rest, one per registered sample.
@@ -184,7 +185,8 @@ fn time_run(
         sim,
         &observation,
         Placement::Press(PressChoice::Auto),
-        eval,
+        // A new engine every run: `tnd pose` prepares the object once per call.
+        &tactile_derender::pose::Estimator::new(eval.clone()),
         config.seed,
         &mut |done, _| {
             if done == 1 {
