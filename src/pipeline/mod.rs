@@ -31,6 +31,7 @@ pub mod object;
 pub mod pose;
 pub mod press;
 pub mod track;
+pub mod tracker;
 
 pub use derender::{derender, imprint_guidance, mean_std, DerenderConfig, Derendered};
 pub use object::{LoadedObject, ObjectSpec};
