@@ -213,16 +213,15 @@ pub fn estimate_pose(
     object: &LoadedObject,
     sim: &Simulator,
     input: &PoseInput<'_>,
-    engine: &Estimator,
+    estimator: &Estimator,
     seed: u64,
     progress: Progress<'_>,
 ) -> Result<PoseEstimate, PipelineError> {
-    let config: &PoseConfig = &engine.config;
+    let config: &PoseConfig = &estimator.config;
     let sensor = SensorContext::of_simulator(sim, ObjectSet::builtin());
     // Pixels without a return give no free-space evidence.
     let ctx = sensor.observing(input.signature);
     let ctx = ctx.as_ref();
-    let estimator = engine;
     let model = estimator.object_from_mesh(&object.name, &object.mesh, object.symmetry)?;
     let strategy = estimator.starts(seed, input.prior);
     let (samples, anchor_shift_m) =

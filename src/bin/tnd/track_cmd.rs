@@ -358,33 +358,14 @@ pub fn run(a: TrackArgs) -> Result<()> {
     if let Some(e) = &earlier {
         check_same(&a.out, e, "settings", &settings, "other settings")?;
     }
-    let Opened {
-        stream,
-        calibration,
-        sim,
-        poses,
-        recorded,
-        object,
-        prepared,
-        model,
-        processed,
-    } = open(&a.input, sim_config)?;
-    let frames = fingerprint(&processed);
+    let opened = open(&a.input, sim_config)?;
+    let (processed, recorded, object) = (&opened.processed, &opened.recorded, &opened.object);
+    let frames = fingerprint(processed);
     if let Some(e) = &earlier {
         check_same(&a.out, e, "recording", &frames, "another recording")?;
     }
-    let ctx = TrackContext {
-        model: &model,
-        object: &object,
-        prepared: &prepared,
-        sim: &sim,
-        derender: &a.input.derender,
-        pose: &a.input.pose,
-        press: a.input.press,
-        tracking: &a.input.tracking,
-    };
-    let mut tracker = Tracker::new(ctx)?;
-    let todo = a.input.tracking.frames(&processed, a.every, &mut |_, why| {
+    let mut tracker = Tracker::new(opened.context(&a.input))?;
+    let todo = a.input.tracking.frames(processed, a.every, &mut |_, why| {
         eprintln!("{}: {why}", a.input.recording.display())
     });
     if todo.is_empty() {
@@ -430,7 +411,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
             {
                 tracker.resume(c.clone());
             }
-            let mut row = tracker.track(&processed, k, &mut |_, _| true)?;
+            let mut row = tracker.track(processed, k, &mut |_, _| true)?;
             score(&mut row);
             rows.push(row);
             rows.sort_by_key(|r| r.frame);
@@ -451,12 +432,12 @@ pub fn run(a: TrackArgs) -> Result<()> {
         mean_median(rows.iter().filter_map(get).collect())
     };
     let summary = json!({
-        "recording": crate::path_json(&a.input.recording), "depth_topic": stream, "object": object.name,
+        "recording": crate::path_json(&a.input.recording), "depth_topic": opened.stream, "object": object.name,
         "frames": processed.len(), "reference_frames": processed.reference_frames,
         "tracked": rows.len(), "this_run": this_run,
         "pose_track": {"file": crate::path_json(a.out.join(POSE_TRACK)), "topic": POSE_TOPIC, "messages": pose_messages},
         "no_estimate": rows.iter().filter(|r| r.estimate.is_none()).count(),
-        "scored_against": poses.as_ref().map(|p| match p {
+        "scored_against": opened.poses.as_ref().map(|p| match p {
             PoseSource::Csv(c) => c.display().to_string(),
             PoseSource::Topic(t) => t.clone().unwrap_or_default(),
         }),
@@ -471,7 +452,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
         "press_m": column(|r| r.press_m),
         "press_err_mm": column(|r| r.press_m.zip(r.recorded_press_m).map(|(p, q)| (p - q).abs() * 1e3)),
         "out": a.out.join("track.csv"),
-        "calibration": calibration,
+        "calibration": opened.calibration,
     });
     write_json(
         &a.out,
