@@ -4,10 +4,11 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use tactile_derender::metrics::evaluate::{
-    EvalConfig, EvalError, Evaluator, GroundTruthGenerator, PairSource,
+    EvalConfig, EvalError, GroundTruthGenerator, PairSource,
 };
 use tactile_derender::metrics::sources::{SimSource, SimSpec};
 use tactile_derender::objects::ObjectSet;
+use tactile_derender::pipeline::evaluate::Evaluator;
 use tactile_derender::pose::PoseConfig;
 use tactile_derender::sensor::Se2;
 use tactile_derender::sim::SimConfig;
@@ -542,4 +543,143 @@ fn pose_estimate_steps_are_counted_and_named() {
     // One sample: no multi-sample step.
     assert_eq!(pose_steps(1), 3);
     assert_eq!(pose_stage(3, 1), "finishing");
+}
+
+/// Samples that differ from one another, as a model's do: the true contact with seeded depth noise and a tenth of
+/// its pixels dropped, one image per sample.
+struct NoisyTruth;
+
+impl tactile_derender::metrics::evaluate::Generator for NoisyTruth {
+    fn name(&self) -> String {
+        "noisy truth".into()
+    }
+    fn generate(
+        &self,
+        pair: &tactile_derender::metrics::evaluate::EvalPair,
+        _ctx: &tactile_derender::pose::SensorContext,
+        n: usize,
+        seed: u64,
+    ) -> Result<Vec<tactile_derender::image::Image>, EvalError> {
+        use rand::{Rng, SeedableRng};
+        Ok((0..n)
+            .map(|k| {
+                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed.wrapping_add(k as u64));
+                let mut x = pair.target.clone();
+                for v in x.data.iter_mut().filter(|v| **v > 0.0) {
+                    if rng.random::<f32>() < 0.1 {
+                        *v = 0.0;
+                    } else {
+                        *v += rng.random_range(-5e-4..5e-4);
+                    }
+                }
+                x
+            })
+            .collect())
+    }
+}
+
+/// The parity of the front ends: the eval record of a pair holds the estimate, posterior and multi-sample estimate
+/// that the pose use case (`tnd pose`, the workbench's Pose tab) gives for the same samples, seed and settings, and
+/// pose.json carries them unchanged — at the defaults and at a configuration that is not (20 samples, more than
+/// the multi-sample estimate's proposals; another posterior temperature; fewer starts; no imprint proposals).
+#[test]
+fn the_eval_record_and_pose_json_hold_the_estimate_the_pose_use_case_gives() {
+    use tactile_derender::metrics::evaluate::pair_seed;
+    use tactile_derender::pipeline::pose_record::{PoseRecord, RecordSource};
+    use tactile_derender::pipeline::{place_and_estimate, ObjectSpec, Observation, Placement};
+    use tactile_derender::pose::posterior::PosteriorConfig;
+    use tactile_derender::pose::Estimator;
+    let src = source();
+    let sim = tactile_derender::sim::Simulator::new(SimConfig::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let other = EvalConfig {
+        pose: PoseConfig {
+            inits: 6,
+            imprint_proposals: false,
+            posterior: PosteriorConfig {
+                temperature: PosteriorConfig::default().temperature * 2.0,
+                ..PosteriorConfig::default()
+            },
+            ..PoseConfig::default()
+        },
+        pose_samples: 20,
+        ..EvalConfig::default()
+    };
+    for config in [EvalConfig::default(), other] {
+        let seed = 11;
+        let mut seen = Vec::new();
+        let report = Evaluator::new(config.clone())
+            .evaluate_observed(&src, &NoisyTruth, seed, &mut |_, _| true, &mut |i, _, s| {
+                seen.push((i, s.to_vec()))
+            })
+            .unwrap();
+        assert_eq!(report.records.len(), src.len(), "{:?}", report.failed);
+        let proposals = config.pose.imprint_proposals;
+        for (r, (i, samples)) in report.records.iter().zip(&seen) {
+            let pair = src.pair(*i).unwrap();
+            let object = ObjectSpec::library("builtin", &pair.object).load().unwrap();
+            let observation = Observation {
+                samples,
+                imprint: &pair.imprint,
+                signature: Some(&pair.signature),
+                truth: Some(pair.object_pose),
+                prior: None,
+            };
+            let engine = Estimator::new(config.pose.clone());
+            let placed = place_and_estimate(
+                &object,
+                None,
+                &sim,
+                &observation,
+                Placement::Camera(pair.t_world_camera),
+                &engine,
+                pair_seed(seed, *i),
+                &mut |_, _| true,
+            )
+            .unwrap();
+            let e = &placed.estimate;
+            // What `tnd pose` reports is the combined row with the imprint's proposals, else the model's row.
+            let row = if proposals {
+                r.model_combined.as_ref().unwrap()
+            } else {
+                assert!(r.model_combined.is_none());
+                &r.model
+            };
+            let name = format!("{} ({} samples)", r.name, samples.len());
+            assert!(e.best().is_some(), "{name}");
+            assert_eq!(row.estimate, e.best(), "{name}");
+            assert!(e.posterior.is_some(), "{name}");
+            assert_eq!(row.posterior, e.posterior, "{name}");
+            assert_eq!(row.truth_region, e.truth_region, "{name}");
+            if samples.len() > 1 {
+                let multi = r.model_multi.as_ref().unwrap();
+                assert!(e.report.multi_sample.is_some(), "{name}");
+                assert_eq!(
+                    multi.estimate,
+                    e.report.multi_sample.map(|m| m.pose),
+                    "{name}"
+                );
+                assert_eq!(multi.posterior, e.report.multi_sample_posterior, "{name}");
+            } else {
+                assert!(r.model_multi.is_none());
+            }
+            // pose.json, written and read back: the same estimate and posterior, and the hypotheses with costs.
+            let record = PoseRecord::new(
+                &placed,
+                Some(pair.object_pose),
+                &object.symmetry,
+                RecordSource::default(),
+            );
+            let path = dir.path().join("pose.json");
+            record.write(&path).unwrap();
+            let back = PoseRecord::read(&path).unwrap();
+            // (As JSON: a refined pose's cost is NaN, written as null, and NaN is unequal to itself.)
+            let json = |r: &PoseRecord| serde_json::to_value(r).unwrap();
+            assert_eq!(json(&back), json(&record), "{name}");
+            assert_eq!(back.estimate, row.estimate, "{name}");
+            assert_eq!(back.posterior, row.posterior, "{name}");
+            assert_eq!(back.hypotheses, e.hypotheses, "{name}");
+            assert_eq!(back.imprint_hypotheses.is_empty(), !proposals, "{name}");
+        }
+    }
 }

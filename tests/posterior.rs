@@ -7,11 +7,12 @@ mod cli_common;
 
 use cli_common::{stderr, tnd_in};
 use tactile_derender::metrics::evaluate::{
-    EvalConfig, Evaluator, GroundTruthGenerator, MethodResult, PairRecord,
+    EvalConfig, GroundTruthGenerator, MethodResult, PairRecord,
 };
 use tactile_derender::metrics::sources::{SimSource, SimSpec};
 use tactile_derender::metrics::DepthMetrics;
 use tactile_derender::objects::{ObjectSet, Symmetry};
+use tactile_derender::pipeline::evaluate::Evaluator;
 use tactile_derender::pose::posterior::{
     symmetric_eigen3, ModeEvidence, PosePosterior, PosteriorConfig,
 };

@@ -12,9 +12,10 @@ use tactile_derender::dataset::import_recording::{
 use tactile_derender::dataset::npz::NpzIndex;
 use tactile_derender::dataset::{Dataset, SplitName};
 use tactile_derender::image::Image;
-use tactile_derender::metrics::evaluate::{EvalConfig, Evaluator, GroundTruthGenerator};
+use tactile_derender::metrics::evaluate::{EvalConfig, GroundTruthGenerator};
 use tactile_derender::metrics::sources::DatasetSource;
 use tactile_derender::objects::ObjectSet;
+use tactile_derender::pipeline::evaluate::Evaluator;
 use tactile_derender::recording::synth::{write_press_recording, DepthEncoding, PressSequence};
 use tactile_derender::recording::{
     process, FolderOptions, ProcessConfig, Recording, RecordingError, ReferenceChoice,

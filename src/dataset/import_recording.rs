@@ -329,10 +329,7 @@ pub fn calibrate_or_explain(
     process: &ProcessConfig,
     progress: &mut dyn FnMut(usize, usize) -> bool,
 ) -> Result<(Option<SensorCalibration>, Option<String>), recording::RecordingError> {
-    let config = CalibrateConfig {
-        reference: process.reference,
-        ..CalibrateConfig::default()
-    };
+    let config = CalibrateConfig::reading(process);
     match calibrate(rec, stream, given, &config, progress) {
         Ok((cal, _)) => Ok((Some(cal), None)),
         Err(recording::RecordingError::Cancelled) => Err(recording::RecordingError::Cancelled),

@@ -13,11 +13,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::evaluate::{
-    pair_seed, EvalError, EvalPair, EvalReport, Evaluator, FailedPair, Generator, PairRecord,
-    PairSource,
-};
-use crate::image::Image;
+use super::evaluate::{EvalError, FailedPair, PairRecord};
 
 /// Errors of an evaluation log; each names the file.
 #[derive(Debug, thiserror::Error)]
@@ -219,49 +215,6 @@ impl EvalLog {
             text.push('\n');
         }
         crate::io::write_atomic(&self.path, text.as_bytes()).map_err(write)
-    }
-}
-
-impl Evaluator {
-    /// [`Evaluator::evaluate_observed`] into `log`: pair `i` of `source` is pair `first_index + i` of `split` in the
-    /// log (`first_index`: the pairs the source skips). Pairs the log holds scored are taken from it (neither
-    /// generated nor observed again); every other pair is scored and logged at once. The report covers every pair
-    /// of `source` alike.
-    #[allow(clippy::too_many_arguments)]
-    pub fn evaluate_logged(
-        &self,
-        source: &dyn PairSource,
-        generator: &dyn Generator,
-        seed: u64,
-        log: &mut EvalLog,
-        split: &str,
-        first_index: usize,
-        progress: &mut dyn FnMut(usize, usize) -> bool,
-        observe: &mut dyn FnMut(usize, &EvalPair, &[Image]),
-    ) -> Result<EvalReport, EvalLogError> {
-        let mut records = Vec::with_capacity(source.len());
-        let mut failed = Vec::new();
-        for i in 0..source.len() {
-            let index = first_index + i;
-            if let Some(r) = log.record(split, index) {
-                records.push(r.clone());
-            } else {
-                let outcome = self.evaluate_pair(source, generator, i, pair_seed(seed, i), observe);
-                let logged = match &outcome {
-                    Ok(r) => LoggedPair::Record(Box::new(r.clone())),
-                    Err(f) => LoggedPair::Failed(f.clone()),
-                };
-                log.insert(split, index, logged)?;
-                match outcome {
-                    Ok(r) => records.push(r),
-                    Err(f) => failed.push(f),
-                }
-            }
-            if !progress(i + 1, source.len()) {
-                return Err(EvalError::Cancelled.into());
-            }
-        }
-        Ok(EvalReport::new(generator.name(), records, failed))
     }
 }
 

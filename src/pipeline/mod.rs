@@ -8,13 +8,14 @@
 //! |---|---|---|
 //! | load the object a user names | [`ObjectSpec`] | [`ObjectSpec::load`] |
 //! | de-render: N samples of X0 for one imprint | [`DerenderConfig`] | [`derender()`] |
-//! | estimate the pose from the samples (one and many) | a [`crate::pose::Estimator`] (its [`crate::pose::PoseConfig`]) + seed | [`estimate_pose`], [`place_and_estimate`] |
+//! | estimate the pose from the samples (one and many) | a [`crate::pose::Estimator`] (its [`crate::pose::PoseConfig`]) + seed | [`estimate_observation`] (the one sequence), [`estimate_pose`], [`place_and_estimate`] |
+//! | its record, pose.json | [`pose_record::RecordSource`] | [`pose_record::PoseRecord::new`], [`pose_record::PoseRecord::write`] |
 //! | export its geometry for Open3D / trimesh (PLY) | [`crate::io::ply::PlyEncoding`] | [`write_pose_geometry`] |
 //! | draw its figures (KDE, SE(2) fits; SVG + PNG) | [`crate::io::figure::FigureConfig`] | [`write_fit_figure`], [`crate::uncertainty::UncertaintyReport::write_with`] |
 //! | simulate a press | [`crate::sim::SimConfig`] | [`crate::sim::Simulator::simulate`] |
 //! | generate a dataset | [`crate::dataset::GenConfig`] | [`crate::dataset::gen::generate`] |
 //! | train | [`crate::model::train::TrainConfig`] | [`crate::model::train::train`] |
-//! | evaluate | [`crate::metrics::evaluate::EvalConfig`] | [`crate::metrics::evaluate::Evaluator::evaluate`] |
+//! | evaluate (the same pose sequence on every pair) | [`crate::metrics::evaluate::EvalConfig`] | [`evaluate::Evaluator::evaluate`] |
 //! | place the sensor: find how far it is pressed | [`press::PressChoice`] | [`press::SensorPlacement::press`] |
 //! | estimate the pose on every contact frame of a recording | [`track::TrackContext`], [`track::TrackingConfig`] | [`track::Tracker::track`] |
 //! | calibrate the inflation | a [`crate::sim::SimConfig`] and the inflations | [`crate::sim::calibration::sweep_inflation`] |
@@ -27,8 +28,10 @@
 //! no stage calls back up into it, and it never prints, draws or reads the environment.
 
 pub mod derender;
+pub mod evaluate;
 pub mod object;
 pub mod pose;
+pub mod pose_record;
 pub mod press;
 pub mod track;
 pub mod tracker;
@@ -36,8 +39,9 @@ pub mod tracker;
 pub use derender::{derender, imprint_guidance, mean_std, DerenderConfig, Derendered};
 pub use object::{LoadedObject, ObjectSpec};
 pub use pose::{
-    estimate_pose, place_and_estimate, pose_stage, pose_steps, write_fit_figure,
-    write_pose_geometry, Observation, PlacedEstimate, Placement, PoseEstimate, PoseInput,
+    estimate_observation, estimate_pose, place_and_estimate, pose_stage, pose_steps,
+    write_fit_figure, write_pose_geometry, Observation, PlacedEstimate, Placement, PoseEstimate,
+    PoseInput,
 };
 
 use std::path::PathBuf;
@@ -86,6 +90,14 @@ pub enum PipelineError {
         #[source]
         source: std::io::Error,
     },
+    #[error("{}: cannot read: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: {problem}", path.display())]
+    Format { path: PathBuf, problem: String },
     #[error(transparent)]
     Figure(#[from] crate::io::figure::FigureError),
     #[error(transparent)]

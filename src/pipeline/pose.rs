@@ -12,7 +12,7 @@ use crate::objects::ObjectSet;
 use crate::pose::posterior::PosePosterior;
 use crate::pose::signature_check::Rival;
 use crate::pose::{threshold_contact, Hypothesis};
-use crate::pose::{Estimator, PoseConfig, PosePrior, SensorContext};
+use crate::pose::{Estimator, ObjectModel, PoseConfig, PosePrior, SensorContext};
 use crate::recon::is_valid_depth;
 use crate::sensor::Se2;
 use crate::sim::Simulator;
@@ -47,6 +47,10 @@ pub struct PoseEstimate {
     pub hypotheses: Vec<Hypothesis>,
     /// The sample whose K-start registration gave the start of the others.
     pub registered_sample: usize,
+    /// The imprint's threshold contact registered from the same starts, best first: the proposals the signature
+    /// check scored beside `hypotheses` ([`PoseConfig::imprint_proposals`]); empty when they were not made (no
+    /// signature, the check or the proposals off).
+    pub imprint_hypotheses: Vec<Hypothesis>,
     /// The single-sample estimate after the signature check ([`crate::pose::signature_check`]): the hypothesis
     /// that best explains the measured signature, refined; `None` without a signature or with the check off.
     pub checked: Option<Se2>,
@@ -217,12 +221,38 @@ pub fn estimate_pose(
     seed: u64,
     progress: Progress<'_>,
 ) -> Result<PoseEstimate, PipelineError> {
-    let config: &PoseConfig = &estimator.config;
     let sensor = SensorContext::of_simulator(sim, ObjectSet::builtin());
+    let model = estimator.object_from_mesh(&object.name, &object.mesh, object.symmetry)?;
+    estimate_observation(
+        estimator,
+        &object.name,
+        &model,
+        &sensor,
+        input,
+        seed,
+        progress,
+    )
+}
+
+/// **The pose sequence**, written once for every front end (`tnd pose`, `tnd eval`, `tnd recording track`, `tnd
+/// bench`, the workbench): the samples anchored onto the signature, the K-start registration of the first sample
+/// that registers, the imprint's proposals, the signature check with its posterior (reweighed by a track's prior),
+/// then the uncertainty analysis (every sample and the baseline from the estimate, the multi-sample estimate).
+/// `sensor` is the sensor as calibrated; the frame's pixels without a return are taken out of its free space here.
+/// `model` is `name`'s prepared model ([`Estimator::object_from_mesh`], [`Estimator::object`]).
+pub fn estimate_observation(
+    estimator: &Estimator,
+    name: &str,
+    model: &ObjectModel,
+    sensor: &SensorContext,
+    input: &PoseInput<'_>,
+    seed: u64,
+    progress: Progress<'_>,
+) -> Result<PoseEstimate, PipelineError> {
+    let config: &PoseConfig = &estimator.config;
     // Pixels without a return give no free-space evidence.
     let ctx = sensor.observing(input.signature);
     let ctx = ctx.as_ref();
-    let model = estimator.object_from_mesh(&object.name, &object.mesh, object.symmetry)?;
     let strategy = estimator.starts(seed, input.prior);
     let (samples, anchor_shift_m) =
         estimator.anchor(input.samples, input.signature, input.imprint)?;
@@ -237,7 +267,7 @@ pub fn estimate_pose(
     // records it with the others).
     let (registered_sample, hypotheses) = first_registration(
         estimator,
-        &model,
+        model,
         ctx,
         &input.t_world_camera,
         &samples,
@@ -252,22 +282,23 @@ pub fn estimate_pose(
         .signature
         .map(|s| (s, input.imprint))
         .filter(|_| config.check_signature);
+    // The imprint's own contact proposes poses too; the check scores them beside the sample's.
+    let imprint_hypotheses = match (measured, config.imprint_proposals, &baseline) {
+        (Some(m), true, Some(b)) => estimator.pooled_hypotheses(
+            model,
+            std::slice::from_ref(b),
+            ctx,
+            &input.t_world_camera,
+            Some(m),
+            &strategy,
+        )?,
+        _ => Vec::new(),
+    };
     let (checked, checked_from_imprint, mut posterior) = match measured {
         Some(m) => {
-            // The imprint's own contact proposes poses too; the check scores them beside the sample's.
-            let mut pool = hypotheses.clone();
-            if let (true, Some(b)) = (config.imprint_proposals, &baseline) {
-                pool.extend(estimator.pooled_hypotheses(
-                    &model,
-                    std::slice::from_ref(b),
-                    ctx,
-                    &input.t_world_camera,
-                    Some(m),
-                    &strategy,
-                )?);
-            }
+            let pool = [hypotheses.as_slice(), &imprint_hypotheses].concat();
             match estimator.check_with_posterior(
-                &model,
+                model,
                 &pool,
                 ctx,
                 &input.t_world_camera,
@@ -322,7 +353,7 @@ pub fn estimate_pose(
     // The baseline's step is counted whether or not there is one (no signature), so that the steps keep the
     // numbers [`pose_stage`] names.
     let no_baseline = usize::from(sig.baseline.is_none());
-    let mut report = analyse_with_progress(estimator, &model, ctx, &sig, seed, &mut |done, _| {
+    let mut report = analyse_with_progress(estimator, model, ctx, &sig, seed, &mut |done, _| {
         progress(1 + done + no_baseline * usize::from(done > n), total)
     })
     .map_err(|e| match e {
@@ -340,8 +371,9 @@ pub fn estimate_pose(
             SampleError::new(pose, cost, report.reference, &model.symmetry)
         });
     Ok(PoseEstimate {
-        object: object.name.clone(),
+        object: name.to_string(),
         hypotheses,
+        imprint_hypotheses,
         registered_sample,
         checked,
         checked_from_imprint,
@@ -374,7 +406,7 @@ pub fn pose_stage(done: usize, samples: usize) -> String {
 }
 
 /// One file written by [`write_pose_geometry`].
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GeometryFile {
     pub path: std::path::PathBuf,
     /// Points (or mesh vertices) in it.

@@ -153,6 +153,49 @@ impl PoseWithCovarianceStamped {
     }
 }
 
+pub use crate::sensor::POSE_FRAME_ID;
+
+/// `t_world_object` as a 4x4 matrix, with its convention in words.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectTransform {
+    /// Row-major 4x4 (metres).
+    pub t_world_object: [[f64; 4]; 4],
+    /// What the matrix maps, in words.
+    pub convention: String,
+}
+
+/// An estimate placed for other tools: its 4x4 transform with the frame convention named, and the
+/// `PoseWithCovarianceStamped` message with the posterior's covariance about it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LocatedEstimate {
+    pub transform: ObjectTransform,
+    pub ros: PoseWithCovarianceStamped,
+}
+
+impl LocatedEstimate {
+    /// `estimate` with the covariance of `posterior` about it ([`covariance_about`]), in [`POSE_FRAME_ID`] at
+    /// `stamp_ns`; `None` without an estimate or a posterior.
+    pub fn new(
+        estimate: Option<Se2>,
+        posterior: Option<&PosePosterior>,
+        symmetry: &Symmetry,
+        stamp_ns: u64,
+    ) -> Option<Self> {
+        let estimate = estimate?;
+        let cov = covariance_about(posterior?, estimate, symmetry)?;
+        Some(Self {
+            transform: ObjectTransform {
+                t_world_object: transform_4x4(estimate),
+                convention: "row-major 4x4; maps points of the object's mesh (its own frame, in its resting pose: \
+                    bounding-box centre over the origin, lowest point at z = 0) to the world frame (the table at z = 0, \
+                    z up, the sensor over x = y = 0), metres"
+                    .into(),
+            },
+            ros: PoseWithCovarianceStamped::new(estimate, &cov, POSE_FRAME_ID, stamp_ns),
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -56,6 +56,7 @@ pub struct Hypothesis {
     /// Estimated pose `t_world_object` (theta wrapped to (-pi, pi]).
     pub pose: Se2,
     /// Final cost (method-specific, lower is better; comparable between hypotheses of one call).
+    #[serde(deserialize_with = "crate::io::null_as_nan")]
     pub cost: f64,
     /// Local-solver iterations used.
     pub iterations: usize,

@@ -50,6 +50,19 @@ impl Default for CalibrateConfig {
     }
 }
 
+impl CalibrateConfig {
+    /// The calibration of a recording whose frames become imprints as `process` says (its reference choice and
+    /// quiet threshold), the fit at its defaults: what `tnd calibrate`, `tnd recording track`, `tnd dataset import`
+    /// and the workbench's Recording tab run.
+    pub fn reading(process: &ProcessConfig) -> Self {
+        Self {
+            reference: process.reference,
+            quiet_threshold_m: process.quiet_threshold_m,
+            ..Self::default()
+        }
+    }
+}
+
 /// One calibrated setting beside the value it replaced.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Change {

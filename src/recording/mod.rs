@@ -8,6 +8,7 @@
 //! | [`ros`] | CDR / ROS 1 decoding of `sensor_msgs/Image`, `PointCloud2`, `geometry_msgs/PoseStamped`, `Pose2D` |
 //! | [`decode`] | depth images from those messages (16UC1 mm, 32FC1 m, projected clouds) |
 //! | [`source`] | opening an MCAP file or a frame folder, listing streams, reading a frame |
+//! | [`read`] | how a recording is read (topic, reference, contact threshold, a folder's units): one config for every front end |
 //! | [`process`] | reference detection, imprint and contact area per frame |
 //! | [`drift`] | the membrane's drift between no-contact stretches; each contact's reference from the one before it |
 //! | [`frames_out`] | a recording's frames as native `.npy` files (NaN where no return) with `frames.csv` |
@@ -26,6 +27,7 @@ pub mod drift;
 pub mod frames_out;
 pub mod measured_membrane;
 pub mod process;
+pub mod read;
 pub mod ros;
 pub mod source;
 pub mod synth;
@@ -33,6 +35,7 @@ pub mod synth;
 use std::path::{Path, PathBuf};
 
 pub use process::{process, ProcessConfig, ProcessedRecording, ReferenceChoice};
+pub use read::ReadConfig;
 pub use source::{DepthFrame, FolderOptions, Recording, StreamInfo, StreamKind};
 
 /// Everything that can go wrong reading a recording; each names the file.

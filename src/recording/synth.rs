@@ -226,7 +226,8 @@ pub fn write_press_recording(
             .map_err(mcap_err)?;
         if let Some(c) = pose_channel {
             let p = &seq.pose;
-            let pose = ros::encode_pose_stamped(stamp, p.x, p.y, p.theta, "bubble");
+            let pose =
+                ros::encode_pose_stamped(stamp, p.x, p.y, p.theta, crate::sensor::POSE_FRAME_ID);
             w.write_to_known_channel(&header(c), &pose)
                 .map_err(mcap_err)?;
         }

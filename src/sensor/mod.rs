@@ -12,3 +12,8 @@ pub mod resample;
 pub use camera::{CameraConfig, Intrinsics};
 pub use elastomer::{ElastomerConfig, ElastomerError};
 pub use pose::{Scene, Se2, SensorPose, MAX_REACH_M};
+
+/// The frame id of an object pose a recording, a track or pose.json gives (`t_world_object`, in ROS headers): the
+/// sensor's. The estimate's world is the table plane z = 0 with the sensor pressing from above at x = y = 0, so
+/// its frame is the sensor's frame on the table.
+pub const POSE_FRAME_ID: &str = "bubble";

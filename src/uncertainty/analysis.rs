@@ -187,9 +187,7 @@ pub fn analyse_with_progress(
         let estimate = multi_sample_estimate(estimator, object, ctx, sig, &strategy);
         step(&mut done)?;
         match estimate {
-            Ok(pose) => {
-                pose.map(|(pose, cost)| SampleError::new(pose, cost, reference, &object.symmetry))
-            }
+            Ok(m) => m,
             Err(e) => {
                 record("multi-sample estimate".into(), &e);
                 None
@@ -200,7 +198,10 @@ pub fn analyse_with_progress(
     };
     let mut report =
         UncertaintyReport::new(reference, sig.truth.is_some(), init, samples, baseline);
-    report.multi_sample = multi_sample;
+    report.multi_sample = multi_sample
+        .as_ref()
+        .map(|m| SampleError::new(m.pose, m.cost, reference, &object.symmetry));
+    report.multi_sample_posterior = multi_sample.and_then(|m| m.posterior);
     report.failed = failed;
     report.modes = super::pose_modes(&report.samples, &object.symmetry);
     report.theta_period_deg = object.symmetry.rotation.period_rad().map(f64::to_degrees);
@@ -210,15 +211,14 @@ pub fn analyse_with_progress(
 /// The multi-sample estimate of `sig`: the samples' consensus contact registered from `strategy`'s starts; with the
 /// signature check ([`Estimator::choose`]) every sample (and, with
 /// [`crate::pose::PoseConfig::imprint_proposals`], the threshold baseline's contact) is registered from
-/// them too and the check picks among all those hypotheses. Returns the pose with its registration cost (NaN for a
-/// pose the check refined).
+/// them too and the check picks among all those hypotheses, with its posterior.
 pub fn multi_sample_estimate(
     estimator: &Estimator,
     object: &ObjectModel,
     ctx: &SensorContext,
     sig: &Signature<'_>,
     strategy: &InitStrategy,
-) -> Result<Option<(Se2, f64)>, PoseError> {
+) -> Result<Option<MultiSample>, PoseError> {
     let consensus = consensus_depth(sig.samples, estimator.config.consensus_probability)?;
     let checked = estimator.config.check_signature && sig.measured.is_some();
     let mut registered = vec![consensus];
@@ -241,14 +241,32 @@ pub fn multi_sample_estimate(
         None,
         strategy,
     )?;
-    let pose = estimator
-        .choose(object, &hypotheses, ctx, &sig.t_world_camera, sig.measured)?
-        .map(|(pose, _)| pose);
-    Ok(pose.map(|p| {
+    let chosen = estimator.choose_with_posterior(
+        object,
+        &hypotheses,
+        ctx,
+        &sig.t_world_camera,
+        sig.measured,
+    )?;
+    Ok(chosen.map(|(p, posterior)| {
         let cost = hypotheses
             .iter()
             .find(|h| h.pose == p)
             .map_or(f64::NAN, |h| h.cost);
-        (p, cost)
+        MultiSample {
+            pose: p,
+            cost,
+            posterior,
+        }
     }))
+}
+
+/// The multi-sample estimate ([`multi_sample_estimate`]).
+#[derive(Clone, Debug)]
+pub struct MultiSample {
+    pub pose: Se2,
+    /// Its registration cost (NaN for a pose the signature check refined).
+    pub cost: f64,
+    /// The signature check's posterior over the pooled hypotheses (`None` without the check).
+    pub posterior: Option<crate::pose::posterior::PosePosterior>,
 }

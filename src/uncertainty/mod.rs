@@ -44,6 +44,7 @@ pub struct SampleError {
     /// Estimated pose `t_world_object`.
     pub pose: Se2,
     /// Registration cost.
+    #[serde(deserialize_with = "crate::io::null_as_nan")]
     pub cost: f64,
     /// Position error, mm.
     pub position_mm: f64,
@@ -143,6 +144,9 @@ pub struct UncertaintyReport {
     /// more samples whose consensus has contact.
     #[serde(default)]
     pub multi_sample: Option<SampleError>,
+    /// The signature check's posterior behind the multi-sample estimate (its pooled hypotheses), when the check ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub multi_sample_posterior: Option<crate::pose::posterior::PosePosterior>,
     /// The pose reported for the signature (`tnd pose`'s estimate, the Pose tab's single-sample fit): the first
     /// sample's K-start registration after the signature check. Set by [`crate::pipeline::estimate_pose`]; cost NaN
     /// where the check refined the pose.
@@ -231,6 +235,7 @@ impl UncertaintyReport {
             samples,
             baseline,
             multi_sample: None,
+            multi_sample_posterior: None,
             estimate: None,
             failed: Vec::new(),
             modes: Vec::new(),

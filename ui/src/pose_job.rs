@@ -1,5 +1,5 @@
 //! Pose estimation of a de-rendering run (paper IV.C, V.D) on a worker thread: the core's use case
-//! [`tactile_derender::pipeline::estimate_pose`] (the same as `tnd pose`: a K-start registration of the first sample
+//! [`tactile_derender::pipeline::place_and_estimate`] (the same as `tnd pose`: a K-start registration of the first sample
 //! with contact, then every sample, the threshold baseline and the multi-sample estimate registered from that start,
 //! errors against the true pose, KDE curves), plus what the Pose tab draws (the object's outline, contact points).
 
@@ -32,7 +32,7 @@ pub struct PoseRequest {
     pub config: PoseConfig,
 }
 
-/// Register the samples and the baseline ([`pipeline::estimate_pose`], as `tnd pose` does), reporting
+/// Register the samples and the baseline ([`pipeline::place_and_estimate`], as `tnd pose` does), reporting
 /// `progress(done, total)` after each registration; `cancel` stops it at the next one.
 pub fn run(
     req: &PoseRequest,
@@ -88,6 +88,7 @@ pub fn run(
         symmetry: object.symmetry,
         truth_region: estimate.truth_region,
         hypotheses: estimate.hypotheses,
+        imprint_hypotheses: estimate.imprint_hypotheses,
         contacts,
         report: estimate.report,
         sample_index: estimate.with_contact,

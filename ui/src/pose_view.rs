@@ -20,6 +20,9 @@ pub struct PoseAnalysis {
     pub registered_sample: usize,
     /// Hypotheses of that registration, best first.
     pub hypotheses: Vec<Hypothesis>,
+    /// The imprint's proposals the signature check scored beside them
+    /// ([`tactile_derender::pipeline::PoseEstimate::imprint_hypotheses`]).
+    pub imprint_hypotheses: Vec<Hypothesis>,
     /// The single-sample estimate after the signature check (the hypothesis that best explains the measured
     /// signature, refined); `None` when the check did not run.
     pub checked: Option<Se2>,

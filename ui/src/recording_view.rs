@@ -13,8 +13,7 @@ use egui::{TextureHandle, TextureOptions};
 use serde::{Deserialize, Serialize};
 use tactile_derender::recording::source::DEFAULT_MAX_POSE_GAP_S;
 use tactile_derender::recording::{
-    self, FolderOptions, ProcessConfig, ProcessedRecording, Recording, ReferenceChoice, StreamInfo,
-    StreamKind,
+    self, ProcessedRecording, ReadConfig, Recording, StreamInfo, StreamKind,
 };
 use tactile_derender::sensor::Se2;
 use tactile_derender::sim::SimConfig;
@@ -28,10 +27,10 @@ use crate::worker::{JobKind, WorkerMsg};
 pub struct RecordingSettings {
     /// The recording (`.mcap` file or frame folder); `None`: nothing open.
     pub path: Option<PathBuf>,
-    /// Depth topic (`None`: the only one).
-    pub topic: Option<String>,
-    /// The no-contact reference frame.
-    pub reference: ReferenceChoice,
+    /// How it is read (depth topic, no-contact reference, contact threshold, a folder's units): the settings `tnd
+    /// recording track` takes as options.
+    #[serde(flatten)]
+    pub read: ReadConfig,
     /// The frame under the timeline cursor.
     pub frame: usize,
 }
@@ -143,13 +142,15 @@ fn load(
         .path
         .clone()
         .ok_or_else(|| anyhow!("no recording chosen"))?;
-    let rec = Recording::open(&path, &FolderOptions::default())?;
-    let stream = rec.depth_stream(settings.topic.as_deref())?.clone();
-    let config = ProcessConfig {
-        reference: settings.reference,
-        ..ProcessConfig::default()
-    };
-    let processed = recording::process(&rec, &stream, &sim.camera, &config, progress)?;
+    let rec = Recording::open(&path, &settings.read.folder())?;
+    let stream = rec.depth_stream(settings.read.topic.as_deref())?.clone();
+    let processed = recording::process(
+        &rec,
+        &stream,
+        &sim.camera,
+        &settings.read.process(),
+        progress,
+    )?;
     let poses = match rec.streams().iter().find(|s| s.kind == StreamKind::Pose) {
         Some(ps) => rec.poses_at(ps, &processed.stamps_ns, DEFAULT_MAX_POSE_GAP_S)?,
         None => vec![None; processed.len()],

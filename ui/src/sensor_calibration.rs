@@ -13,7 +13,7 @@ use egui::{TextureHandle, TextureOptions};
 use tactile_derender::recording::calibrate::{
     calibrate, CalibrateConfig, CalibrationImages, SensorCalibration,
 };
-use tactile_derender::recording::{FolderOptions, Recording};
+use tactile_derender::recording::Recording;
 
 use crate::colormap::to_color_image;
 use crate::worker::{JobKind, WorkerMsg};
@@ -30,8 +30,8 @@ pub struct CalibrationRequest {
     pub generation: u64,
     /// The recording (an .mcap file or a frame folder).
     pub recording: PathBuf,
-    /// Its depth topic (`None`: the only one).
-    pub topic: Option<String>,
+    /// How it is read (the Recording tab's settings).
+    pub read: tactile_derender::recording::ReadConfig,
     /// The sensor the calibration starts from.
     pub given: tactile_derender::sim::SimConfig,
     pub config: CalibrateConfig,
@@ -52,8 +52,8 @@ pub fn spawn(
         tx,
         ctx,
         move |progress| {
-            let rec = Recording::open(&req.recording, &FolderOptions::default())?;
-            let stream = rec.depth_stream(req.topic.as_deref())?.clone();
+            let rec = Recording::open(&req.recording, &req.read.folder())?;
+            let stream = rec.depth_stream(req.read.topic.as_deref())?.clone();
             let (calibration, images) = calibrate(
                 &rec,
                 &stream,

@@ -6,7 +6,6 @@
 
 mod support;
 
-use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
@@ -16,26 +15,16 @@ use tactile_derender::io::npy;
 use tnd_workbench::app::WorkbenchApp;
 use tnd_workbench::state::{State, Tab};
 
-/// `target/<profile>/tnd`, beside this test's `deps/` directory.
-fn tnd_binary() -> PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    let dir = exe.parent().and_then(Path::parent).unwrap();
-    let tnd = dir.join(format!("tnd{}", std::env::consts::EXE_SUFFIX));
-    assert!(
-        tnd.is_file(),
-        "{} is missing: run the workspace's tests (`cargo test --workspace`), which build the tnd binary",
-        tnd.display()
-    );
-    tnd
-}
-
 /// Waits for the workbench's jobs: longer than the other UI tests allow, the debug-build sampler is slow.
 fn wait_for(h: &mut Harness<'_, WorkbenchApp>, what: &str, done: impl Fn(&WorkbenchApp) -> bool) {
     support::wait_for_within(h, what, Duration::from_secs(300), done);
 }
 
 fn tnd(args: &[&str]) -> serde_json::Value {
-    let out = Command::new(tnd_binary()).args(args).output().unwrap();
+    let out = Command::new(support::tnd_binary())
+        .args(args)
+        .output()
+        .unwrap();
     assert!(
         out.status.success(),
         "tnd {args:?}: {}",

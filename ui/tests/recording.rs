@@ -172,6 +172,47 @@ fn every_contact_frame_is_tracked_in_the_background_and_saved_as_csv() {
     let csv = std::fs::read_to_string(dir.path().join("press_track.csv")).unwrap();
     assert_eq!(csv.lines().count(), with_contact.len() + 1);
     assert!(csv.starts_with("frame,stamp_ns,contact_px,press_m"));
+    // `tnd recording track` with the same settings (the sensor as the workbench has it: not calibrated from the
+    // recording) gives the same rows: the same estimate, spread and posterior, bit for bit.
+    let out = std::process::Command::new(support::tnd_binary())
+        .args(["recording", "track"])
+        .arg(&rec)
+        .args([
+            "--object",
+            OBJECT,
+            "--samples",
+            "2",
+            "--steps",
+            "5",
+            "--no-calibrate",
+            "--out",
+        ])
+        .arg(dir.path().join("cli"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cli = std::fs::read_to_string(dir.path().join("cli/track.csv")).unwrap();
+    // Everything but the scores (the columns from recorded_x to baseline_theta_err_deg).
+    let estimated = |text: &str| -> Vec<Vec<String>> {
+        text.lines()
+            .map(|l| {
+                l.split(',')
+                    .enumerate()
+                    .filter(|(k, _)| !(18..28).contains(k))
+                    .map(|(_, c)| c.to_string())
+                    .collect()
+            })
+            .collect()
+    };
+    assert_eq!(
+        estimated(&csv),
+        estimated(&cli),
+        "workbench:\n{csv}\ncli:\n{cli}"
+    );
     // A second track can be cancelled: it stops and says so.
     h.get_by_label("Track all frames").click();
     h.run_ok();

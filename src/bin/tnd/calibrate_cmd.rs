@@ -15,7 +15,7 @@ use tactile_derender::sensor::membrane_fit::MembraneFitConfig;
 
 use crate::args::SensorArgs;
 use crate::progress;
-use crate::recording_cmd::RecordingReadArgs;
+use tactile_derender::recording::ReadConfig;
 
 #[derive(Args, Debug)]
 pub struct CalibrateArgs {
@@ -24,7 +24,7 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub from: PathBuf,
     #[command(flatten)]
-    pub read: RecordingReadArgs,
+    pub read: ReadConfig,
     #[command(flatten)]
     pub sensor: SensorArgs,
     /// Fit the footprint too (held by default: within the camera's view a wider footprint looks almost like a
@@ -218,13 +218,12 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     let rec = Recording::open(&a.from, &a.read.folder())?;
     let stream = rec.depth_stream(a.read.topic.as_deref())?.clone();
     let config = CalibrateConfig {
-        reference: a.read.reference,
         fit: MembraneFitConfig {
             footprint: a.fit_footprint,
             camera_position: !a.keep_camera,
             ..MembraneFitConfig::default()
         },
-        ..CalibrateConfig::default()
+        ..CalibrateConfig::reading(&a.read.process())
     };
     let mut bar = progress::bar("frames", "frame", 0);
     let result = calibrate(

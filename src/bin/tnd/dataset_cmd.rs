@@ -15,7 +15,7 @@ use tactile_derender::mesh::Units;
 use tactile_derender::objects::ObjectSet;
 
 use crate::args::SensorArgs;
-use crate::recording_cmd::RecordingReadArgs;
+use tactile_derender::recording::ReadConfig;
 
 #[derive(Args, Debug)]
 pub struct DatasetArgs {
@@ -138,7 +138,7 @@ pub struct ImportArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     #[command(flatten)]
-    pub read: RecordingReadArgs,
+    pub read: ReadConfig,
     /// Recordings: the pressed object (an entry of --objects).
     #[arg(long)]
     pub object: Option<String>,

@@ -13,12 +13,13 @@ use tactile_derender::dataset::{Dataset, SplitName};
 use tactile_derender::image::Image;
 use tactile_derender::metrics::eval_log::EvalLog;
 use tactile_derender::metrics::evaluate::{
-    EvalConfig, EvalPair, Evaluator, Generator, GroundTruthGenerator, MethodSummary, PairSource,
+    EvalConfig, EvalPair, Generator, GroundTruthGenerator, MethodSummary, PairSource,
 };
 use tactile_derender::metrics::model_generator::ModelGenerator;
 use tactile_derender::metrics::paper_table::{paper_tables, PaperEntry};
 use tactile_derender::metrics::saved_samples::save_samples;
 use tactile_derender::metrics::sources::DatasetSource;
+use tactile_derender::pipeline::evaluate::Evaluator;
 
 use crate::eval_tables::{breakdown_tables, markdown_table};
 use tactile_derender::model::{DiffusionModel, GuidanceConfig, SamplerConfig, TactileConfig};

@@ -9,11 +9,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Result};
 use clap::Args;
-use serde_json::json;
 use tactile_derender::io::figure::FigureConfig;
 use tactile_derender::io::npy;
 use tactile_derender::io::ply::PlyEncoding;
 use tactile_derender::model::DiffusionModel;
+use tactile_derender::pipeline::pose_record::{PoseRecord, RecordSource};
 use tactile_derender::pipeline::press::PressChoice;
 use tactile_derender::pipeline::{self, DerenderConfig, ObjectSpec};
 use tactile_derender::pose::from_depth::contact_probability;
@@ -146,9 +146,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
         other => other?,
     };
     progress::finish(&mut bar);
-    let press = placed.press_m.unwrap_or_default();
     let input = placed.input(&observation);
-    let estimate = placed.estimate;
+    let estimate = &placed.estimate;
     let report = &estimate.report;
     if report.ambiguous() {
         let modes = report.major_modes();
@@ -176,7 +175,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         );
     }
     report.write_with(&a.out, &a.figure_size)?;
-    pipeline::write_fit_figure(&a.out, &object, &sim, &input, &estimate, &a.figure_size)?;
+    pipeline::write_fit_figure(&a.out, &object, &sim, &input, estimate, &a.figure_size)?;
     if samples.len() > 1 {
         let p = match probability {
             Some(p) => p,
@@ -189,7 +188,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         &object,
         &sim,
         &input,
-        &estimate,
+        estimate,
         &a.pose,
         a.derender.seed,
         a.ply,
@@ -261,41 +260,26 @@ pub fn run(a: PoseArgs) -> Result<()> {
         }
     }
     let rerun = crate::rerun_out::finish(rrd)?;
-    // The default estimate's error against --truth, as the baseline and the multi-sample estimate report theirs.
-    let estimate_error = truth.zip(estimate.best()).map(|(t, best)| {
-        let e = tactile_derender::uncertainty::SampleError::new(best, 0.0, t, &object.symmetry);
-        json!({"position_mm": e.position_mm, "theta_deg": e.theta_deg})
-    });
-    let located = crate::posterior_cmd::LocatedEstimate::new(
-        estimate.best(),
-        estimate.posterior.as_ref(),
+    let record = PoseRecord::new(
+        &placed,
+        truth,
         &object.symmetry,
-        "world",
-        0,
+        RecordSource {
+            generator,
+            seed: a.derender.seed,
+            calibration: measured.calibration,
+            out: a.out.clone(),
+            rerun,
+            geometry,
+        },
     );
-    if let Some(l) = &located {
+    if let Some(ros) = record.located() {
         let path = a.out.join("pose_with_covariance.json");
-        tactile_derender::io::write_atomic(&path, serde_json::to_string_pretty(&l.ros)?.as_bytes())
+        tactile_derender::io::write_atomic(&path, serde_json::to_string_pretty(ros)?.as_bytes())
             .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
     }
-    let summary = json!({"object": object.name, "generator": generator, "rerun": rerun.as_deref().map(crate::path_json), "samples": report.samples.len(),
-        "seed": a.derender.seed, "press_m": press, "estimate": estimate.best(), "estimate_error": estimate_error,
-        "signature_checked": estimate.checked.is_some(),
-        "checked_from_imprint": estimate.checked_from_imprint,
-        "best_hypothesis": estimate.hypotheses.first().map(|h| h.pose),
-        "estimate_multi_sample": report.multi_sample.map(|m| m.pose),
-        "truth": truth, "baseline": report.baseline, "multi_sample": report.multi_sample,
-        "failed": report.failed, "geometry": geometry,
-        "ambiguous": report.ambiguous() || estimate.signature_ambiguous(), "modes": report.major_modes(),
-        "signature_rival": estimate.signature_rival, "anchor_shift_m": estimate.anchor_shift_m,
-        "position_err_mm": report.samples.iter().map(|s| s.position_mm).collect::<Vec<_>>(),
-        "calibration": measured.calibration, "out": a.out,
-        "posterior": estimate.posterior, "truth_region": estimate.truth_region,
-        "transform": located.as_ref().map(|l| &l.transform),
-        "pose_with_covariance": located.as_ref().map(|l| &l.ros)});
-    let path = a.out.join("pose.json");
-    tactile_derender::io::write_atomic(&path, serde_json::to_string_pretty(&summary)?.as_bytes())
-        .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
+    record.write(&a.out.join("pose.json"))?;
+    let summary = serde_json::to_string(&record)?;
     println!("{summary}");
     Ok(())
 }

@@ -14,10 +14,7 @@ use tactile_derender::metrics::coverage::{
 };
 use tactile_derender::metrics::eval_log::EvalLog;
 use tactile_derender::metrics::evaluate::{MethodResult, PairRecord, REGION_DRAWS};
-use tactile_derender::objects::Symmetry;
-use tactile_derender::pose::export::{covariance_about, transform_4x4, PoseWithCovarianceStamped};
-use tactile_derender::pose::posterior::{PosePosterior, PosteriorConfig};
-use tactile_derender::sensor::Se2;
+use tactile_derender::pose::posterior::PosteriorConfig;
 
 #[derive(Args, Debug)]
 pub struct PosteriorArgs {
@@ -153,37 +150,6 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// An estimate placed for other tools: its 4x4 transform with the frame convention named, and the
-/// `PoseWithCovarianceStamped` message with the posterior's covariance about it.
-#[derive(serde::Serialize)]
-pub struct LocatedEstimate {
-    pub transform: serde_json::Value,
-    pub ros: PoseWithCovarianceStamped,
-}
-
-impl LocatedEstimate {
-    /// `None` without an estimate or a posterior.
-    pub fn new(
-        estimate: Option<Se2>,
-        posterior: Option<&PosePosterior>,
-        symmetry: &Symmetry,
-        frame_id: &str,
-        stamp_ns: u64,
-    ) -> Option<Self> {
-        let estimate = estimate?;
-        let cov = covariance_about(posterior?, estimate, symmetry)?;
-        Some(Self {
-            transform: json!({
-                "t_world_object": transform_4x4(estimate),
-                "convention": "row-major 4x4; maps points of the object's mesh (its own frame, in its resting pose: \
-                    bounding-box centre over the origin, lowest point at z = 0) to the world frame (the table at z = 0, z up), \
-                    metres",
-            }),
-            ros: PoseWithCovarianceStamped::new(estimate, &cov, frame_id, stamp_ns),
-        })
-    }
 }
 
 fn row(name: &str, group: &str, c: &Coverage) -> String {

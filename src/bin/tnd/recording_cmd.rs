@@ -8,7 +8,7 @@ use clap::{Args, Subcommand};
 use serde_json::json;
 use tactile_derender::pipeline::ObjectSpec;
 use tactile_derender::recording::synth::{self, DepthEncoding, PressSequence};
-use tactile_derender::recording::{self, FolderOptions, ProcessConfig, Recording, ReferenceChoice};
+use tactile_derender::recording::{self, ReadConfig, Recording};
 use tactile_derender::sim::PreparedObject;
 
 use crate::args::SensorArgs;
@@ -46,50 +46,9 @@ pub struct FramesArgs {
     #[arg(long, default_value = "all")]
     pub frames: String,
     #[command(flatten)]
-    pub read: RecordingReadArgs,
+    pub read: ReadConfig,
     #[command(flatten)]
     pub sensor: SensorArgs,
-}
-
-/// How a recording is read (shared with `tnd dataset import`).
-#[derive(Args, Debug, Clone)]
-pub struct RecordingReadArgs {
-    /// Depth topic of an MCAP file (sensor_msgs/Image or PointCloud2); default: its only depth topic.
-    #[arg(long)]
-    pub topic: Option<String>,
-    /// No-contact reference frame: "auto" (median of the frames without contact) or a frame number (0-based).
-    #[arg(long, default_value = "auto")]
-    pub reference: ReferenceChoice,
-    /// Imprint above which a pixel counts as contact, metres (the threshold baseline's 3 mm).
-    #[arg(long, default_value_t = ProcessConfig::default().contact_threshold_m)]
-    pub contact_threshold: f64,
-    /// Metres per unit of .npy/.npz depth arrays (1 = metres, 0.001 = millimetres).
-    #[arg(long, default_value_t = FolderOptions::default().npy_scale)]
-    pub npy_scale: f64,
-    /// Metres per unit of 16-bit PNG depth images (default: millimetres).
-    #[arg(long, default_value_t = FolderOptions::default().png_scale)]
-    pub png_scale: f64,
-    /// Folder recordings: frames per second (for the time stamps).
-    #[arg(long, default_value_t = FolderOptions::default().fps)]
-    pub fps: f64,
-}
-
-impl RecordingReadArgs {
-    pub fn folder(&self) -> FolderOptions {
-        FolderOptions {
-            npy_scale: self.npy_scale,
-            png_scale: self.png_scale,
-            fps: self.fps,
-        }
-    }
-
-    pub fn process(&self) -> ProcessConfig {
-        ProcessConfig {
-            reference: self.reference,
-            contact_threshold_m: self.contact_threshold,
-            ..ProcessConfig::default()
-        }
-    }
 }
 
 #[derive(Args, Debug)]
@@ -97,7 +56,7 @@ pub struct InfoArgs {
     /// The recording: an .mcap file or a folder of depth frames (16-bit PNG in mm, .npy/.npz).
     pub recording: PathBuf,
     #[command(flatten)]
-    pub read: RecordingReadArgs,
+    pub read: ReadConfig,
     #[command(flatten)]
     pub sensor: SensorArgs,
 }
@@ -156,7 +115,7 @@ pub fn run(a: RecordingArgs) -> Result<()> {
 /// Open `path` and process its depth stream with a progress bar, saying on stderr how far the membrane drifted.
 fn open_processed(
     path: &std::path::Path,
-    read: &RecordingReadArgs,
+    read: &ReadConfig,
     sim: &tactile_derender::sim::SimConfig,
 ) -> Result<(
     Recording,

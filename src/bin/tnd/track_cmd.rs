@@ -23,7 +23,7 @@ use tactile_derender::sim::{PreparedObject, Simulator};
 
 use crate::args::SensorArgs;
 use crate::progress;
-use crate::recording_cmd::RecordingReadArgs;
+use tactile_derender::recording::ReadConfig;
 
 /// What a track reads and how it estimates: `tnd recording track` and `tnd bench track` take the same.
 #[derive(Args, Debug)]
@@ -33,7 +33,7 @@ pub struct TrackInputArgs {
     #[command(flatten)]
     pub object: ObjectSpec,
     #[command(flatten)]
-    pub read: RecordingReadArgs,
+    pub read: ReadConfig,
     #[command(flatten)]
     pub sensor: SensorArgs,
     /// The generator: a model checkpoint (default: the bundled model; `small`: the bundled small one).
@@ -95,7 +95,7 @@ fn settings(a: &TrackArgs, sim: &tactile_derender::sim::SimConfig) -> Value {
     };
     let mut settings = json!({
         "recording": canonical(&a.input.recording), "topic": a.input.read.topic, "reference": a.input.read.reference,
-        "contact_threshold_m": a.input.read.contact_threshold, "npy_scale": a.input.read.npy_scale,
+        "contact_threshold_m": a.input.read.contact_threshold_m, "npy_scale": a.input.read.npy_scale,
         "png_scale": a.input.read.png_scale, "fps": a.input.read.fps,
         "object": object, "model": model, "derender": a.input.derender, "press": a.input.press.to_string(),
         "every": a.every, "min_contact_px": a.input.tracking.min_contact_px, "tracking": a.input.tracking, "sim": sim, "calibrate": !a.input.no_calibrate,
@@ -121,15 +121,16 @@ fn fingerprint(p: &ProcessedRecording) -> Value {
 const POSE_TRACK: &str = "track.mcap";
 const POSE_TOPIC: &str = "/tnd/object_pose";
 
-/// Write every row with an estimate and a posterior as a `geometry_msgs/PoseWithCovarianceStamped` (frame `bubble`,
-/// the sensor's, as the recording's own pose topic) into `out/track.mcap`; returns how many.
+/// Write every row with an estimate and a posterior as a `geometry_msgs/PoseWithCovarianceStamped` (frame
+/// [`POSE_FRAME_ID`], the sensor's, as the recording's own pose topic and pose.json) into `out/track.mcap`; returns how
+/// many.
 fn write_pose_track(out: &Path, rows: &[FrameTrack]) -> Result<usize> {
-    use tactile_derender::pose::export::PoseWithCovarianceStamped;
+    use tactile_derender::pose::export::{PoseWithCovarianceStamped, POSE_FRAME_ID};
     let poses: Vec<(u64, [f64; 3], [f64; 36])> = rows
         .iter()
         .filter_map(|r| {
             let (e, cov) = (r.estimate?, r.covariance?);
-            let msg = PoseWithCovarianceStamped::new(e, &cov, "bubble", r.stamp_ns);
+            let msg = PoseWithCovarianceStamped::new(e, &cov, POSE_FRAME_ID, r.stamp_ns);
             let covariance: [f64; 36] = msg.pose.covariance.try_into().ok()?;
             Some((r.stamp_ns, [e.x, e.y, e.theta], covariance))
         })
@@ -137,7 +138,7 @@ fn write_pose_track(out: &Path, rows: &[FrameTrack]) -> Result<usize> {
     tactile_derender::recording::synth::write_pose_track(
         &out.join(POSE_TRACK),
         POSE_TOPIC,
-        "bubble",
+        POSE_FRAME_ID,
         &poses,
     )?;
     Ok(poses.len())
@@ -378,7 +379,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
              (lower --min-contact-px or --contact-threshold, or check --reference and the sensor options)",
             a.input.recording.display(),
             a.input.tracking.min_contact_px,
-            a.input.read.contact_threshold * 1e3
+            a.input.read.contact_threshold_m * 1e3
         );
     }
     std::fs::create_dir_all(&a.out)

@@ -345,6 +345,7 @@ impl WorkbenchApp {
         let estimate = tactile_derender::pipeline::PoseEstimate {
             object: r.object.clone(),
             hypotheses: r.hypotheses.clone(),
+            imprint_hypotheses: r.imprint_hypotheses.clone(),
             registered_sample: r.registered_sample,
             checked: r.checked,
             checked_from_imprint: r.checked_from_imprint,
@@ -383,9 +384,34 @@ impl WorkbenchApp {
             &estimate,
             &Default::default(),
         )?;
+        let count = files.len();
+        // pose.json, the record `tnd pose` writes for the same estimate.
+        let placed = tactile_derender::pipeline::PlacedEstimate {
+            press_m: r.press_found_m,
+            t_world_camera: c.t_world_camera,
+            estimate,
+        };
+        let generator = match &self.state.model.path {
+            Some(p) => format!("model {} (the workbench's De-render run)", p.display()),
+            None => "the bundled model (the workbench's De-render run)".into(),
+        };
+        let record = tactile_derender::pipeline::pose_record::PoseRecord::new(
+            &placed,
+            c.truth,
+            &r.symmetry,
+            tactile_derender::pipeline::pose_record::RecordSource {
+                generator,
+                seed: req.seed,
+                calibration: None,
+                out: dir.clone(),
+                rerun: None,
+                geometry: files,
+            },
+        );
+        record.write(&dir.join("pose.json"))?;
         self.notice = Some(format!(
-            "wrote samples.csv, kde.csv, the uncertainty and fit figures (SVG, PNG) and {} PLY files to {}",
-            files.len(),
+            "wrote pose.json, samples.csv, kde.csv, the uncertainty and fit figures (SVG, PNG) and {count} PLY files \
+             to {}",
             dir.display()
         ));
         Ok(())

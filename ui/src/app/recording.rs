@@ -59,7 +59,7 @@ impl WorkbenchApp {
     pub(crate) fn set_recording(&mut self, settings: RecordingSettings) {
         let old = std::mem::replace(&mut self.state.recording, settings);
         let s = &self.state.recording;
-        let reload = s.path != old.path || s.topic != old.topic || s.reference != old.reference;
+        let reload = s.path != old.path || s.read != old.read;
         if reload && s.path.is_some() {
             self.load_recording();
         }
@@ -137,15 +137,12 @@ impl WorkbenchApp {
         view.cancel = Some(cancel.clone());
         let generation = view.generation;
         let given = self.state.sim.clone();
-        let topic = self.state.recording.topic.clone();
-        let config = CalibrateConfig {
-            reference: self.state.recording.reference,
-            ..CalibrateConfig::default()
-        };
+        let read = self.state.recording.read.clone();
+        let config = CalibrateConfig::reading(&read.process());
         let req = CalibrationRequest {
             generation,
             recording: path,
-            topic,
+            read,
             given,
             config,
         };

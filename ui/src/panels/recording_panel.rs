@@ -55,13 +55,13 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             .selected_text(p.stream.as_str())
             .show_ui(ui, |ui| {
                 for t in depth {
-                    ui.selectable_value(&mut s.topic, Some(t.to_string()), t);
+                    ui.selectable_value(&mut s.read.topic, Some(t.to_string()), t);
                 }
             })
             .response
             .on_hover_text("the depth stream of the recording (sensor_msgs/Image or PointCloud2)");
         ui.label("reference");
-        let auto = s.reference == ReferenceChoice::Auto;
+        let auto = s.read.reference == ReferenceChoice::Auto;
         if ui
             .radio(auto, "auto")
             .on_hover_text(
@@ -69,17 +69,35 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             )
             .clicked()
         {
-            s.reference = ReferenceChoice::Auto;
+            s.read.reference = ReferenceChoice::Auto;
         }
         if ui
             .button("Use this frame as the reference")
             .on_hover_text("take the frame under the cursor as the no-contact reference R")
             .clicked()
         {
-            s.reference = ReferenceChoice::Frame(s.frame);
+            s.read.reference = ReferenceChoice::Frame(s.frame);
         }
-        if let ReferenceChoice::Frame(k) = s.reference {
+        if let ReferenceChoice::Frame(k) = s.read.reference {
             ui.label(format!("frame {k}"));
+        }
+        // The contact threshold in mm on screen, metres in the settings (`--contact-threshold` of the CLI).
+        let mut threshold_mm = s.read.contact_threshold_m * 1e3;
+        ui.label("contact threshold");
+        if ui
+            .add(
+                egui::DragValue::new(&mut threshold_mm)
+                    .range(0.1..=20.0)
+                    .speed(0.05)
+                    .suffix(" mm"),
+            )
+            .on_hover_text(
+                "imprint above which a pixel counts as contact (the frames tracked and their contact area; \
+                 tnd recording track --contact-threshold)",
+            )
+            .changed()
+        {
+            s.read.contact_threshold_m = threshold_mm * 1e-3;
         }
     });
     ui.weak(format!(

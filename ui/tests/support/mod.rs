@@ -146,3 +146,17 @@ pub fn open_dataset(h: &mut Harness<'_, WorkbenchApp>, data: &Path) {
     h.run_ok();
     assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
 }
+
+/// `target/<profile>/tnd`, beside this test's `deps/` directory (`cargo test --workspace` builds it).
+#[allow(dead_code)] // not every test binary runs the CLI
+pub fn tnd_binary() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    let dir = exe.parent().and_then(Path::parent).unwrap();
+    let tnd = dir.join(format!("tnd{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        tnd.is_file(),
+        "{} is missing: run the workspace's tests (`cargo test --workspace`), which build the tnd binary",
+        tnd.display()
+    );
+    tnd
+}
