@@ -5,7 +5,7 @@
 //! run by `.ci/run`) reads back.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-mod dataset_common;
+use crate::dataset_common;
 
 use dataset_common::{gen_config, run, sim_config, small_set};
 

@@ -3,7 +3,7 @@
 //! mixes in a user's own set at its share; a membrane mesh file travels with the dataset.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-mod dataset_common;
+use crate::dataset_common;
 
 use dataset_common::{gen_config, sim_config, small_set};
 use tactile_derender::dataset::{generate, Dataset, DatasetError, GenConfig, SplitName};

@@ -10,7 +10,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-mod fuzz_common;
+use crate::fuzz_common;
 
 use std::path::Path;
 

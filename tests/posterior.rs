@@ -3,7 +3,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-mod cli_common;
+use crate::cli_common;
 
 use cli_common::{stderr, tnd_in};
 use tactile_derender::metrics::evaluate::{

@@ -12,7 +12,7 @@ use tactile_derender::objects::ObjectSet;
 use tnd_workbench::app::WorkbenchApp;
 use tnd_workbench::state::{State, Tab};
 
-mod support;
+use crate::support;
 use support::{
     harness, open_dataset, select_pair, small_dataset, tiny_model, type_into, use_checkpoint,
     wait_for,

@@ -10,7 +10,7 @@ use tnd_workbench::app::WorkbenchApp;
 use tnd_workbench::command::Command;
 use tnd_workbench::state::{DerenderInput, ObjectSource, State, Tab};
 
-mod support;
+use crate::support;
 use support::{drop_file, harness};
 
 fn press(h: &mut Harness<'_, WorkbenchApp>, modifiers: Modifiers, key: Key) {

@@ -4,8 +4,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-#[path = "../../tests/fuzz_common/mod.rs"]
-mod fuzz_common;
+use crate::fuzz_common;
 
 #[test]
 fn session_files() {

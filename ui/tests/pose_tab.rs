@@ -10,7 +10,7 @@ use egui_kittest::kittest::Queryable;
 use tactile_derender::dataset::{Dataset, SplitName};
 use tnd_workbench::app::WorkbenchApp;
 
-mod support;
+use crate::support;
 use support::{
     harness, open_dataset, select_pair, small_dataset, tiny_model, use_checkpoint, wait_for,
 };

@@ -15,7 +15,7 @@ use tactile_derender::sim::PreparedObject;
 use tnd_workbench::app::WorkbenchApp;
 use tnd_workbench::state::{ObjectSource, State, Tab};
 
-mod support;
+use crate::support;
 use support::{drop_file, harness, tiny_model, wait_for};
 
 const OBJECT: &str = "cylinder_r12";

@@ -8,7 +8,7 @@ use egui_kittest::Harness;
 use tnd_workbench::app::WorkbenchApp;
 use tnd_workbench::state::State;
 
-mod support;
+use crate::support;
 use support::harness;
 
 /// Step until the background simulation has answered the latest request.

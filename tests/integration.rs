@@ -1,0 +1,33 @@
+//! The core's integration tests, one module per file beside this one, built as one test binary: one link and the
+//! library's code instantiated once, instead of a binary per file (CI builds everything from scratch on 2 cores).
+//! `cargo test --test integration eval_loop::` runs one file's tests.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod cli_common;
+mod dataset_common;
+mod fuzz_common;
+
+mod architecture;
+mod dataset;
+mod dataset_import;
+mod dataset_objects;
+mod eval_loop;
+mod eval_metrics;
+mod fuzz_loaders;
+mod grad_accumulation;
+mod mesh_io;
+mod missing_returns;
+mod model_cli;
+mod model_config_checks;
+mod model_schedule;
+mod model_train;
+mod model_unet;
+mod one_writer;
+mod pose_register;
+mod posterior;
+mod recording;
+mod recording_calibrate;
+mod signature_check;
+mod simulator;
+mod small_cases;
