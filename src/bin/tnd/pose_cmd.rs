@@ -149,31 +149,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let input = placed.input(&observation);
     let estimate = &placed.estimate;
     let report = &estimate.report;
-    if report.ambiguous() {
-        let modes = report.major_modes();
-        let among = estimate.best().is_some_and(|p| {
-            modes
-                .iter()
-                .any(|m| tactile_derender::uncertainty::same_pose(m.pose, p, &object.symmetry))
-        });
-        let described: Vec<String> = modes.iter().map(|m| m.describe()).collect();
-        eprintln!(
-            "warning: the samples split between poses the contact cannot tell apart ({}); {}",
-            described.join("; "),
-            if among {
-                "the estimate is one of them"
-            } else {
-                "the estimate, the signature check's pick, is none of them"
-            }
-        );
-    }
-    if let Some(r) = estimate.signature_rival.filter(|r| r.ambiguous()) {
-        eprintln!(
-            "warning: the signature explains another pose about as well as the estimate ({}); which of the two it \
-             is, the sensor's noise decides",
-            r.describe()
-        );
-    }
+    warn_ambiguous(estimate, &object.symmetry);
     report.write_with(&a.out, &a.figure_size)?;
     pipeline::write_fit_figure(&a.out, &object, &sim, &input, estimate, &a.figure_size)?;
     if samples.len() > 1 {
@@ -194,70 +170,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         a.ply,
     )?;
     if let Some(log) = &rrd {
-        use crate::rerun_out::{camera_views, object_at, ESTIMATE_RGB, TRUTH_RGB};
-        let t_world_camera = input.t_world_camera;
-        log.set_step("sample", 0);
-        if let Some(t) = truth {
-            object_at(log, "world/object", &object.mesh, t, TRUTH_RGB)?;
-        }
-        if let Some(best) = estimate.best() {
-            object_at(log, "world/estimate/best", &object.mesh, best, ESTIMATE_RGB)?;
-        }
-        if let Some(p) = &estimate.posterior {
-            // Each mode's 90 % position region, on the table.
-            let strips: Vec<Vec<glam::DVec3>> = p
-                .modes
-                .iter()
-                .map(|m| {
-                    let mut ring: Vec<glam::DVec3> = m
-                        .ellipse_xy(0.9, 64)
-                        .iter()
-                        .map(|[x, y]| glam::DVec3::new(*x, *y, 0.0))
-                        .collect();
-                    ring.extend(ring.first().copied());
-                    ring
-                })
-                .collect();
-            log.line_strips("world/posterior", &strips, [0, 170, 190])?;
-        }
-        if let Some(m) = &report.multi_sample {
-            object_at(
-                log,
-                "world/estimate/multi_sample",
-                &object.mesh,
-                m.pose,
-                ESTIMATE_RGB,
-            )?;
-        }
-        camera_views(
-            log,
-            sim.intrinsics(),
-            &t_world_camera,
-            &[("imprint", &imprint)],
-            None,
-        )?;
-        // One step per sample: its depth and its registered pose.
-        for (k, s) in samples.iter().enumerate() {
-            log.set_step("sample", k);
-            camera_views(
-                log,
-                sim.intrinsics(),
-                &t_world_camera,
-                &[("sample", s)],
-                Some(("sample", s)),
-            )?;
-        }
-        // The registered samples' poses, one step each (samples that failed to register have none).
-        for (j, fit) in report.samples.iter().enumerate() {
-            log.set_step("fit", j);
-            object_at(
-                log,
-                "world/estimate/fit",
-                &object.mesh,
-                fit.pose,
-                ESTIMATE_RGB,
-            )?;
-        }
+        log_to_rerun(log, &object, &sim, &input, estimate, &imprint, truth)?;
     }
     let rerun = crate::rerun_out::finish(rrd)?;
     let record = PoseRecord::new(
@@ -281,5 +194,118 @@ pub fn run(a: PoseArgs) -> Result<()> {
     record.write(&a.out.join("pose.json"))?;
     let summary = serde_json::to_string(&record)?;
     println!("{summary}");
+    Ok(())
+}
+
+/// Say on stderr when the samples split between poses, or the signature explains a rival about as well.
+fn warn_ambiguous(
+    estimate: &pipeline::PoseEstimate,
+    symmetry: &tactile_derender::objects::Symmetry,
+) {
+    let report = &estimate.report;
+    if report.ambiguous() {
+        let modes = report.major_modes();
+        let among = estimate.best().is_some_and(|p| {
+            modes
+                .iter()
+                .any(|m| tactile_derender::uncertainty::same_pose(m.pose, p, symmetry))
+        });
+        let described: Vec<String> = modes.iter().map(|m| m.describe()).collect();
+        eprintln!(
+            "warning: the samples split between poses the contact cannot tell apart ({}); {}",
+            described.join("; "),
+            if among {
+                "the estimate is one of them"
+            } else {
+                "the estimate, the signature check's pick, is none of them"
+            }
+        );
+    }
+    if let Some(r) = estimate.signature_rival.filter(|r| r.ambiguous()) {
+        eprintln!(
+            "warning: the signature explains another pose about as well as the estimate ({}); which of the two it \
+             is, the sensor's noise decides",
+            r.describe()
+        );
+    }
+}
+
+/// The estimate in the rerun recording: the object at the truth, the estimate and the multi-sample estimate, the
+/// posterior's regions, the imprint, and one step per sample (its depth) and per registered sample (its pose).
+fn log_to_rerun(
+    log: &tactile_derender::rrd::RrdLog,
+    object: &pipeline::LoadedObject,
+    sim: &Simulator,
+    input: &pipeline::PoseInput<'_>,
+    estimate: &pipeline::PoseEstimate,
+    imprint: &tactile_derender::image::Image,
+    truth: Option<tactile_derender::sensor::Se2>,
+) -> Result<()> {
+    let report = &estimate.report;
+    let samples = input.samples;
+    use crate::rerun_out::{camera_views, object_at, ESTIMATE_RGB, TRUTH_RGB};
+    let t_world_camera = input.t_world_camera;
+    log.set_step("sample", 0);
+    if let Some(t) = truth {
+        object_at(log, "world/object", &object.mesh, t, TRUTH_RGB)?;
+    }
+    if let Some(best) = estimate.best() {
+        object_at(log, "world/estimate/best", &object.mesh, best, ESTIMATE_RGB)?;
+    }
+    if let Some(p) = &estimate.posterior {
+        // Each mode's 90 % position region, on the table.
+        let strips: Vec<Vec<glam::DVec3>> = p
+            .modes
+            .iter()
+            .map(|m| {
+                let mut ring: Vec<glam::DVec3> = m
+                    .ellipse_xy(0.9, 64)
+                    .iter()
+                    .map(|[x, y]| glam::DVec3::new(*x, *y, 0.0))
+                    .collect();
+                ring.extend(ring.first().copied());
+                ring
+            })
+            .collect();
+        log.line_strips("world/posterior", &strips, [0, 170, 190])?;
+    }
+    if let Some(m) = &report.multi_sample {
+        object_at(
+            log,
+            "world/estimate/multi_sample",
+            &object.mesh,
+            m.pose,
+            ESTIMATE_RGB,
+        )?;
+    }
+    camera_views(
+        log,
+        sim.intrinsics(),
+        &t_world_camera,
+        &[("imprint", imprint)],
+        None,
+    )?;
+    // One step per sample: its depth and its registered pose.
+    for (k, s) in samples.iter().enumerate() {
+        log.set_step("sample", k);
+        camera_views(
+            log,
+            sim.intrinsics(),
+            &t_world_camera,
+            &[("sample", s)],
+            Some(("sample", s)),
+        )?;
+    }
+    // The registered samples' poses, one step each (samples that failed to register have none).
+    for (j, fit) in report.samples.iter().enumerate() {
+        log.set_step("fit", j);
+        object_at(
+            log,
+            "world/estimate/fit",
+            &object.mesh,
+            fit.pose,
+            ESTIMATE_RGB,
+        )?;
+    }
     Ok(())
 }
