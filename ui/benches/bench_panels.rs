@@ -6,9 +6,9 @@
 //! * `sample`: de-render the default scene with a checkpoint (DDIM K steps, S samples) and time every frame while
 //!   the sampler runs on its thread; reports frame times and the sampler's wall time.
 //!
-//! `cargo run --release -p tnd-workbench --example bench_panels -- grid DATASET_DIR [frames] [px_per_frame]`
-//! `cargo run --release -p tnd-workbench --example bench_panels -- sample MODEL.safetensors [samples] [steps]`
-//! `cargo run --release -p tnd-workbench --example bench_panels -- make-model OUT.safetensors` writes a randomly
+//! `cargo bench -p tnd-workbench --bench bench_panels -- grid DATASET_DIR [frames] [px_per_frame]`
+//! `cargo bench -p tnd-workbench --bench bench_panels -- sample MODEL.safetensors [samples] [steps]`
+//! `cargo bench -p tnd-workbench --bench bench_panels -- make-model OUT.safetensors` writes a randomly
 //! initialised model of the default architecture (the shipped model's cost, not its quality) for `sample`.
 
 use std::time::{Duration, Instant};
@@ -185,7 +185,11 @@ fn sample(model: &str, samples: usize, steps: usize) {
 }
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    // `cargo bench` appends `--bench` to the arguments.
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| a != "--bench")
+        .collect();
     let arg = |i: usize| args.get(i).map(String::as_str);
     match (arg(0), arg(1)) {
         (Some("grid"), Some(dir)) => grid(

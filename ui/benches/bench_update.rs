@@ -2,7 +2,7 @@
 //! times; for each move, time from the slider event until the new images are on screen (worker simulation + message
 //! + texture upload), and time every UI frame (layout + tessellation, no rasterisation). Prints one JSON line.
 //!
-//! `cargo run --release -p tnd-workbench --example bench_update -- [moves] [resolution] [press|inflation]`
+//! `cargo bench -p tnd-workbench --bench bench_update -- [moves] [resolution] [press|inflation]`
 //! (moving the inflation rebuilds the membrane, its signed distance and E on every move).
 
 use std::time::{Duration, Instant};
@@ -15,7 +15,8 @@ use tnd_workbench::state::State;
 use tnd_workbench::timings::Samples;
 
 fn main() {
-    let mut args = std::env::args().skip(1);
+    // `cargo bench` appends `--bench` to the arguments.
+    let mut args = std::env::args().skip(1).filter(|a| a != "--bench");
     let moves: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(100);
     let res: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(64);
     let slider = args.next().unwrap_or_else(|| "press".into());
