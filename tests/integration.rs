@@ -24,6 +24,7 @@ mod model_schedule;
 mod model_train;
 mod model_unet;
 mod one_writer;
+mod output_ownership;
 mod pose_register;
 mod posterior;
 mod recording;

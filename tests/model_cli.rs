@@ -524,7 +524,10 @@ fn eval_records_resume_to_the_uninterrupted_result() {
     std::fs::write(dir.path().join("old.jsonl"), old).unwrap();
     let (ok, _, err) = eval("1", "0", "old.jsonl");
     assert!(!ok);
-    assert!(err.contains("old.jsonl: line 1: no settings line"), "{err}");
+    assert!(
+        err.contains("old.jsonl: exists and was not written by this command"),
+        "{err}"
+    );
     assert_eq!(read("old.jsonl"), old);
 }
 

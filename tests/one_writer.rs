@@ -7,33 +7,11 @@
 
 use crate::cli_common;
 
-use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use cli_common::{stderr, tnd_in};
+use cli_common::{stderr, tnd_in, tree};
 use tactile_derender::io::lock::OutputLock;
-
-/// Every file under `dir` (relative path → bytes), lock files aside.
-fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
-    fn walk(root: &Path, dir: &Path, out: &mut Vec<(PathBuf, Vec<u8>)>) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                walk(root, &p, out);
-            } else {
-                out.push((
-                    p.strip_prefix(root).unwrap().to_path_buf(),
-                    std::fs::read(&p).unwrap(),
-                ));
-            }
-        }
-    }
-    let mut out = Vec::new();
-    walk(dir, dir, &mut out);
-    out.sort();
-    out
-}
 
 /// A second `tnd train` on the run folder of a running one is refused within a second naming the folder and the
 /// first's pid; the first run ends normally (here: stopped by SIGTERM with its checkpoint) and its log holds only

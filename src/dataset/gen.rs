@@ -445,7 +445,11 @@ fn load_progress(path: &Path) -> Result<Progress, DatasetError> {
 /// A new dataset goes into a missing or empty directory only.
 pub(crate) fn refuse_foreign_dir(out: &Path) -> Result<(), DatasetError> {
     match std::fs::read_dir(out) {
-        Ok(mut entries) => {
+        Ok(entries) => {
+            // The ledger of the output claim (crate::io::output) is not content.
+            let mut entries = entries
+                .flatten()
+                .filter(|e| e.file_name() != crate::io::output::LEDGER_FILE);
             if entries.next().is_some() {
                 if out.join(MANIFEST_FILE).is_file() {
                     return Err(DatasetError::Exists {

@@ -78,6 +78,10 @@ impl Dataset {
             return Err(DatasetError::NotADataset { path: dir, message });
         }
         let mut manifest = DatasetManifest::load(&path)?;
+        crate::sim::bounds::check_settings(&manifest.sim).map_err(|e| DatasetError::Manifest {
+            path: path.clone(),
+            message: format!("its sensor cannot exist: {}: {}", e.setting, e.message),
+        })?;
         // A membrane mesh stored with the dataset (`tnd dataset gen --elastomer-mesh`) is named relative to it.
         if let Some(mesh) = &manifest.sim.elastomer.mesh_file {
             if mesh.is_relative() && dir.join(mesh).is_file() {

@@ -49,6 +49,9 @@ pub fn write_atomic_with(
         ),
         None => named(e),
     })?;
+    if let Some(kept) = super::output::protected_by(path) {
+        return Err(super::output::protected_error(&kept));
+    }
     let tmp = sibling(path, "tmp", std::process::id());
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;
@@ -78,6 +81,9 @@ pub fn replace_dir_atomic<T>(
     if dir.file_name().is_none() {
         return Err(named(std::io::Error::other("not a folder name")));
     }
+    if let Some(kept) = super::output::protected_by(dir) {
+        return Err(super::output::protected_error(&kept));
+    }
     let (parent, _) = parent_and_name(dir);
     std::fs::create_dir_all(&parent).map_err(named)?;
     let tmp = sibling(dir, "tmp", std::process::id());
@@ -87,8 +93,13 @@ pub fn replace_dir_atomic<T>(
     let result = (|| {
         std::fs::create_dir(&tmp)?;
         let value = fill(&tmp)?;
+        for entry in std::fs::read_dir(&tmp)? {
+            if let Some(kept) = super::output::protected_by(&dir.join(entry?.file_name())) {
+                return Err(super::output::protected_error(&kept));
+            }
+        }
         if dir.is_dir() {
-            copy_missing(dir, &tmp)?;
+            link_missing(dir, &tmp)?;
         }
         sync_dir(&tmp)?;
         if dir.exists() {
@@ -106,19 +117,38 @@ pub fn replace_dir_atomic<T>(
     result.map_err(named)
 }
 
-/// Copy what `from` holds and `to` does not (recursively), so a replacement keeps files it did not write.
-fn copy_missing(from: &Path, to: &Path) -> std::io::Result<()> {
+/// Carry across what `from` holds and `to` does not (recursively), so a replacement keeps files it did not write:
+/// as hard links (the same files, byte for byte, whatever they are: symbolic links stay links, a FIFO is not read),
+/// or, on a file system without hard links, as copies of regular files and re-made symbolic links.
+fn link_missing(from: &Path, to: &Path) -> std::io::Result<()> {
     for entry in std::fs::read_dir(from)? {
         let entry = entry?;
         let target = to.join(entry.file_name());
-        if target.exists() {
+        if std::fs::symlink_metadata(&target).is_ok() {
             continue;
         }
-        if entry.file_type()?.is_dir() {
+        let source = entry.path();
+        let kind = entry.file_type()?;
+        if kind.is_dir() {
             std::fs::create_dir(&target)?;
-            copy_missing(&entry.path(), &target)?;
-        } else {
-            std::fs::copy(entry.path(), &target)?;
+            link_missing(&source, &target)?;
+        } else if let Err(e) = std::fs::hard_link(&source, &target) {
+            if kind.is_symlink() {
+                #[cfg(unix)]
+                std::os::unix::fs::symlink(std::fs::read_link(&source)?, &target)?;
+                #[cfg(not(unix))]
+                return Err(e);
+            } else if kind.is_file() {
+                std::fs::copy(&source, &target)?;
+            } else {
+                return Err(std::io::Error::new(
+                    e.kind(),
+                    format!(
+                        "{}: cannot carry it into the new folder: {e}",
+                        source.display()
+                    ),
+                ));
+            }
         }
     }
     Ok(())

@@ -71,7 +71,9 @@ impl OutputLock {
     /// Lock `output` (a file or a folder, existing or not) for writing, or say who holds it. The parent folder is
     /// created if needed.
     pub fn acquire(output: &Path) -> Result<Self, LockError> {
-        let lock = lock_path(output);
+        // The lock is on the real file: two names of one output (a symbolic link) share it.
+        let real = super::output::resolve(output).unwrap_or_else(|_| output.to_path_buf());
+        let lock = lock_path(&real);
         let io = |source: std::io::Error| LockError::Io {
             output: output.to_path_buf(),
             lock: lock.clone(),
@@ -103,7 +105,7 @@ impl OutputLock {
             if !same_file(&file, &lock) {
                 continue;
             }
-            remove_leftovers(output);
+            remove_leftovers(&real);
             file.set_len(0).map_err(io)?;
             file.rewind().map_err(io)?;
             write!(file, "{}", std::process::id()).map_err(io)?;
@@ -127,7 +129,8 @@ impl Drop for OutputLock {
 /// Refuse to read `output` while another tnd run writes it ("being written by another tnd run (pid N)"); Ok when no
 /// one holds its lock.
 pub fn check_not_written(output: &Path) -> Result<(), LockError> {
-    let lock = lock_path(output);
+    let real = super::output::resolve(output).unwrap_or_else(|_| output.to_path_buf());
+    let lock = lock_path(&real);
     let Ok(mut file) = File::open(&lock) else {
         return Ok(());
     };

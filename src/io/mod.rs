@@ -4,8 +4,10 @@
 pub mod atomic;
 pub mod depth_file;
 pub mod figure;
+pub mod input;
 pub mod lock;
 pub mod npy;
+pub mod output;
 pub mod ply;
 pub mod preview;
 pub mod settings;

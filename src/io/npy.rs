@@ -88,10 +88,13 @@ pub fn write_image(path: &Path, image: &Image) -> Result<(), NpyError> {
 
 /// Read any numeric `.npy` file as `f32`.
 pub fn read(path: &Path) -> Result<NpyArray, NpyError> {
-    let bytes = std::fs::read(path).map_err(|source| NpyError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes =
+        super::input::read_capped(path, super::input::MAX_ARRAY_BYTES).map_err(|source| {
+            NpyError::Io {
+                path: path.to_path_buf(),
+                source,
+            }
+        })?;
     decode(&bytes).map_err(|e| e.with_path(path))
 }
 

@@ -186,7 +186,14 @@ pub fn draw_text(img: &mut RgbImage, x: u32, y: u32, text: &str, colour: [u8; 3]
     }
 }
 
-/// Encode as PNG and write atomically; the error names the file.
+/// The text chunk every PNG tnd writes carries after its header: `Software` = `tactile-derender`, so that a command
+/// knows an image it may replace ([`written_by_tnd`]).
+const SOFTWARE_KEY: &[u8] = b"Software\0tactile-derender";
+
+/// PNG signature (8 bytes) + IHDR chunk (4 length + 4 type + 13 data + 4 CRC).
+const AFTER_IHDR: usize = 33;
+
+/// Encode as PNG (marked as tnd's) and write atomically; the error names the file.
 pub fn save_png(path: &Path, img: &RgbImage) -> std::io::Result<()> {
     let mut bytes = Vec::new();
     img.write_to(
@@ -194,12 +201,44 @@ pub fn save_png(path: &Path, img: &RgbImage) -> std::io::Result<()> {
         image::ImageFormat::Png,
     )
     .map_err(|e| std::io::Error::other(format!("{}: PNG encoding failed: {e}", path.display())))?;
+    let mut chunk = Vec::with_capacity(12 + SOFTWARE_KEY.len());
+    chunk.extend_from_slice(&(SOFTWARE_KEY.len() as u32).to_be_bytes());
+    chunk.extend_from_slice(b"tEXt");
+    chunk.extend_from_slice(SOFTWARE_KEY);
+    chunk.extend_from_slice(&crc32fast::hash(&chunk[4..]).to_be_bytes());
+    if bytes.len() > AFTER_IHDR {
+        bytes.splice(AFTER_IHDR..AFTER_IHDR, chunk);
+    }
     crate::io::write_atomic(path, &bytes)
+}
+
+/// Whether `path` is a PNG tnd wrote ([`save_png`]'s text chunk right after the header).
+pub fn written_by_tnd(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = [0u8; AFTER_IHDR + 8 + SOFTWARE_KEY.len()];
+    let Ok(()) = std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut head)) else {
+        return false;
+    };
+    head[AFTER_IHDR + 4..].starts_with(b"tEXt") && head[AFTER_IHDR + 8..].starts_with(SOFTWARE_KEY)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_png_tnd_wrote_is_marked_and_still_decodes() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.png");
+        let img = RgbImage::from_pixel(3, 2, Rgb([10, 20, 30]));
+        save_png(&p, &img).unwrap();
+        assert!(written_by_tnd(&p));
+        let back = image::open(&p).unwrap().to_rgb8();
+        assert_eq!(back, img);
+        // Another encoder's PNG is not tnd's.
+        img.save(dir.path().join("b.png")).unwrap();
+        assert!(!written_by_tnd(&dir.path().join("b.png")));
+    }
 
     #[test]
     fn jet_matches_matplotlib_at_key_points() {

@@ -18,10 +18,12 @@ use super::MeshError;
 
 /// Read a `.gltf` or `.glb` file: raw vertex positions (file units, metres by the glTF specification) and triangles.
 pub fn read(path: &Path) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), MeshError> {
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = crate::io::input::read_capped(path, crate::io::input::MAX_MESH_BYTES).map_err(
+        |source| MeshError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+    )?;
     let dir = path.parent().unwrap_or(Path::new("."));
     decode(&bytes, Some(dir)).map_err(|e| MeshError::Parse {
         path: path.to_path_buf(),
@@ -154,7 +156,8 @@ fn load_uri(uri: &str, dir: Option<&Path>) -> Result<Vec<u8>, String> {
         ));
     }
     let path = dir.join(uri.replace("%20", " "));
-    std::fs::read(&path).map_err(|e| format!("external buffer {}: {e}", path.display()))
+    crate::io::input::read_capped(&path, crate::io::input::MAX_MESH_BYTES)
+        .map_err(|e| format!("external buffer {}: {e}", path.display()))
 }
 
 /// The merged triangle soup.

@@ -483,6 +483,8 @@ impl Mesh {
     pub fn to_obj_string(&self) -> String {
         use std::fmt::Write;
         let mut s = String::with_capacity(self.vertices.len() * 40 + self.triangles.len() * 24);
+        s.push_str(obj::OBJ_MARK);
+        s.push('\n');
         for v in &self.vertices {
             let _ = writeln!(s, "v {} {} {}", v.x, v.y, v.z);
         }

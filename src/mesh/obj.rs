@@ -18,6 +18,18 @@
 //! Relative (negative) position indices are handled by `tobj` (resolved against the vertices defined so far); the
 //! pre-pass checks them first so that an out-of-range index is a clear error naming the line.
 
+/// The first line of every OBJ tnd writes ([`super::Mesh::to_obj_string`]): how a command knows a mesh it may replace.
+pub const OBJ_MARK: &str = "# written by tactile-derender";
+
+/// Whether `path` is an OBJ file tnd wrote (its first line is [`OBJ_MARK`]).
+pub fn written_by_tnd(path: &std::path::Path) -> bool {
+    use std::io::Read;
+    let mut head = [0u8; OBJ_MARK.len()];
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .is_ok_and(|()| head == *OBJ_MARK.as_bytes())
+}
+
 use std::path::Path;
 
 use glam::Vec3;
@@ -27,10 +39,12 @@ use super::{Mesh, MeshError};
 /// Read an OBJ file: raw vertex positions in file units and triangle indices (quads and n-gons fan-triangulated,
 /// all objects and groups merged into one mesh). Validation of the geometry is left to [`Mesh::from_raw`].
 pub fn read(path: &Path) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), MeshError> {
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = crate::io::input::read_capped(path, crate::io::input::MAX_MESH_BYTES).map_err(
+        |source| MeshError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+    )?;
     // Non-UTF-8 bytes (e.g. Latin-1 in comments or names) must not reject the file; they never matter for v/f lines.
     let text = String::from_utf8_lossy(&bytes);
     let clean = sanitize(&text).map_err(|message| parse_error(path, message))?;

@@ -15,10 +15,12 @@ use super::{Mesh, MeshError};
 
 /// Read a PLY file: raw vertex positions in file units and triangle indices.
 pub fn read(path: &Path) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), MeshError> {
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = crate::io::input::read_capped(path, crate::io::input::MAX_MESH_BYTES).map_err(
+        |source| MeshError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+    )?;
     decode(&bytes).map_err(|e| MeshError::Parse {
         path: path.to_path_buf(),
         format: "PLY",

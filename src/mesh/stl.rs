@@ -25,10 +25,12 @@ enum Problem {
 
 /// Read an ASCII or binary STL file: raw vertex positions in file units (three per facet) and triangle indices.
 pub fn read(path: &Path) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), MeshError> {
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = crate::io::input::read_capped(path, crate::io::input::MAX_MESH_BYTES).map_err(
+        |source| MeshError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+    )?;
     let problem = |p: Problem| match p {
         Problem::Empty => MeshError::Empty {
             context: path.display().to_string(),

@@ -75,6 +75,22 @@ pub struct EvalLog {
 }
 
 impl EvalLog {
+    /// Whether `path` is a records file tnd wrote: its first line is a settings line.
+    pub fn written_by_tnd(path: &Path) -> bool {
+        use std::io::BufRead;
+        let Ok(file) = std::fs::File::open(path) else {
+            return false;
+        };
+        let mut first = String::new();
+        match std::io::BufReader::new(file).read_line(&mut first) {
+            Ok(0) => false,
+            Ok(_) => {
+                serde_json::from_str::<Value>(&first).is_ok_and(|v| v.get("settings").is_some())
+            }
+            Err(_) => false,
+        }
+    }
+
     /// Open the log at `path` for a run with `settings`: an earlier run's records when the file exists and was
     /// written with the same settings (an error naming the differing settings otherwise, or naming the line that
     /// is not a record); a new log, written at once (so that an unwritable path fails before any work), when not.
@@ -140,6 +156,14 @@ impl EvalLog {
             path: path.to_path_buf(),
             source,
         })?;
+        if text.trim().is_empty() {
+            return Err(EvalLogError::Format {
+                path: path.to_path_buf(),
+                line: 1,
+                problem: "empty: no records yet (an evaluation stopped before its first write?)"
+                    .into(),
+            });
+        }
         let settings = text
             .lines()
             .next()

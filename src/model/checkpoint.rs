@@ -105,6 +105,32 @@ fn parse_tensors(bytes: &[u8], path: &Path) -> Result<TensorFile, ModelError> {
     })
 }
 
+/// Whether `path` is a checkpoint tnd wrote: a safetensors file whose metadata `config` holds the
+/// `tactile_derender` section (read from the header alone).
+pub fn written_by_tnd(path: &Path) -> bool {
+    use std::io::Read;
+    let Ok(mut file) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut len = [0u8; 8];
+    if file.read_exact(&mut len).is_err() {
+        return false;
+    }
+    let len = u64::from_le_bytes(len);
+    if len > 100_000_000 {
+        return false;
+    }
+    let mut header = vec![0u8; len as usize];
+    if file.read_exact(&mut header).is_err() {
+        return false;
+    }
+    serde_json::from_slice::<serde_json::Value>(&header).is_ok_and(|h| {
+        h.pointer("/__metadata__/config")
+            .and_then(serde_json::Value::as_str)
+            .is_some_and(|c| c.contains("\"tactile_derender\""))
+    })
+}
+
 /// Write named f32 tensors (sorted by name) with string metadata, atomically.
 pub fn write_tensors(
     path: &Path,

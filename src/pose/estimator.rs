@@ -579,6 +579,15 @@ mod tests {
             (r#"{"temperature": "hot"}"#, "not a posterior calibration"),
             (r#"{"temperature": -1.0}"#, "temperature must be positive"),
             (r#"{"no_such_setting": 1}"#, "unknown field"),
+            // Overflowing settings (the covariances came out null, coverage 0 %).
+            (
+                r#"{"floor_position_m": 1e160}"#,
+                "floor_position_m 1e160 is above 1",
+            ),
+            (
+                r#"{"temperature": 1e308}"#,
+                "temperature 1e308 is above 1e6",
+            ),
         ];
         for (text, expected) in cases {
             let bad = dir.path().join("bad.json");

@@ -88,7 +88,7 @@ impl PosteriorConfig {
     /// error says what is wrong; the caller names the file.
     pub fn read(path: &Path) -> Result<Self, InvalidInput> {
         const WHAT: &str = "posterior calibration";
-        let text = std::fs::read_to_string(path)
+        let text = crate::io::input::read_text_capped(path, crate::io::input::MAX_SETTINGS_BYTES)
             .map_err(|e| InvalidInput::new(WHAT, format!("cannot read: {e}")))?;
         let config: Self = serde_json::from_str(&text)
             .map_err(|e| InvalidInput::new(WHAT, format!("not a posterior calibration: {e}")))?;
@@ -117,6 +117,68 @@ impl PosteriorConfig {
                 ("min_weight", self.min_weight),
             ],
         )?;
+        // Upper bounds: past them the covariances overflow (null in JSON) and coverage reads 0 %.
+        for (name, value, max, why) in [
+            (
+                "temperature",
+                self.temperature,
+                1e6,
+                "a posterior that trusts no pixel",
+            ),
+            (
+                "floor_position_m",
+                self.floor_position_m,
+                1.0,
+                "beyond any sensor's reach",
+            ),
+            (
+                "floor_theta_rad",
+                self.floor_theta_rad,
+                std::f64::consts::TAU,
+                "more than a turn",
+            ),
+            (
+                "max_sigma_m",
+                self.max_sigma_m,
+                1.0,
+                "beyond any sensor's reach",
+            ),
+            ("lever_m", self.lever_m, 1.0, "beyond any sensor's reach"),
+            ("step_m", self.step_m, 0.01, "wider than a contact"),
+            (
+                "contact_threshold_m",
+                self.contact_threshold_m,
+                0.1,
+                "deeper than the sensor",
+            ),
+            (
+                "floor_exponent",
+                self.floor_exponent,
+                4.0,
+                "steeper than any contact law",
+            ),
+            (
+                "floor_contact_px",
+                self.floor_contact_px,
+                1e7,
+                "more pixels than an image has",
+            ),
+        ] {
+            if value > max {
+                let show = |v: f64| {
+                    if v.abs() >= 1e5 {
+                        format!("{v:e}")
+                    } else {
+                        format!("{v}")
+                    }
+                };
+                return Err(super::PoseError::Config(format!(
+                    "posterior: {name} {} is above {} ({why})",
+                    show(value),
+                    show(max)
+                )));
+            }
+        }
         if self.max_modes == 0 || self.min_weight >= 1.0 {
             return Err(super::PoseError::Config(
                 "posterior: max_modes must be at least 1 and min_weight below 1".into(),

@@ -443,20 +443,6 @@ fn calibrate_frames(
     let (width, height) = (native[0].width, native[0].height);
     let (intrinsics, _) = frame_intrinsics(given, width, height)?;
     let mut warnings = Vec::new();
-    if quiet.len() < 3 {
-        warnings.push(format!(
-            "only {} frame(s) without contact: the membrane fit is less certain{}; record a second of the sensor \
-             touching nothing",
-            quiet.len(),
-            if quiet.len() < 2 {
-                " and the noise cannot be measured"
-            } else {
-                ""
-            }
-        ));
-    }
-    let quiet_model: Vec<&Image> = quiet.iter().map(|&q| &model[q]).collect();
-    let noise_std_model_m = spread_about(&quiet_model, &mean_image(&quiet_model));
     let step = depth_step(&native[quiet[0]]);
     let t_sensor_camera = given.mount.t_sensor_camera();
     let start = given_params(given);
@@ -473,7 +459,7 @@ fn calibrate_frames(
     }
     // Two passes: a light touch can hide among the frames without contact (it stands out of the noise only once
     // the membrane is known), so frames the first fit finds pushed in are left out of the second.
-    let mut used = quiet.clone();
+    let mut used = quiet;
     let mut pass = 0;
     let (measured, noise_std_m, params, std_error, fitted) = loop {
         pass += 1;
@@ -520,6 +506,22 @@ fn calibrate_frames(
         }
         used = keep;
     };
+    // What was said and measured of the frames without contact is of those the fit used, after the pushed-in ones
+    // were dropped (the first pass's set may hold a pressed frame).
+    if used.len() < 3 {
+        warnings.push(format!(
+            "only {} frame(s) without contact: the membrane fit is less certain{}; record a second of the sensor \
+             touching nothing",
+            used.len(),
+            if used.len() < 2 {
+                " and the noise cannot be measured"
+            } else {
+                ""
+            }
+        ));
+    }
+    let used_model: Vec<&Image> = used.iter().map(|&q| &model[q]).collect();
+    let noise_std_model_m = spread_about(&used_model, &mean_image(&used_model));
     let residual = measured.zip_map(&fitted, |m, f| if m > 0.0 && f > 0.0 { m - f } else { 0.0 });
     let residuals: Vec<f64> = residual
         .data
@@ -579,7 +581,7 @@ fn calibrate_frames(
         ));
     }
 
-    let drift_m = frames_drift(model, &quiet);
+    let drift_m = frames_drift(model, &used);
     if drift_m > super::drift::DRIFT_WARNING_M {
         warnings.push(format!(
             "the membrane drifted up to {:.2} mm between runs of no-contact frames: the calibration is of their mean, \
@@ -651,6 +653,13 @@ fn calibrate_frames(
             start.inflation_m * 1e3
         ));
     }
+    crate::sim::bounds::check_settings(&sensor).map_err(|e| {
+        format!(
+            "the calibrated sensor cannot exist ({}: {}): do the frames show this sensor's inflated membrane, with \
+             depths in the units the reader assumed?",
+            e.setting, e.message
+        )
+    })?;
     let calibration = SensorCalibration {
         inflation_m: params.inflation_m,
         footprint_m: params.footprint_m,

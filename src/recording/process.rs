@@ -347,27 +347,32 @@ fn median_of(x: &mut [f64]) -> f64 {
     v
 }
 
-/// The noise of a 5 x 5-window mean of the difference of two frames, metres: for each window, the robust spread
-/// (1.4826 × median absolute value) of that window's mean over the differences of successive frames, and the median
-/// of those over the windows. A window is still or only noisy in most frame pairs (contact moves in a few), so
-/// neither a large contact nor a recording that is mostly contact inflates it. `None` with fewer than two frames.
+/// The noise of a 5 x 5-window mean of the difference of two frames, metres: for each pair of frames one and two
+/// apart, the robust spread (1.4826 × median absolute value) of that difference's window means over the windows
+/// both frames measure, and the median of those near the least over the pairs. Somewhere in a recording two nearby frames hold the
+/// same contact or none (a press held, the rest before it), so a contact, however large, does not inflate it, nor
+/// does a short recording whose every consecutive pair spans a press (rest, press, rest: the first and last frames
+/// are two apart). `None` with fewer than two frames.
 pub fn window_noise(signatures: &[Image]) -> Option<f64> {
-    if signatures.len() < 2 {
-        return None;
-    }
-    let diffs: Vec<Vec<f64>> = signatures
-        .windows(2)
-        .map(|p| box_means(&imprint(&p[0], &p[1]), 2))
+    let n = signatures.len();
+    let pair = |a: &Image, b: &Image| {
+        let means = box_means(&imprint(a, b), 2);
+        let mut seen: Vec<f64> = (0..means.len())
+            .filter(|&i| a.data[i] > 0.0 && b.data[i] > 0.0)
+            .map(|i| means[i].abs())
+            .collect();
+        (!seen.is_empty()).then(|| 1.4826 * median_of(&mut seen))
+    };
+    let mut per_pair: Vec<f64> = (0..n.saturating_sub(1))
+        .flat_map(|k| [(k, k + 1), (k, k + 2)])
+        .filter(|&(_, j)| j < n)
+        .filter_map(|(i, j)| pair(&signatures[i], &signatures[j]))
         .collect();
-    let windows = diffs[0].len();
-    let mut per_window = Vec::with_capacity(windows);
-    let mut column = Vec::with_capacity(diffs.len());
-    for w in 0..windows {
-        column.clear();
-        column.extend(diffs.iter().map(|d| d[w].abs()));
-        per_window.push(1.4826 * median_of(&mut column));
-    }
-    Some(median_of(&mut per_window))
+    // The pairs of noise alone cluster near the least (each estimate is within ~10 % of the truth; the least of
+    // many is biased low), those spanning a change of contact lie far above: the median of the cluster.
+    let least = per_pair.iter().copied().reduce(f64::min)?;
+    per_pair.retain(|&e| e <= 2.0 * least);
+    Some(median_of(&mut per_pair))
 }
 
 /// Whether the imprint `y` of a frame against a no-contact frame shows no contact: its largest 5 x 5-window mean

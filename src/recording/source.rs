@@ -142,7 +142,8 @@ impl Recording {
             path: path.to_path_buf(),
             message,
         };
-        let mut file = std::fs::File::open(path).map_err(|e| RecordingError::io(path, e))?;
+        let mut file = std::fs::File::open(path)
+            .map_err(|e| RecordingError::io(path, crate::io::input::explained(path, e)))?;
         let mut magic = [0u8; 5];
         if file.read_exact(&mut magic).is_err() || &magic != b"\x89MCAP" {
             return Err(bad("not an MCAP file (no MCAP magic at the start)".into()));

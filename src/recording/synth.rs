@@ -244,10 +244,36 @@ fn mcap_error(path: &Path) -> impl Fn(mcap::McapError) -> RecordingError + Copy 
     }
 }
 
+/// The library an MCAP file tnd writes names in its header: how `tnd recording simulate` knows a file it may
+/// replace ([`written_by_tnd`]).
+pub const MCAP_LIBRARY: &str = "tactile-derender";
+
+/// Whether `path` is an MCAP file whose header names [`MCAP_LIBRARY`] (a recording or track tnd wrote).
+pub fn written_by_tnd(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = [0u8; 256];
+    let Ok(n) = std::fs::File::open(path).and_then(|mut f| f.read(&mut head)) else {
+        return false;
+    };
+    let head = &head[..n];
+    // Magic, the Header record's opcode and length, then two length-prefixed strings: profile, library.
+    let string_at = |at: usize| -> Option<(&[u8], usize)> {
+        let len = u32::from_le_bytes(head.get(at..at + 4)?.try_into().ok()?) as usize;
+        Some((head.get(at + 4..at + 4 + len)?, at + 4 + len))
+    };
+    if !head.starts_with(b"\x89MCAP0\r\n") || head.get(8) != Some(&0x01) {
+        return false;
+    }
+    string_at(17)
+        .and_then(|(_, next)| string_at(next))
+        .is_some_and(|(library, _)| library == MCAP_LIBRARY.as_bytes())
+}
+
 /// A ROS 2 MCAP file for `path`, written in memory until [`save_mcap`].
 fn new_mcap(path: &Path) -> Result<mcap::Writer<Cursor<Vec<u8>>>, RecordingError> {
     mcap::WriteOptions::new()
         .profile("ros2")
+        .library(MCAP_LIBRARY)
         .create(Cursor::new(Vec::new()))
         .map_err(mcap_error(path))
 }

@@ -6,6 +6,7 @@
 //! membrane's inflation against a measurement; [`sensor_file`] reads and writes a whole sensor as JSON. [`Simulator`] runs them in order
 //! for one scene; everything that depends only on the sensor (membrane BVH and SDF, E) is built once.
 
+pub mod bounds;
 pub mod calibration;
 pub mod contact;
 pub mod depth_camera;
@@ -40,6 +41,8 @@ pub enum SimError {
     Camera(#[source] crate::error::InvalidSetting),
     #[error("signature: {0}")]
     Signature(#[source] crate::error::InvalidSetting),
+    #[error("sensor setting {}: {}", .0.setting, .0.message)]
+    Bounds(#[source] crate::error::InvalidSetting),
     #[error(transparent)]
     Elastomer(#[from] ElastomerError),
     #[error(transparent)]
@@ -185,6 +188,7 @@ impl Simulator {
         let elastomer_mesh = config.elastomer.build()?;
         let caster = RayCaster::new(&elastomer_mesh)?;
         let nominal = render::render_far_depth(&caster, &intrinsics, &t_sensor_camera);
+        bounds::check_membrane(&config, &elastomer_mesh, &nominal).map_err(SimError::Bounds)?;
         // The parametric membrane's contact test answers from its half-ellipsoid wherever that is certain.
         let e = &config.elastomer;
         let dome = e.mesh_file.is_none().then(|| {

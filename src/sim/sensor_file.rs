@@ -45,10 +45,11 @@ pub fn load(path: &Path) -> Result<SimConfig, SensorFileError> {
         path: path.to_path_buf(),
         message,
     };
-    let text = std::fs::read_to_string(path).map_err(|source| SensorFileError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = crate::io::input::read_text_capped(path, crate::io::input::MAX_SETTINGS_BYTES)
+        .map_err(|source| SensorFileError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
     let value: Value = serde_json::from_str(&text).map_err(|e| format(e.to_string()))?;
     if !value.is_object() {
         return Err(format("expected a JSON object".into()));
@@ -70,6 +71,8 @@ pub fn load(path: &Path) -> Result<SimConfig, SensorFileError> {
         )));
     }
     let mut config: SimConfig = serde_json::from_value(value).map_err(|e| format(e.to_string()))?;
+    super::bounds::check_settings(&config)
+        .map_err(|e| format(format!("{}: {}", e.setting, e.message)))?;
     if let Some(mesh) = &config.elastomer.mesh_file {
         if mesh.is_relative() {
             let dir = path.parent().unwrap_or(Path::new(""));
@@ -77,6 +80,19 @@ pub fn load(path: &Path) -> Result<SimConfig, SensorFileError> {
         }
     }
     Ok(config)
+}
+
+/// Whether `path` looks like a sensor file [`save`] wrote: a JSON object with every section (camera, mount,
+/// elastomer, signature), as `tnd calibrate --out` writes them; a hand-written partial file is not.
+pub fn written_by_tnd(path: &Path) -> bool {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return false;
+    };
+    serde_json::from_str::<Value>(&text).is_ok_and(|v| {
+        ["camera", "mount", "elastomer", "signature"]
+            .iter()
+            .all(|k| v.get(k).is_some_and(Value::is_object))
+    })
 }
 
 /// Write `config` as a sensor file, atomically.

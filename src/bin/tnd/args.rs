@@ -1,6 +1,6 @@
 //! Command-line options shared by several commands, mapped onto the library's config structs.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, Result};
 use clap::Args;
@@ -59,6 +59,15 @@ pub fn parse_pose(flag: &str, text: &str) -> Result<tactile_derender::sensor::Se
     ))
 }
 
+/// `--force` of a command that writes an output ([`tactile_derender::io::output`]).
+#[derive(Args, Clone, Copy, Debug, Default)]
+pub struct ForceArg {
+    /// Write into a folder that holds files tnd did not write (they are kept, never replaced), or replace an output
+    /// file tnd did not write.
+    #[arg(long)]
+    pub force: bool,
+}
+
 /// Sensor, elastomer and signature options: overrides of a sensor file (`--sensor`) or of the library's
 /// [`SimConfig`], whose defaults (the Soft Bubble of the paper) apply to every option left out.
 #[derive(Args, Clone, Debug)]
@@ -94,6 +103,14 @@ pub struct SensorArgs {
 }
 
 impl SensorArgs {
+    /// The files these options read (an output may not be one of them).
+    pub fn inputs(&self) -> Vec<&Path> {
+        [self.sensor.as_deref(), self.elastomer_mesh.as_deref()]
+            .into_iter()
+            .flatten()
+            .collect()
+    }
+
     /// The simulator configuration these options describe.
     pub fn sim_config(&self) -> Result<SimConfig> {
         let mut cfg = match &self.sensor {
@@ -127,6 +144,8 @@ impl SensorArgs {
         if let Some(n) = self.noise_std {
             cfg.signature.noise_std = n;
         }
+        tactile_derender::sim::bounds::check_settings(&cfg)
+            .map_err(|e| anyhow!("sensor setting {}: {}", e.setting, e.message))?;
         Ok(cfg)
     }
 }

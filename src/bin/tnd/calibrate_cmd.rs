@@ -59,6 +59,10 @@ pub struct CalibrateArgs {
     /// Print the calibration as one JSON object (metres) instead of lines for people.
     #[arg(long)]
     pub json: bool,
+    /// Replace --out, --figure or --measured-membrane files that tnd did not write (otherwise refused; tnd's own
+    /// are replaced).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// The figure: the measured reference, the calibrated membrane, and their difference.
@@ -209,11 +213,33 @@ fn fit_shadow_width(
 }
 
 pub fn run(a: CalibrateArgs) -> Result<()> {
-    let _locks = [a.out.as_deref(), a.figure.as_deref()]
+    let mut inputs = a.sensor.inputs();
+    inputs.push(&a.from);
+    inputs.extend(a.poses.as_deref());
+    // Each output file, and how to know one tnd wrote.
+    type Output<'a> = (&'a str, Option<&'a Path>, &'a dyn Fn(&Path) -> bool);
+    let outputs: [Output; 3] = [
+        (
+            "--out",
+            a.out.as_deref(),
+            &tactile_derender::sim::sensor_file::written_by_tnd,
+        ),
+        (
+            "--figure",
+            a.figure.as_deref(),
+            &tactile_derender::io::preview::written_by_tnd,
+        ),
+        (
+            "--measured-membrane",
+            a.measured_membrane.as_deref(),
+            &tactile_derender::mesh::obj::written_by_tnd,
+        ),
+    ];
+    let _claims = outputs
         .into_iter()
-        .flatten()
-        .map(tactile_derender::io::lock::OutputLock::acquire)
-        .collect::<Result<Vec<_>, _>>()?;
+        .filter_map(|(flag, path, ours)| Some((flag, path?, ours)))
+        .map(|(flag, path, ours)| crate::outputs::file(flag, path, a.force, &inputs, ours))
+        .collect::<Result<Vec<_>>>()?;
     let given = a.sensor.sim_config()?;
     let rec = Recording::open(&a.from, &a.read.folder())?;
     let stream = rec.depth_stream(a.read.topic.as_deref())?.clone();

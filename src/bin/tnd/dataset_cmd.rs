@@ -1,6 +1,6 @@
 //! `tnd dataset`: generate synthetic datasets, import real sensor pairs, print statistics, preview one pair.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use anyhow::{anyhow, Context, Result};
@@ -51,9 +51,11 @@ pub enum DatasetCommand {
         /// train, unseen_poses or unseen_objects.
         #[arg(long, default_value = "train")]
         split: String,
-        /// Output PNG.
+        /// Output PNG (an existing file is replaced only if tnd wrote it, or with --force).
         #[arg(long)]
         out: PathBuf,
+        #[command(flatten)]
+        force: crate::args::ForceArg,
     },
 }
 
@@ -170,7 +172,8 @@ pub fn run(a: DatasetArgs) -> Result<()> {
             index,
             split,
             out,
-        } => show(dir, index, &split, out),
+            force,
+        } => show(dir, index, &split, out, force.force),
     }
 }
 
@@ -214,8 +217,16 @@ fn say_how_to_resume_when_interrupted() {
     }
 }
 
+/// A dataset folder from before ledgers: its manifest or its run's progress file.
+fn earlier_dataset(dir: &Path) -> bool {
+    use tactile_derender::dataset::manifest::{MANIFEST_FILE, PROGRESS_FILE};
+    dir.join(MANIFEST_FILE).is_file() || dir.join(PROGRESS_FILE).is_file()
+}
+
 fn gen(a: GenArgs) -> Result<()> {
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
+    let mut inputs = a.sensor.inputs();
+    inputs.push(Path::new(&a.objects));
+    let _out = crate::outputs::folder_of("--out", &a.out, false, &inputs, &earlier_dataset)?;
     let pair = |flag: &str, s: &str, example: &str| {
         s.split_once(',')
             .and_then(|(x, y)| Some([x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?]))
@@ -330,7 +341,9 @@ fn gen(a: GenArgs) -> Result<()> {
 }
 
 fn run_import(a: ImportArgs) -> Result<()> {
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
+    let mut inputs = a.sensor.inputs();
+    inputs.extend([a.from.as_path(), Path::new(&a.objects)]);
+    let _out = crate::outputs::folder_of("--out", &a.out, false, &inputs, &earlier_dataset)?;
     let sim = a.sensor.sim_config()?;
     let set = ObjectSet::open(&a.objects).with_context(|| format!("--objects {}", a.objects))?;
     let split = match a.split.as_str() {
@@ -468,9 +481,16 @@ fn stats(dir: PathBuf, as_json: bool, verify: bool) -> Result<()> {
     Ok(())
 }
 
-fn show(dir: PathBuf, index: usize, split: &str, out: PathBuf) -> Result<()> {
+fn show(dir: PathBuf, index: usize, split: &str, out: PathBuf, force: bool) -> Result<()> {
     tactile_derender::io::lock::check_not_written(&dir)?;
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&out)?;
+    let claimed = crate::outputs::file(
+        "--out",
+        &out,
+        force,
+        &[&dir],
+        &tactile_derender::io::preview::written_by_tnd,
+    )?;
+    let out = claimed.path();
     let split: SplitName = split.parse().context("--split")?;
     let ds = Dataset::open(&dir)?;
     let pair = ds.pair(split, index)?;
@@ -507,7 +527,7 @@ fn show(dir: PathBuf, index: usize, split: &str, out: PathBuf) -> Result<()> {
             dir.display()
         ),
     ];
-    preview::save_png(&out, &preview::side_by_side(&panels, &caption))?;
-    println!("{}", json!({"out": crate::path_json(&out), "meta": m}));
+    preview::save_png(out, &preview::side_by_side(&panels, &caption))?;
+    println!("{}", json!({"out": crate::path_json(out), "meta": m}));
     Ok(())
 }

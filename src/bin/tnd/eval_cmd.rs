@@ -93,6 +93,8 @@ pub struct EvalArgs {
     /// DIR/<split>/<index>.npz, metres, for analysis in numpy (docs/evaluation.md).
     #[arg(long, value_name = "DIR")]
     pub save_samples: Option<PathBuf>,
+    #[command(flatten)]
+    pub force: crate::args::ForceArg,
     /// The rerun recording has one step per pair on the "pair" timeline: the imprint, the true and generated X0 under
     /// the camera, the generated contact points, and the object at its true and estimated poses.
     #[command(flatten)]
@@ -195,7 +197,7 @@ fn check_writable_folder(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-pub fn run(a: EvalArgs) -> Result<()> {
+pub fn run(mut a: EvalArgs) -> Result<()> {
     if !a.tables_from.is_empty() {
         print!("{}", paper_tables(&tables_from(&a.tables_from)?));
         return Ok(());
@@ -207,15 +209,22 @@ pub fn run(a: EvalArgs) -> Result<()> {
     tactile_derender::io::lock::check_not_written(data)?;
     // One writer per output, refused before any work; the report folder must take files before the evaluation runs,
     // not after it.
-    let _locks = [
-        a.records.as_deref(),
-        a.report.as_deref(),
-        a.save_samples.as_deref(),
-    ]
-    .into_iter()
-    .flatten()
-    .map(tactile_derender::io::lock::OutputLock::acquire)
-    .collect::<Result<Vec<_>, _>>()?;
+    let inputs = [data, Path::new(&a.model)];
+    let force = a.force.force;
+    let records = a
+        .records
+        .as_deref()
+        .map(|p| crate::outputs::file("--records", p, force, &inputs, &EvalLog::written_by_tnd))
+        .transpose()?;
+    // Records go to the real file: a symbolic link stays a link.
+    if let Some(r) = &records {
+        a.records = Some(r.path().to_path_buf());
+    }
+    let _folders = [("--report", &a.report), ("--save-samples", &a.save_samples)]
+        .into_iter()
+        .filter_map(|(flag, p)| Some((flag, p.as_deref()?)))
+        .map(|(flag, p)| crate::outputs::folder(flag, p, force, &inputs))
+        .collect::<Result<Vec<_>>>()?;
     if let Some(dir) = &a.report {
         check_writable_folder(dir)?;
     }

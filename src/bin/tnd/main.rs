@@ -9,6 +9,7 @@ mod eval_tables;
 mod measured;
 mod model_cmd;
 mod objects_cmd;
+mod outputs;
 mod pose_cmd;
 mod posterior_cmd;
 mod progress;

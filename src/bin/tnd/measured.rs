@@ -74,6 +74,16 @@ fn read_frame(path: &Path) -> Result<Image> {
 }
 
 impl MeasuredArgs {
+    /// The files these options read.
+    pub fn inputs(&self) -> Vec<&Path> {
+        let mut v: Vec<&Path> = [self.imprint.as_deref(), self.signature.as_deref()]
+            .into_iter()
+            .flatten()
+            .collect();
+        v.extend(self.reference.iter().map(PathBuf::as_path));
+        v
+    }
+
     /// Read the images for the sensor `given` (calibrated from the references where there are any, unless it came
     /// from a sensor file, `from_file`, and --calibrate is not given). With `imprint_any_size`, an imprint alone (no
     /// signature, no reference) of a size no stage of the sensor has is taken as it is (`tnd sample` with a model

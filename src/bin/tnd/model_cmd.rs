@@ -3,7 +3,7 @@
 //! `tnd model diagnose`: the one-step x0 quality of a checkpoint per diffusion timestep on dataset pairs.
 //! `tnd model export --diffusers DIR` / `tnd model import --diffusers DIR`: diffusers folders out and in.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 use candle_core::DType;
@@ -45,7 +45,8 @@ pub struct ExportArgs {
     /// The diffusers folder to write (created if missing).
     #[arg(long)]
     pub diffusers: PathBuf,
-    /// Replace the model a folder already holds (otherwise refused: it may be another model's only copy).
+    /// Replace the model a folder already holds (otherwise refused: it may be another model's only copy), or write
+    /// into a folder that holds files tnd did not write (they are kept; the export stops rather than replace one).
     #[arg(long)]
     pub force: bool,
 }
@@ -55,9 +56,11 @@ pub struct ImportArgs {
     /// The diffusers folder to read.
     #[arg(long)]
     pub diffusers: PathBuf,
-    /// The .safetensors file to write.
+    /// The .safetensors file to write (an existing file is replaced only if tnd wrote it, or with --force).
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::args::ForceArg,
 }
 
 #[derive(Args, Debug)]
@@ -104,7 +107,19 @@ pub fn run(a: ModelArgs) -> Result<()> {
         ModelCommand::Verify(v) => verify(&v),
         ModelCommand::Diagnose(d) => diagnose(&d),
         ModelCommand::Export(e) => {
-            let _lock = tactile_derender::io::lock::OutputLock::acquire(&e.diffusers)?;
+            // A model folder exported before ledgers: the three files of a diffusers model.
+            let exported = |dir: &Path| {
+                ["config.json", "diffusion_pytorch_model.safetensors"]
+                    .iter()
+                    .all(|f| dir.join(f).is_file())
+            };
+            let _out = crate::outputs::folder_of(
+                "--diffusers",
+                &e.diffusers,
+                e.force,
+                &[&e.model],
+                &exported,
+            )?;
             let held = e.diffusers.join("diffusion_pytorch_model.safetensors");
             if held.exists() && !e.force {
                 bail!(
@@ -122,10 +137,16 @@ pub fn run(a: ModelArgs) -> Result<()> {
             Ok(())
         }
         ModelCommand::Import(i) => {
-            let _lock = tactile_derender::io::lock::OutputLock::acquire(&i.out)?;
+            let out = crate::outputs::file(
+                "--out",
+                &i.out,
+                i.force.force,
+                &[&i.diffusers],
+                &tactile_derender::model::checkpoint::written_by_tnd,
+            )?;
             let model = DiffusionModel::load(&i.diffusers)?;
             save_model(
-                &i.out,
+                out.path(),
                 &model.vars().varmap,
                 model.config(),
                 Default::default(),

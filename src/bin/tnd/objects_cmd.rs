@@ -1,7 +1,7 @@
 //! `tnd objects`: list an object set, export the built-in set, or generate a procedural training set, as meshes
 //! plus an `objects.json` manifest.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Result};
 use clap::{Args, Subcommand};
@@ -28,6 +28,8 @@ pub enum ObjectsCommand {
     Export {
         /// Directory to write the meshes and objects.json into (created if missing).
         dir: PathBuf,
+        #[command(flatten)]
+        force: crate::args::ForceArg,
     },
     /// Report what a mesh file holds: shells, holes, non-manifold edges, volume, extent, and a unit warning when the
     /// size is implausible for a pressed object (e.g. a millimetre file read as metres).
@@ -87,7 +89,14 @@ pub enum ObjectsCommand {
         /// land in the unseen_objects split and are never trained on.
         #[arg(long, value_name = "DIR=SHARE", value_parser = parse_include)]
         include: Vec<(PathBuf, f64)>,
+        #[command(flatten)]
+        force: crate::args::ForceArg,
     },
+}
+
+/// An object set folder tnd wrote before ledgers: its objects.json.
+fn earlier_set(dir: &Path) -> bool {
+    dir.join(MANIFEST_FILE).is_file()
 }
 
 pub fn run(a: ObjectsArgs) -> Result<()> {
@@ -105,8 +114,8 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
                 println!("{v}");
             }
         }
-        ObjectsCommand::Export { dir } => {
-            let _lock = tactile_derender::io::lock::OutputLock::acquire(&dir)?;
+        ObjectsCommand::Export { dir, force } => {
+            let _out = crate::outputs::folder_of("dir", &dir, force.force, &[], &earlier_set)?;
             let set = ObjectSet::builtin();
             set.export(&dir)?;
             println!(
@@ -219,8 +228,10 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
             builtin_share,
             kinds,
             include,
+            force,
         } => {
-            let _lock = tactile_derender::io::lock::OutputLock::acquire(&dir)?;
+            let inputs: Vec<&Path> = include.iter().map(|(p, _)| p.as_path()).collect();
+            let _out = crate::outputs::folder_of("dir", &dir, force.force, &inputs, &earlier_set)?;
             let config = ProceduralConfig {
                 count,
                 seed,

@@ -62,11 +62,17 @@ pub struct PoseArgs {
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
+    pub force: crate::args::ForceArg,
+    #[command(flatten)]
     pub rerun: crate::rerun_out::RerunArgs,
 }
 
 pub fn run(a: PoseArgs) -> Result<()> {
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
+    let mut inputs = a.measured.inputs();
+    inputs.extend(a.sensor.inputs());
+    inputs.extend([Path::new(&a.model), Path::new(&a.object.object)]);
+    inputs.extend(a.target.as_deref());
+    let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
     let measured = a
         .measured
         .read(a.sensor.sim_config()?, a.sensor.sensor.is_some(), false)?;

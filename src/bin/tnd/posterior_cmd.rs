@@ -3,7 +3,7 @@
 //! that `tnd eval`, `tnd pose` and `tnd recording track` take as `--posterior FILE`: a user with labelled
 //! recordings of their own sensor calibrates the uncertainty it reports.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
@@ -35,6 +35,8 @@ pub struct PosteriorArgs {
     /// JSON lines only (no markdown table on stderr).
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub force: crate::args::ForceArg,
 }
 
 /// One row of a record, by name.
@@ -59,10 +61,28 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
             a.method
         );
     }
-    let _lock = a
+    // Each records file once (the same file under two names counts once too), and none an eval is still writing.
+    let mut seen: Vec<(PathBuf, PathBuf)> = Vec::new();
+    for path in &a.records {
+        let real = tactile_derender::io::output::resolve(path)
+            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        if let Some(first) = seen.iter().find(|(r, _)| *r == real).map(|(_, p)| p) {
+            bail!(
+                "--records {} is {} again: each records file is given once",
+                path.display(),
+                first.display()
+            );
+        }
+        tactile_derender::io::lock::check_not_written(path)?;
+        seen.push((real, path.clone()));
+    }
+    let mut inputs: Vec<&Path> = a.records.iter().map(PathBuf::as_path).collect();
+    inputs.extend(a.config.as_deref());
+    let fitted_file = |p: &Path| PosteriorConfig::read(p).is_ok();
+    let _claim = a
         .fit
         .as_deref()
-        .map(tactile_derender::io::lock::OutputLock::acquire)
+        .map(|p| crate::outputs::file("--fit", p, a.force.force, &inputs, &fitted_file))
         .transpose()?;
     let config = a
         .config

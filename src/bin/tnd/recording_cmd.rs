@@ -1,7 +1,7 @@
 //! `tnd recording`: look into a real sensor recording (MCAP file or folder of depth frames) and write a simulated
 //! one. Turning a recording into pairs is `tnd dataset import --from REC`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::{Args, Subcommand};
@@ -42,6 +42,8 @@ pub struct FramesArgs {
     /// nothing else — write a new folder for another export, or old frame files stay beside the new).
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::args::ForceArg,
     /// Frames to write: all (default), contact (those with contact), or a list such as 0,5,10-20 (0-based).
     #[arg(long, default_value = "all")]
     pub frames: String,
@@ -63,8 +65,10 @@ pub struct InfoArgs {
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
-    /// Output .mcap file.
+    /// Output .mcap file (an existing file is replaced only if tnd wrote it, or with --force).
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::args::ForceArg,
     #[command(flatten)]
     pub object: ObjectSpec,
     /// Object pose relative to the sensor axis: X,Y,THETA (metres, metres, radians).
@@ -190,8 +194,16 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     if a.no_pose_topic {
         seq.pose_topic = None;
     }
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
-    let frames = synth::write_press_recording(&a.out, &config, &object, &seq)?;
+    let mut inputs = a.sensor.inputs();
+    inputs.push(Path::new(&a.object.object));
+    let out = crate::outputs::file(
+        "out",
+        &a.out,
+        a.force.force,
+        &inputs,
+        &synth::written_by_tnd,
+    )?;
+    let frames = synth::write_press_recording(out.path(), &config, &object, &seq)?;
     println!(
         "{}",
         json!({
@@ -256,7 +268,9 @@ fn frames(a: FramesArgs) -> Result<()> {
     let sim = a.sensor.sim_config()?;
     let (rec, stream, processed) = open_processed(&a.recording, &a.read, &sim)?;
     let list = frame_list(&a.frames, &processed.contact_px)?;
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
+    let mut inputs = a.sensor.inputs();
+    inputs.push(&a.recording);
+    let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
     let mut bar = progress::bar("writing", "frame", list.len());
     let rows = recording::frames_out::write_frames(
         &rec,

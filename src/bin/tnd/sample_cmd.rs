@@ -37,13 +37,18 @@ pub struct SampleArgs {
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::args::ForceArg,
     /// The rerun recording shows the images in the frame of the default sensor's camera (`tnd sample` has no scene).
     #[command(flatten)]
     pub rerun: crate::rerun_out::RerunArgs,
 }
 
 pub fn run(a: SampleArgs) -> Result<()> {
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
+    let mut inputs = a.measured.inputs();
+    inputs.extend(a.sensor.inputs());
+    inputs.push(&a.model);
+    let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
     let device = tactile_derender::model::device::open_device(&a.derender.device)?;
     let model = DiffusionModel::load_on(&a.model, &device)?;
     let measured = a

@@ -1,6 +1,6 @@
 //! `tnd sim`: one simulated contact written as `.npy` arrays (metres) and PNG previews, with a JSON summary.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Args;
@@ -35,6 +35,8 @@ pub struct SimArgs {
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
+    pub force: crate::args::ForceArg,
+    #[command(flatten)]
     pub rerun: crate::rerun_out::RerunArgs,
 }
 
@@ -62,7 +64,10 @@ fn image_of<'a>(out: &'a SimOutput, name: &str) -> &'a Image {
 }
 
 pub fn run(a: SimArgs) -> Result<()> {
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
+    let mesh = Path::new(&a.object.object);
+    let mut inputs = a.sensor.inputs();
+    inputs.push(mesh);
+    let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
     let pose = crate::args::parse_pose("--pose", &a.pose)?;
     crate::args::check_press("--press", a.press, false)?;
     let config = a.sensor.sim_config()?;

@@ -74,6 +74,8 @@ pub struct TrackArgs {
     /// Output directory: track.csv (one row per frame) and track.json; a run killed part-way resumes into it.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::args::ForceArg,
 }
 
 /// `path` made absolute (the same file however it is named); as given when it does not exist.
@@ -147,17 +149,8 @@ fn write_pose_track(out: &Path, rows: &[FrameTrack]) -> Result<usize> {
 /// An earlier run into `out`: its settings file (`None`: none yet). A folder holding anything else is refused.
 fn earlier_run(out: &Path) -> Result<Option<Value>> {
     let json_path = out.join("track.json");
+    // Whose the folder's other files are was settled when it was claimed (crate::outputs).
     if !json_path.exists() {
-        if out
-            .read_dir()
-            .map(|mut d| d.next().is_some())
-            .unwrap_or(false)
-        {
-            bail!(
-                "{}: not empty and holds no track; choose a new --out",
-                out.display()
-            );
-        }
         return Ok(None);
     }
     let text = std::fs::read_to_string(&json_path)
@@ -351,7 +344,14 @@ pub fn run(a: TrackArgs) -> Result<()> {
     if a.every == 0 {
         bail!("--every must be at least 1");
     }
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
+    let mut inputs = a.input.sensor.inputs();
+    inputs.extend([
+        a.input.recording.as_path(),
+        Path::new(&a.input.object.object),
+    ]);
+    // A track folder from before ledgers: its track.json.
+    let earlier_track = |dir: &Path| dir.join("track.json").is_file();
+    let _out = crate::outputs::folder_of("--out", &a.out, a.force.force, &inputs, &earlier_track)?;
     let sim_config = a.input.sensor.sim_config()?;
     let settings = settings(&a, &sim_config);
     // Refuse another run's folder before any long work; nothing is written until the track can start.

@@ -2,7 +2,7 @@
 //! the same command again resumes from the run directory's last checkpoint (also after kill -9); Ctrl-C or SIGTERM
 //! stop it after the step under way with a fresh checkpoint.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -48,6 +48,8 @@ pub struct TrainArgs {
     /// Run directory: train_state.safetensors, model.safetensors, log.jsonl.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::args::ForceArg,
     /// Fine-tune from this checkpoint (architecture and normalisation come from it).
     #[arg(long)]
     pub init: Option<PathBuf>,
@@ -211,7 +213,12 @@ fn fit_to_data(
 
 pub fn run(a: TrainArgs) -> Result<()> {
     // One writer per run folder: a second `tnd train --out` here is refused at once, naming the first's pid.
-    let _lock = tactile_derender::io::lock::OutputLock::acquire(&a.out)?;
+    let mut inputs = vec![a.data.as_path()];
+    inputs.extend(a.init.as_deref());
+    inputs.extend(a.val_data.as_deref());
+    // A run folder from before ledgers: its training state.
+    let earlier_run = |dir: &Path| dir.join("train_state.safetensors").is_file();
+    let _out = crate::outputs::folder_of("--out", &a.out, a.force.force, &inputs, &earlier_run)?;
     tactile_derender::io::lock::check_not_written(&a.data)?;
     if let Some(val) = &a.val_data {
         tactile_derender::io::lock::check_not_written(val)?;

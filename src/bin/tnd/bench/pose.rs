@@ -266,6 +266,7 @@ pub fn run(a: &PoseBenchArgs) -> Result<()> {
     };
     perturb(&mut p, a)?;
     if let (Some(out), Some(src)) = (&a.write_problem, &a.problem) {
+        let _out = crate::outputs::folder("--write-problem", out, false, &[src])?;
         write_problem(out, src, &p)?;
     }
     let pool = rayon::ThreadPoolBuilder::new()

@@ -1,0 +1,428 @@
+//! **Outputs a command owns**: before a command writes, it claims its output ([`claim`]), which resolves symbolic
+//! links (the lock and every write go to the real file), refuses an output that is one of the command's inputs, a
+//! special file, the file-system root, the home folder or the current folder, and refuses to write into what tnd did
+//! not write unless told to (`--force`):
+//!
+//! - **A folder output** carries a ledger, `.tnd-output.json`, written when tnd first claims it: the entries the
+//!   folder held *before* tnd wrote there (a user's files). A new or empty folder has none; a folder that holds other
+//!   files and no ledger is refused without `--force`, naming what is there; with `--force` its files are recorded
+//!   in the ledger. From then on those entries are **protected**: [`super::write_atomic`] and
+//!   [`super::atomic::replace_dir_atomic`] refuse to replace them, for this run and every later one, and a folder
+//!   replaced whole keeps them (hard links, not copies). So `--force` never deletes a user's file.
+//! - **A file output** that exists is replaced only when the command recognises it as its own (a caller's test,
+//!   e.g. the MCAP header tnd writes) or with `--force`.
+//!
+//! The ledger is written before any other file, so a run killed at any point leaves a folder the next run (a resume)
+//! recognises as tnd's.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, PoisonError};
+
+use serde::{Deserialize, Serialize};
+
+use super::lock::{LockError, OutputLock};
+
+/// The ledger file inside a folder output.
+pub const LEDGER_FILE: &str = ".tnd-output.json";
+
+/// Whether an output is one file or a folder of files.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputKind {
+    File,
+    Folder,
+}
+
+/// Why an output was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    #[error(transparent)]
+    Lock(#[from] LockError),
+    #[error("{}: {source}", .path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{flag} {}: {what}; choose another output", .path.display())]
+    Refused {
+        flag: String,
+        path: PathBuf,
+        what: String,
+    },
+    #[error("{flag} {}: holds {} that tnd did not write ({}); choose a new or empty folder, or --force to write beside them (they are kept)", .path.display(), plural(*.count, "entry", "entries"), .names)]
+    Foreign {
+        flag: String,
+        path: PathBuf,
+        count: usize,
+        names: String,
+    },
+    #[error("{flag} {}: exists and was not written by this command; choose another name, or --force to replace it", .path.display())]
+    ForeignFile { flag: String, path: PathBuf },
+}
+
+fn plural(n: usize, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
+}
+
+/// What a command is about to write.
+pub struct Claim<'a> {
+    /// The flag that named the output, for messages (`--out`).
+    pub flag: &'a str,
+    pub path: &'a Path,
+    pub kind: OutputKind,
+    /// `--force`: write into a folder holding others' files (they are kept), or replace a file tnd did not write.
+    pub force: bool,
+    /// The files and folders the command reads: the output may be none of them, nor hold one.
+    pub inputs: Vec<&'a Path>,
+    /// For a file output that exists: whether it is this command's own output (replaced without `--force`); for a
+    /// folder without a ledger: whether an earlier tnd wrote it (then it is adopted whole).
+    pub ours: Option<&'a dyn Fn(&Path) -> bool>,
+}
+
+impl<'a> Claim<'a> {
+    /// A folder output named by `flag`.
+    pub fn folder(flag: &'a str, path: &'a Path) -> Self {
+        Self {
+            flag,
+            path,
+            kind: OutputKind::Folder,
+            force: false,
+            inputs: Vec::new(),
+            ours: None,
+        }
+    }
+
+    /// A file output named by `flag`.
+    pub fn file(flag: &'a str, path: &'a Path) -> Self {
+        Self {
+            kind: OutputKind::File,
+            ..Self::folder(flag, path)
+        }
+    }
+
+    pub fn force(mut self, force: bool) -> Self {
+        self.force = force;
+        self
+    }
+
+    /// Add inputs (paths that do not exist are ignored).
+    pub fn inputs<P: AsRef<Path> + ?Sized + 'a>(
+        mut self,
+        inputs: impl IntoIterator<Item = &'a P>,
+    ) -> Self {
+        self.inputs.extend(inputs.into_iter().map(AsRef::as_ref));
+        self
+    }
+
+    pub fn ours(mut self, test: &'a dyn Fn(&Path) -> bool) -> Self {
+        self.ours = Some(test);
+        self
+    }
+}
+
+/// A claimed output: held (locked) until dropped; its user files stay protected until then.
+#[derive(Debug)]
+pub struct Claimed {
+    path: PathBuf,
+    protected: Vec<PathBuf>,
+    /// The claim made the folder: left without anything in it, it is removed again.
+    created: bool,
+    _lock: OutputLock,
+}
+
+impl Claimed {
+    /// The output's real path (symbolic links resolved): write here.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for Claimed {
+    fn drop(&mut self) {
+        // A run refused after its claim (a bad mesh, a missing model) leaves no folder behind.
+        if self.created && entries(&self.path).is_ok_and(|e| e.is_empty()) {
+            let _ = std::fs::remove_file(self.path.join(LEDGER_FILE));
+            let _ = std::fs::remove_dir(&self.path);
+        }
+        let mut set = PROTECTED.lock().unwrap_or_else(PoisonError::into_inner);
+        for p in &self.protected {
+            if let Some(i) = set.iter().position(|q| q == p) {
+                set.swap_remove(i);
+            }
+        }
+    }
+}
+
+/// Paths this process must not replace or delete (the user files of claimed folders).
+static PROTECTED: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// The protected path `path` is, or lies under, if any ([`Claimed`]).
+pub fn protected_by(path: &Path) -> Option<PathBuf> {
+    let set = PROTECTED.lock().unwrap_or_else(PoisonError::into_inner);
+    if set.is_empty() {
+        return None;
+    }
+    let real = resolve(path).unwrap_or_else(|_| path.to_path_buf());
+    set.iter().find(|p| real.starts_with(p)).cloned()
+}
+
+/// The error a writer gives for a protected path.
+pub(crate) fn protected_error(path: &Path) -> std::io::Error {
+    std::io::Error::new(
+        std::io::ErrorKind::PermissionDenied,
+        format!(
+            "{} was not written by tnd and is kept; move it away or choose another output",
+            path.display()
+        ),
+    )
+}
+
+/// The folder's ledger ([module docs](self)).
+#[derive(Debug, Default, Serialize, Deserialize)]
+struct Ledger {
+    /// Always "tnd".
+    written_by: String,
+    /// Entries the folder held before tnd first wrote there.
+    foreign: BTreeSet<String>,
+}
+
+/// Claim an output ([module docs](self)): check it, lock it, and for a folder write its ledger.
+pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| OutputError::Io { path, source }
+    };
+    let refuse = |what: String| OutputError::Refused {
+        flag: c.flag.to_string(),
+        path: c.path.to_path_buf(),
+        what,
+    };
+    let path = resolve(c.path).map_err(io(c.path))?;
+    if let Some(file) = path.ancestors().skip(1).find(|a| a.is_file()) {
+        return Err(refuse(format!(
+            "{} is a file, not a folder",
+            file.display()
+        )));
+    }
+    if let Ok(meta) = std::fs::metadata(&path) {
+        match (c.kind, file_kind(&meta)) {
+            (_, Some(special)) => {
+                return Err(refuse(format!("is {special}, not a file or folder")))
+            }
+            (OutputKind::Folder, None) if !meta.is_dir() => {
+                return Err(refuse(
+                    "is a file, not a folder (tnd never replaces a file with a folder)".into(),
+                ))
+            }
+            (OutputKind::File, None) if meta.is_dir() => {
+                return Err(refuse("is a folder; give a file name".into()))
+            }
+            _ => {}
+        }
+    }
+    for input in &c.inputs {
+        let Ok(real) = resolve(input) else { continue };
+        if !real.exists() {
+            continue;
+        }
+        if real == path {
+            return Err(refuse(format!("is also an input ({})", input.display())));
+        }
+        if c.kind == OutputKind::Folder && real.starts_with(&path) {
+            return Err(refuse(format!("holds an input ({})", input.display())));
+        }
+    }
+    if c.kind == OutputKind::Folder {
+        if let Some(what) = reserved_folder(&path) {
+            return Err(refuse(format!(
+                "is {what}; tnd writes into a folder of its own"
+            )));
+        }
+    }
+    let lock = OutputLock::acquire(&path)?;
+    let created = c.kind == OutputKind::Folder && !path.exists();
+    let protected = match c.kind {
+        OutputKind::Folder => claim_folder(&c, &path).map_err(|e| match e {
+            FolderRefusal::Io(p, source) => OutputError::Io { path: p, source },
+            FolderRefusal::Foreign(names) => OutputError::Foreign {
+                flag: c.flag.to_string(),
+                path: c.path.to_path_buf(),
+                count: names.len(),
+                names: list(&names),
+            },
+        })?,
+        OutputKind::File => {
+            if path.exists() && !c.force && !c.ours.is_some_and(|ours| ours(&path)) {
+                return Err(OutputError::ForeignFile {
+                    flag: c.flag.to_string(),
+                    path: c.path.to_path_buf(),
+                });
+            }
+            Vec::new()
+        }
+    };
+    PROTECTED
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .extend(protected.iter().cloned());
+    Ok(Claimed {
+        path,
+        protected,
+        created,
+        _lock: lock,
+    })
+}
+
+enum FolderRefusal {
+    Io(PathBuf, std::io::Error),
+    Foreign(Vec<String>),
+}
+
+/// Read or write the ledger of a folder output we hold; the paths of its protected entries.
+fn claim_folder(c: &Claim<'_>, dir: &Path) -> Result<Vec<PathBuf>, FolderRefusal> {
+    let ledger_path = dir.join(LEDGER_FILE);
+    let existing = ledger_of(&ledger_path);
+    let foreign: BTreeSet<String> = match existing {
+        Some(ledger) => ledger.foreign,
+        None => {
+            let entries = entries(dir).map_err(|e| FolderRefusal::Io(dir.to_path_buf(), e))?;
+            // A folder an earlier tnd wrote before ledgers existed, recognised by the command (a dataset's
+            // manifest, a run's checkpoint): all of it is tnd's.
+            let adopted = !entries.is_empty() && c.ours.is_some_and(|ours| ours(dir));
+            if !entries.is_empty() && !c.force && !adopted {
+                return Err(FolderRefusal::Foreign(entries.into_iter().collect()));
+            }
+            let ledger = Ledger {
+                written_by: "tnd".into(),
+                foreign: if adopted { BTreeSet::new() } else { entries },
+            };
+            let text = serde_json::to_string_pretty(&ledger)
+                .map_err(|e| FolderRefusal::Io(ledger_path.clone(), std::io::Error::other(e)))?;
+            super::write_atomic(&ledger_path, format!("{text}\n").as_bytes())
+                .map_err(|e| FolderRefusal::Io(ledger_path.clone(), e))?;
+            ledger.foreign
+        }
+    };
+    Ok(foreign.iter().map(|name| dir.join(name)).collect())
+}
+
+fn ledger_of(path: &Path) -> Option<Ledger> {
+    let text = std::fs::read_to_string(path).ok()?;
+    serde_json::from_str::<Ledger>(&text)
+        .ok()
+        .filter(|l| l.written_by == "tnd")
+}
+
+/// Whether `dir` is a folder tnd claimed (it holds a ledger).
+pub fn is_tnd_folder(dir: &Path) -> bool {
+    ledger_of(&dir.join(LEDGER_FILE)).is_some()
+}
+
+/// A folder's entries, leaving out the lock files and temporary siblings of tnd's writers.
+fn entries(dir: &Path) -> std::io::Result<BTreeSet<String>> {
+    let mut out = BTreeSet::new();
+    let Ok(read) = std::fs::read_dir(dir) else {
+        return Ok(out);
+    };
+    for entry in read {
+        let name = entry?.file_name().to_string_lossy().into_owned();
+        let writer_file = name.starts_with('.')
+            && (name.ends_with(".tnd-lock") || name.contains(".tmp.") || name.contains(".old."));
+        if !writer_file && name != LEDGER_FILE {
+            out.insert(name);
+        }
+    }
+    Ok(out)
+}
+
+fn list(names: &[String]) -> String {
+    const SHOWN: usize = 4;
+    let mut s = names
+        .iter()
+        .take(SHOWN)
+        .cloned()
+        .collect::<Vec<_>>()
+        .join(", ");
+    if names.len() > SHOWN {
+        s.push_str(&format!(", and {} more", names.len() - SHOWN));
+    }
+    s
+}
+
+/// `/`, the home folder, or the current folder or one above it, which no command may take as its output folder.
+fn reserved_folder(path: &Path) -> Option<&'static str> {
+    if path.parent().is_none() {
+        return Some("the file system's root");
+    }
+    let home = std::env::var_os("HOME").and_then(|h| resolve(Path::new(&h)).ok());
+    if home.as_deref() == Some(path) {
+        return Some("your home folder");
+    }
+    let cwd = std::env::current_dir().ok().and_then(|d| resolve(&d).ok());
+    if cwd.is_some_and(|cwd| cwd.starts_with(path)) {
+        return Some("the current folder or one above it");
+    }
+    None
+}
+
+/// A FIFO, socket or device: what it is, in words; `None` for files, folders and links.
+pub fn file_kind(meta: &std::fs::Metadata) -> Option<&'static str> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return Some("a FIFO (named pipe)");
+        }
+        if t.is_socket() {
+            return Some("a socket");
+        }
+        if t.is_block_device() || t.is_char_device() {
+            return Some("a device");
+        }
+    }
+    let _ = meta;
+    None
+}
+
+/// The real path of `path`: absolute, symbolic links resolved, also for a path that does not exist yet (its
+/// nearest existing ancestor is resolved). A link to nowhere is an error naming its target.
+pub fn resolve(path: &Path) -> std::io::Result<PathBuf> {
+    if let Ok(meta) = std::fs::symlink_metadata(path) {
+        if meta.file_type().is_symlink() && !path.exists() {
+            let target = std::fs::read_link(path)?;
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!(
+                    "a symbolic link to {}, which does not exist",
+                    target.display()
+                ),
+            ));
+        }
+        return std::fs::canonicalize(path);
+    }
+    let absolute = std::path::absolute(path)?;
+    let mut rest = Vec::new();
+    let mut base = absolute.as_path();
+    loop {
+        if base.exists() {
+            let mut real = std::fs::canonicalize(base)?;
+            for part in rest.iter().rev() {
+                real.push(part);
+            }
+            return Ok(real);
+        }
+        match (base.parent(), base.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_os_string());
+                base = parent;
+            }
+            _ => return Ok(absolute),
+        }
+    }
+}
+
+#[cfg(test)]
+#[path = "output_tests.rs"]
+mod tests;
