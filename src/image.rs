@@ -88,6 +88,17 @@ pub fn is_measured_depth(d: f32) -> bool {
     d.is_finite() && d > 0.0 && d <= MAX_DEPTH_M
 }
 
+/// What to tell of depths whose typical magnitude is `typical` (beyond [`MAX_DEPTH_M`]), with `fix` the way to
+/// read millimetres: millimetres when they could be (a tactile sensor's depths are up to ~0.2 m: 200 mm), and
+/// otherwise that they are no depths at all (1e30 is not "around 1000000000000000000000000000000 m: millimetres?").
+pub fn implausible_depth_units(typical: f32, fix: &str) -> String {
+    if typical <= 2000.0 {
+        format!("depths around {typical} m: millimetres? {fix}")
+    } else {
+        format!("depths around {typical:e}: no depth camera's depths in metres or millimetres")
+    }
+}
+
 /// The median magnitude of the finite, non-zero `values` (`None` without any): the scale a frame is in, which a
 /// few out-of-range pixels (a driver's no-return sentinel) do not move.
 pub fn typical_magnitude(values: &[f32]) -> Option<f32> {

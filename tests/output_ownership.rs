@@ -438,6 +438,23 @@ fn a_symbolic_link_is_the_output_it_names() {
         .unwrap()
         .file_type()
         .is_symlink());
+    // A reader of a records file an evaluation is still writing is told so, not given the partial file.
+    let held = tactile_derender::io::lock::OutputLock::acquire(&d.join("r_real.jsonl")).unwrap();
+    let o = tnd_in(d, &["posterior", "--records", "r_link.jsonl"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("being written"),
+        "{}",
+        stderr(&o)
+    );
+    drop(held);
+    // An empty records file says it is empty.
+    std::fs::write(d.join("empty.jsonl"), "").unwrap();
+    let o = tnd_in(d, &["posterior", "--records", "empty.jsonl"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("empty"),
+        "{}",
+        stderr(&o)
+    );
     assert!(std::fs::read_to_string(d.join("r_real.jsonl"))
         .unwrap()
         .contains("settings"));

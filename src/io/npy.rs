@@ -119,8 +119,9 @@ pub fn read_metres_image(path: &Path) -> Result<Image, NpyError> {
     if let Some(typical) =
         crate::image::typical_magnitude(&a.data).filter(|&t| t > PLAUSIBLE_METRES)
     {
-        return Err(units(format!(
-            "values around {typical}: images here are metres, and no depth of a tactile sensor is that large — millimetres? divide by 1000"
+        return Err(units(crate::image::implausible_depth_units(
+            typical,
+            "images here are metres: divide by 1000",
         )));
     }
     let mut img = image_of(path, a)?;
@@ -506,6 +507,13 @@ mod tests {
         std::fs::write(&p, encode_f32(&[1, 2], &[7.0, 12.0])).unwrap();
         let err = read_metres_image(&p).unwrap_err().to_string();
         assert!(err.contains("millimetres"), "{err}");
+        // Values no unit makes depths are said to be none (not "around 1000000000000000000000000000000 m").
+        std::fs::write(&p, encode_f32(&[1, 2], &[1e30, 1e30])).unwrap();
+        let err = read_metres_image(&p).unwrap_err().to_string();
+        assert!(
+            err.contains("1e30") && err.contains("no depth camera"),
+            "{err}"
+        );
         // Metres are read as they are.
         std::fs::write(&p, encode_f32(&[1, 2], &[0.007, -0.012])).unwrap();
         assert_eq!(read_metres_image(&p).unwrap().data, vec![0.007, -0.012]);

@@ -285,3 +285,15 @@ fn a_short_recording_never_calibrates_on_its_pressed_frame() {
     .unwrap();
     assert_eq!(processed.reference_frames, vec![0, 2]);
 }
+
+/// Frames of constant depth show no membrane: the calibration is refused, naming the impossible inflation, instead
+/// of writing a sensor inflated 2.3e-9 m with a warning that it is "30.0 mm from the given 30.0 mm".
+#[test]
+fn constant_frames_give_no_sensor() {
+    let (w, h) = (224, 171);
+    let frames = vec![Image::filled(w, h, 0.09); 3];
+    let e = calibrate_references(frames, &SimConfig::default(), &CalibrateConfig::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cannot exist") && e.contains("inflation"), "{e}");
+}

@@ -341,8 +341,9 @@ impl Recording {
                 {
                     return Err(RecordingError::Format {
                         path: file.clone(),
-                        message: format!(
-                            "depths around {typical} m: millimetres? read .npy/.npz frames with --npy-scale 0.001"
+                        message: crate::image::implausible_depth_units(
+                            typical,
+                            "read .npy/.npz frames with --npy-scale 0.001",
                         ),
                     });
                 }

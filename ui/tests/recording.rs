@@ -172,6 +172,24 @@ fn every_contact_frame_is_tracked_in_the_background_and_saved_as_csv() {
     let csv = std::fs::read_to_string(dir.path().join("press_track.csv")).unwrap();
     assert_eq!(csv.lines().count(), with_contact.len() + 1);
     assert!(csv.starts_with("frame,stamp_ns,contact_px,press_m"));
+    // Saved again, its own file is replaced; a file of the user's of that name is not.
+    h.get_by_label("Save track CSV").click();
+    h.run_ok();
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    let users = dir.path().join("press_track.csv");
+    std::fs::write(&users, "my notes\n").unwrap();
+    h.get_by_label("Save track CSV").click();
+    h.run_ok();
+    assert!(
+        h.state()
+            .errors
+            .iter()
+            .any(|e| e.contains("not a track tnd saved")),
+        "{:?}",
+        h.state().errors
+    );
+    assert_eq!(std::fs::read_to_string(&users).unwrap(), "my notes\n");
+    h.state_mut().errors.clear();
     // `tnd recording track` with the same settings (the sensor as the workbench has it: not calibrated from the
     // recording) gives the same rows: the same estimate, spread and posterior, bit for bit.
     let out = std::process::Command::new(support::tnd_binary())

@@ -173,6 +173,34 @@ fn exports_the_depth_image_as_png_and_npy() {
     );
     let npy = tactile_derender::io::npy::read_image(&dir.path().join("out/depth.npy")).unwrap();
     assert_eq!(npy, h.state().sim.as_ref().unwrap().output.depth);
+    // Exported again, its own files are replaced. Into a folder of the user's, the user's file of that name is
+    // kept and the export says so; the user's other files stay too.
+    h.get_all_by_label("PNG").next().unwrap().click();
+    h.run_ok();
+    assert!(h.state().errors.is_empty(), "{:?}", h.state().errors);
+    let mine = dir.path().join("mine");
+    std::fs::create_dir(&mine).unwrap();
+    std::fs::write(mine.join("depth.png"), "my picture").unwrap();
+    std::fs::write(mine.join("notes.txt"), "notes").unwrap();
+    h.state_mut().state.view.export_dir = mine.clone();
+    h.get_all_by_label("PNG").next().unwrap().click();
+    h.run_ok();
+    assert!(
+        h.state()
+            .errors
+            .iter()
+            .any(|e| e.contains("not written by tnd")),
+        "{:?}",
+        h.state().errors
+    );
+    assert_eq!(
+        std::fs::read(mine.join("depth.png")).unwrap(),
+        b"my picture"
+    );
+    h.get_all_by_label("npy").next().unwrap().click();
+    h.run_ok();
+    assert!(mine.join("depth.npy").is_file());
+    assert_eq!(std::fs::read(mine.join("notes.txt")).unwrap(), b"notes");
 }
 
 #[test]

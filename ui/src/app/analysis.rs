@@ -333,7 +333,14 @@ impl WorkbenchApp {
             .result
             .as_ref()
             .ok_or_else(|| anyhow!("register the samples first"))?;
-        let dir = self.state.view.export_dir.join("pose");
+        let claimed = tactile_derender::io::output::claim(
+            tactile_derender::io::output::Claim::folder(
+                "export folder",
+                &self.state.view.export_dir.join("pose"),
+            )
+            .force(true),
+        )?;
+        let dir = claimed.path().to_path_buf();
         r.report.write(&dir)?;
         let req = r
             .inputs

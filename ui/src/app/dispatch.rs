@@ -411,8 +411,15 @@ impl WorkbenchApp {
             .as_ref()
             .ok_or_else(|| anyhow!("nothing simulated yet"))?;
         let img = kind.image(&result.output);
-        let dir = &self.state.view.export_dir;
-        let path = dir.join(format!(
+        // Files of the user's in the export folder are kept, never replaced: an export of the same name stops.
+        let claimed = tactile_derender::io::output::claim(
+            tactile_derender::io::output::Claim::folder(
+                "export folder",
+                &self.state.view.export_dir,
+            )
+            .force(true),
+        )?;
+        let path = claimed.path().join(format!(
             "{}.{}",
             kind.file_stem(),
             if png { "png" } else { "npy" }

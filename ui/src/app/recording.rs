@@ -1,7 +1,7 @@
 //! The app's side of the Recording tab's jobs: loading a recording, tracking its contact frames, calibrating the
 //! sensor from it — starting, cancelling and taking in each job's messages, where they touch several views.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
@@ -295,6 +295,21 @@ impl WorkbenchApp {
         // Beside the recording: a frame folder's track goes next to the folder, not into it.
         let dir = rec.parent().map(PathBuf::from).unwrap_or_default();
         let path = dir.join(format!("{stem}_track.csv"));
+        // Replace only a track saved before (its header), never a file of the user's of that name.
+        let header = tactile_derender::pipeline::track::FrameTrack::csv_header();
+        let ours = |p: &Path| {
+            std::fs::read_to_string(p).is_ok_and(|t| t.lines().next() == Some(header.as_str()))
+        };
+        let _claimed = tactile_derender::io::output::claim(
+            tactile_derender::io::output::Claim::file("track", &path).ours(&ours),
+        )
+        .map_err(|e| match e {
+            tactile_derender::io::output::OutputError::ForeignFile { .. } => anyhow!(
+                "{} exists and is not a track tnd saved: move it away to save the track there",
+                path.display()
+            ),
+            e => e.into(),
+        })?;
         tactile_derender::io::write_atomic(
             &path,
             tactile_derender::pipeline::track::FrameTrack::csv(&view.rows).as_bytes(),
