@@ -595,6 +595,28 @@ fn a_mis_scaled_mesh_is_refused_before_any_work() {
     assert!(!dir.path().join("out").exists());
     let o = sim(&["--units", "mm"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // A fit size past any object (the vertices overflowed and the simulation hung), and a set's object, which
+    // the set sizes.
+    let o = sim(&["--fit-size", "1e308"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("above 10 m"), "{err}");
+    let o = tnd_in(
+        dir.path(),
+        &[
+            "sim",
+            "--object",
+            "cross_w12_s50",
+            "--fit-size",
+            "0.05",
+            "--out",
+            "set",
+        ],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("mesh files only"),
+        "{err}"
+    );
 }
 
 /// A sensor whose contact lies nearer the camera than the default's (inflation 15 mm, camera 25 mm behind the base):

@@ -466,11 +466,14 @@ fn a_symbolic_link_is_the_output_it_names() {
 fn impossible_sensors_and_overflowing_posteriors_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let cases: [(&[&str], &str); 4] = [
+    let cases: [(&[&str], &str); 7] = [
         (&["--inflation", "10"], "elastomer.inflation"),
         (&["--camera-offset", "100"], "mount.position"),
         (&["--noise-std", "10"], "signature.noise_std"),
         (&["--shadow-px", "100000"], "signature.shadow_px"),
+        (&["--footprint=1e308x0.08"], "1e308 m"),
+        (&["--sensor-yaw", "NaN"], "--sensor-yaw"),
+        (&["--resolution", "2048x2048"], "larger than 1024"),
     ];
     for (flags, setting) in cases {
         let mut args = vec!["sim", "--object", OBJECT, "--out", "s"];
@@ -511,4 +514,89 @@ fn impossible_sensors_and_overflowing_posteriors_are_refused() {
             stderr(&o)
         );
     }
+}
+
+/// What a fresh round of hostile probes found, each refused in a line instead of data loss, a hang or a blow-up:
+/// a user's folder that merely holds files of tnd's names is not taken for tnd's (and a refused run does not mark it
+/// so), a model import may not replace its input's weights, a FIFO is no recording or records file, and a press
+/// sequence is not an hour of frames.
+#[cfg(unix)]
+#[test]
+fn hostile_inputs_are_refused_in_a_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let users = d.join("mine");
+    std::fs::create_dir(&users).unwrap();
+    std::fs::write(users.join("objects.json"), "precious").unwrap();
+    std::fs::write(users.join("manifest.json"), "{}").unwrap();
+    std::fs::write(users.join("depth.npy"), "precious").unwrap();
+    let before = tree(&users);
+    for args in [
+        vec!["objects", "export", "mine"],
+        vec!["dataset", "gen", "-q", "--pairs", "4", "--out", "mine"],
+        vec!["sim", "--object", OBJECT, "--out", "mine"],
+    ] {
+        let o = tnd_in(d, &args);
+        assert!(!o.status.success(), "{args:?} wrote into the user's folder");
+        assert!(stderr(&o).contains("did not write"), "{}", stderr(&o));
+        assert_eq!(tree(&users), before, "{args:?}");
+    }
+    ok(
+        d,
+        &["model", "export", "--model", "small", "--diffusers", "m"],
+    );
+    let weights = d.join("m/diffusion_pytorch_model.safetensors");
+    let kept = std::fs::read(&weights).unwrap();
+    let o = tnd_in(
+        d,
+        &[
+            "model",
+            "import",
+            "--diffusers",
+            "m",
+            "--out",
+            "m/diffusion_pytorch_model.safetensors",
+            "--force",
+        ],
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("part of an input"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(std::fs::read(&weights).unwrap(), kept);
+    let fifo = d.join("fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    for args in [
+        vec!["recording", "info", "fifo"],
+        vec!["posterior", "--records", "fifo"],
+    ] {
+        let o = tnd_in(d, &args);
+        assert!(
+            !o.status.success() && stderr(&o).contains("FIFO"),
+            "{args:?}: {}",
+            stderr(&o)
+        );
+    }
+    let o = tnd_in(
+        d,
+        &[
+            "recording",
+            "simulate",
+            "big.mcap",
+            "--object",
+            OBJECT,
+            "--rest",
+            "100000000",
+        ],
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("3000 frames"),
+        "{}",
+        stderr(&o)
+    );
 }

@@ -8,6 +8,8 @@ use std::path::Path;
 pub const MAX_MESH_BYTES: u64 = 1 << 30;
 /// Largest settings file read (sensor, posterior calibration), bytes.
 pub const MAX_SETTINGS_BYTES: u64 = 16 << 20;
+/// Largest records file read (`tnd eval --records`, `--json` outputs), bytes: ~100 000 pairs.
+pub const MAX_RECORDS_BYTES: u64 = 1 << 30;
 /// Largest array file read (.npy), bytes: a 4096 x 4096 float64 image is 128 MiB.
 pub const MAX_ARRAY_BYTES: u64 = 1 << 30;
 

@@ -221,8 +221,13 @@ pub fn decode(bytes: &[u8]) -> Result<NpyArray, NpyError> {
     })?;
     let needed = count.checked_mul(size);
     if needed != Some(body.len()) {
+        let hint = match needed {
+            Some(n) if n > body.len() => "truncated file?",
+            Some(_) => "more data than the shape holds: a wrong shape in the header?",
+            None => "a wrong shape in the header?",
+        };
         return Err(fmt(&format!(
-            "data holds {} bytes, shape {:?} of {descr} needs {} (truncated file?)",
+            "data holds {} bytes, shape {:?} of {descr} needs {} ({hint})",
             body.len(),
             shape,
             needed.map_or_else(

@@ -128,6 +128,9 @@ pub struct Claimed {
     protected: Vec<PathBuf>,
     /// The claim made the folder: left without anything in it, it is removed again.
     created: bool,
+    /// The claim wrote the folder's ledger: what the folder held then. A run that wrote nothing (refused after its
+    /// claim) takes the ledger back, so that a refusal never marks a user's folder as tnd's.
+    fresh_ledger: Option<BTreeSet<String>>,
     _lock: OutputLock,
 }
 
@@ -140,10 +143,14 @@ impl Claimed {
 
 impl Drop for Claimed {
     fn drop(&mut self) {
-        // A run refused after its claim (a bad mesh, a missing model) leaves no folder behind.
-        if self.created && entries(&self.path).is_ok_and(|e| e.is_empty()) {
-            let _ = std::fs::remove_file(self.path.join(LEDGER_FILE));
-            let _ = std::fs::remove_dir(&self.path);
+        // A run refused after its claim (a bad mesh, a missing model) leaves no ledger, and no folder it made.
+        if let Some(before) = &self.fresh_ledger {
+            if entries(&self.path).is_ok_and(|now| now == *before) {
+                let _ = std::fs::remove_file(self.path.join(LEDGER_FILE));
+                if self.created {
+                    let _ = std::fs::remove_dir(&self.path);
+                }
+            }
         }
         let mut set = PROTECTED.lock().unwrap_or_else(PoisonError::into_inner);
         for p in &self.protected {
@@ -170,7 +177,7 @@ pub fn protected_by(path: &Path) -> Option<PathBuf> {
 /// The error a writer gives for a protected path.
 pub(crate) fn protected_error(path: &Path) -> std::io::Error {
     std::io::Error::new(
-        std::io::ErrorKind::PermissionDenied,
+        std::io::ErrorKind::AlreadyExists,
         format!(
             "{} was not written by tnd and is kept; move it away or choose another output",
             path.display()
@@ -232,6 +239,10 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
         if c.kind == OutputKind::Folder && real.starts_with(&path) {
             return Err(refuse(format!("holds an input ({})", input.display())));
         }
+        // A file of an input folder (a diffusers folder's weights) is part of that input.
+        if c.kind == OutputKind::File && real.is_dir() && path.starts_with(&real) && path.exists() {
+            return Err(refuse(format!("is part of an input ({})", input.display())));
+        }
     }
     if c.kind == OutputKind::Folder {
         if let Some(what) = reserved_folder(&path) {
@@ -242,7 +253,7 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
     }
     let lock = OutputLock::acquire(&path)?;
     let created = c.kind == OutputKind::Folder && !path.exists();
-    let protected = match c.kind {
+    let (protected, fresh_ledger) = match c.kind {
         OutputKind::Folder => claim_folder(&c, &path).map_err(|e| match e {
             FolderRefusal::Io(p, source) => OutputError::Io { path: p, source },
             FolderRefusal::Foreign(names) => OutputError::Foreign {
@@ -259,7 +270,7 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
                     path: c.path.to_path_buf(),
                 });
             }
-            Vec::new()
+            (Vec::new(), None)
         }
     };
     PROTECTED
@@ -270,6 +281,7 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
         path,
         protected,
         created,
+        fresh_ledger,
         _lock: lock,
     })
 }
@@ -279,10 +291,14 @@ enum FolderRefusal {
     Foreign(Vec<String>),
 }
 
-/// Read or write the ledger of a folder output we hold; the paths of its protected entries.
-fn claim_folder(c: &Claim<'_>, dir: &Path) -> Result<Vec<PathBuf>, FolderRefusal> {
+/// Read or write the ledger of a folder output we hold; the paths of its protected entries, and what the folder held
+/// when this claim wrote its ledger.
+type FolderClaim = (Vec<PathBuf>, Option<BTreeSet<String>>);
+
+fn claim_folder(c: &Claim<'_>, dir: &Path) -> Result<FolderClaim, FolderRefusal> {
     let ledger_path = dir.join(LEDGER_FILE);
     let existing = ledger_of(&ledger_path);
+    let mut fresh = None;
     let foreign: BTreeSet<String> = match existing {
         Some(ledger) => ledger.foreign,
         None => {
@@ -295,16 +311,25 @@ fn claim_folder(c: &Claim<'_>, dir: &Path) -> Result<Vec<PathBuf>, FolderRefusal
             }
             let ledger = Ledger {
                 written_by: "tnd".into(),
-                foreign: if adopted { BTreeSet::new() } else { entries },
+                foreign: if adopted {
+                    BTreeSet::new()
+                } else {
+                    entries.clone()
+                },
             };
             let text = serde_json::to_string_pretty(&ledger)
                 .map_err(|e| FolderRefusal::Io(ledger_path.clone(), std::io::Error::other(e)))?;
             super::write_atomic(&ledger_path, format!("{text}\n").as_bytes())
                 .map_err(|e| FolderRefusal::Io(ledger_path.clone(), e))?;
+            fresh = Some(entries);
             ledger.foreign
         }
     };
-    Ok(foreign.iter().map(|name| dir.join(name)).collect())
+    // A name is one entry of the folder: an empty or a path-like one (hand-edited) protects nothing more.
+    let names = foreign
+        .iter()
+        .filter(|n| !n.is_empty() && *n != "." && *n != ".." && !n.contains(['/', '\\']));
+    Ok((names.map(|name| dir.join(name)).collect(), fresh))
 }
 
 fn ledger_of(path: &Path) -> Option<Ledger> {

@@ -190,3 +190,48 @@ fn a_fifo_is_refused_and_carried_across_a_replacement_unread() {
     assert!(t("linked_dir").is_symlink(), "a linked folder stays a link");
     assert!(out.join("model.json").is_file());
 }
+
+#[test]
+fn a_claim_that_writes_nothing_takes_its_ledger_back() {
+    // A command refused after its claim (here: nothing written) never leaves a user's folder marked as tnd's, so the
+    // next command still refuses to write there without --force.
+    let tmp = tempfile::tempdir().unwrap();
+    let proj = tmp.path().join("proj");
+    user_tree(&proj);
+    drop(claim(Claim::folder("--out", &proj).force(true)).unwrap());
+    assert!(!is_tnd_folder(&proj));
+    assert!(claim(Claim::folder("--out", &proj)).is_err());
+    assert_user_tree(&proj);
+    // Once something was written, the ledger stays (a resume after a kill finds it).
+    let c = claim(Claim::folder("--out", &proj).force(true)).unwrap();
+    write_atomic(&c.path().join("out.json"), b"{}").unwrap();
+    drop(c);
+    assert!(is_tnd_folder(&proj));
+    // A hand-edited ledger naming "" or a path protects no more than its entries.
+    std::fs::write(
+        proj.join(LEDGER_FILE),
+        r#"{"written_by": "tnd", "foreign": ["", "../x", "README.md"]}"#,
+    )
+    .unwrap();
+    let c = claim(Claim::folder("--out", &proj)).unwrap();
+    write_atomic(&c.path().join("out.json"), b"{}").unwrap();
+    assert!(write_atomic(&c.path().join("README.md"), b"x").is_err());
+    drop(c);
+    assert_user_tree(&proj);
+}
+
+#[test]
+fn a_file_of_an_input_folder_is_part_of_the_input() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = tmp.path().join("model");
+    std::fs::create_dir(&model).unwrap();
+    let weights = model.join("weights.safetensors");
+    std::fs::write(&weights, "weights").unwrap();
+    let e = claim(Claim::file("--out", &weights).force(true).inputs([&model]))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("part of an input"), "{e}");
+    // A new file beside the input's files is no part of it.
+    drop(claim(Claim::file("--out", &model.join("notes.json")).inputs([&model])).unwrap());
+    assert_eq!(std::fs::read(&weights).unwrap(), b"weights");
+}

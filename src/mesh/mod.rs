@@ -188,6 +188,9 @@ pub struct Mesh {
     triangles: Vec<[u32; 3]>,
 }
 
+/// Largest size, metres, a mesh may be fitted to (`--fit-size`).
+pub const MAX_FIT_SIZE_M: f64 = 10.0;
+
 /// Summary of a mesh's topology, reported to users (e.g. `tnd objects`, the workbench).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MeshReport {
@@ -332,6 +335,15 @@ impl Mesh {
                 return Err(MeshError::Invalid {
                     context: context.to_string(),
                     message: format!("cannot fit a mesh of extent {extent} m to size {size} m"),
+                });
+            }
+            // Beyond this the vertices (f32) overflow, and no tactile sensor presses such an object.
+            if size > MAX_FIT_SIZE_M {
+                return Err(MeshError::Invalid {
+                    context: context.to_string(),
+                    message: format!(
+                        "fit size {size:e} m is above {MAX_FIT_SIZE_M} m: sizes are in metres"
+                    ),
                 });
             }
             scale *= size / extent;

@@ -100,19 +100,20 @@ impl EvalLog {
             settings,
             pairs: BTreeMap::new(),
         };
-        let text = match std::fs::read_to_string(path) {
-            Ok(text) => text,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                log.write()?;
-                return Ok(log);
-            }
-            Err(source) => {
-                return Err(EvalLogError::Read {
-                    path: path.to_path_buf(),
-                    source,
-                })
-            }
-        };
+        let text =
+            match crate::io::input::read_text_capped(path, crate::io::input::MAX_RECORDS_BYTES) {
+                Ok(text) => text,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                    log.write()?;
+                    return Ok(log);
+                }
+                Err(source) => {
+                    return Err(EvalLogError::Read {
+                        path: path.to_path_buf(),
+                        source,
+                    })
+                }
+            };
         let format = |line: usize, problem: String| EvalLogError::Format {
             path: path.to_path_buf(),
             line,
@@ -152,10 +153,11 @@ impl EvalLog {
     /// The records of the log at `path`, whatever settings it was written with, in split and index order (failed
     /// pairs left out), with its settings.
     pub fn read(path: &Path) -> Result<(Value, Vec<PairRecord>), EvalLogError> {
-        let text = std::fs::read_to_string(path).map_err(|source| EvalLogError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::io::input::read_text_capped(path, crate::io::input::MAX_RECORDS_BYTES)
+            .map_err(|source| EvalLogError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
         if text.trim().is_empty() {
             return Err(EvalLogError::Format {
                 path: path.to_path_buf(),

@@ -113,11 +113,14 @@ fn write_files(model: &DiffusionModel, dir: &Path) -> Result<Vec<PathBuf>, Model
     Ok(paths)
 }
 
+/// The first line of the README an export writes: how `tnd model export` knows a folder it exported.
+pub const README_TITLE: &str = "# tactile-derender model (diffusers folder)";
+
 fn readme(model: &DiffusionModel) -> String {
     let cfg = model.config();
     let t = &cfg.tactile_derender;
     format!(
-        "# tactile-derender model (diffusers folder)\n\n\
+        "{README_TITLE}\n\n\
          Written by `tnd model export --diffusers` from `{source}`.\n\n\
          ```python\n\
          from diffusers import UNet2DModel, DDIMScheduler\n\

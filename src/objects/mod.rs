@@ -85,7 +85,7 @@ pub enum ObjectError {
         #[source]
         source: MeshError,
     },
-    #[error("{path}: cannot write: {source} (check that the directory is writable)")]
+    #[error("{path}: cannot write: {source}")]
     Write {
         path: PathBuf,
         #[source]

@@ -93,6 +93,12 @@ impl ObjectSpec {
         let set = ObjectSet::open(&self.objects)?;
         if let Some(entry) = set.find(&self.object) {
             let symmetry = entry.symmetry;
+            if self.fit_size.is_some() || self.units != Units::M {
+                return Err(PipelineError::Scale(format!(
+                    "{}: an object of the set, sized by it; --units and --fit-size apply to mesh files only",
+                    self.object
+                )));
+            }
             return Ok(LoadedObject {
                 name: self.object.clone(),
                 mesh: set.mesh(&self.object)?,

@@ -142,6 +142,12 @@ impl Recording {
             path: path.to_path_buf(),
             message,
         };
+        // A FIFO would block the open itself, a device never end: only regular files are recordings.
+        let meta = std::fs::metadata(path)
+            .map_err(|e| RecordingError::io(path, crate::io::input::explained(path, e)))?;
+        if let Some(kind) = crate::io::output::file_kind(&meta) {
+            return Err(bad(format!("{kind}, not a recording")));
+        }
         let mut file = std::fs::File::open(path)
             .map_err(|e| RecordingError::io(path, crate::io::input::explained(path, e)))?;
         let mut magic = [0u8; 5];

@@ -120,6 +120,9 @@ impl Default for CameraConfig {
     }
 }
 
+/// Largest model (rendered) resolution, pixels a side.
+pub const MAX_RESOLUTION: usize = 1024;
+
 impl CameraConfig {
     /// The crop of the native image in native pixels.
     pub fn crop(&self) -> Intrinsics {
@@ -140,17 +143,38 @@ impl CameraConfig {
                 format!("resolution {w}x{h} must be a positive multiple of 8 in both directions"),
             ));
         }
-        if w > 4096 || h > 4096 {
+        // The model's resolution (a 1024 x 1024 simulation takes ~1 GB and seconds a contact; larger ones hours).
+        if w > MAX_RESOLUTION || h > MAX_RESOLUTION {
             return Err(InvalidSetting::new(
                 "camera.resolution",
-                format!("resolution {w}x{h} is larger than 4096 pixels"),
+                format!("resolution {w}x{h} is larger than {MAX_RESOLUTION} pixels"),
             ));
         }
         let n = &self.native;
-        if !(n.fx > 0.0 && n.fy > 0.0 && n.cx.is_finite() && n.cy.is_finite()) {
+        if n.width == 0 || n.height == 0 || n.width > 4096 || n.height > 4096 {
             return Err(InvalidSetting::new(
                 "camera.native",
-                "focal lengths must be positive and the principal point finite",
+                format!(
+                    "the native image {}x{} must be 1 to 4096 pixels a side",
+                    n.width, n.height
+                ),
+            ));
+        }
+        // A depth camera's focal length in pixels: its field of view between ~1° and ~170° across the image.
+        let widest = n.width.max(n.height) as f64;
+        let focal_ok = |f: f64| f.is_finite() && f >= 0.04 * widest && f <= 60.0 * widest;
+        if !(focal_ok(n.fx) && focal_ok(n.fy) && n.cx.is_finite() && n.cy.is_finite()) {
+            return Err(InvalidSetting::new(
+                "camera.native",
+                format!(
+                    "focal lengths {} and {} px must be between {} and {} px for a {}x{} image (fields of view of ~1 to ~170 degrees), the principal point finite",
+                    n.fx,
+                    n.fy,
+                    0.04 * widest,
+                    60.0 * widest,
+                    n.width,
+                    n.height
+                ),
             ));
         }
         let (r0, r1) = self.crop_rows;

@@ -24,8 +24,14 @@ pub const MAX_NOISE_STD_M: f64 = 0.01;
 /// The least share of the camera's pixels that must see the membrane.
 pub const MIN_MEMBRANE_SHARE: f64 = 0.25;
 
+/// A length for a message: millimetres for a sensor's sizes, scientific notation in metres for absurd ones (1e308 is
+/// not 309 digits).
 fn mm(m: f64) -> String {
-    format!("{:.1} mm", m * 1e3)
+    if m.is_finite() && m != 0.0 && !(1e-6..1e3).contains(&m.abs()) {
+        format!("{m:e} m")
+    } else {
+        format!("{:.1} mm", m * 1e3)
+    }
 }
 
 /// The bounds that need no mesh: membrane size, camera distance, noise and shadow width.
@@ -40,7 +46,7 @@ pub fn check_settings(config: &SimConfig) -> Result<(), InvalidSetting> {
             if !(v.is_finite() && (lo..=hi).contains(&v)) {
                 return Err(InvalidSetting::new(
                     name,
-                    format!("{v} m is outside {lo}..{hi} m"),
+                    format!("{} is outside {lo}..{hi} m", mm(v)),
                 ));
             }
         }
@@ -196,6 +202,9 @@ mod tests {
         assert!(e.contains("mount.position") && e.contains("behind"), "{e}");
         let e = refused(|c| c.elastomer.inflation = 10.0);
         assert!(e.contains("inflation") && e.contains("200.0 mm"), "{e}");
+        // Absurd sizes in scientific notation, not hundreds of digits.
+        let e = refused(|c| c.elastomer.footprint_x = 1e308);
+        assert!(e.contains("footprint_x") && e.contains("1e308 m"), "{e}");
         let e = refused(|c| c.elastomer.inflation = 2.3e-9);
         assert!(e.contains("inflation"), "{e}");
         let e = refused(|c| c.mount.position = [0.0, 0.0, -100.0]);

@@ -179,6 +179,8 @@ impl Simulator {
     }
 
     fn with_intrinsics(config: SimConfig, intrinsics: Intrinsics) -> Result<Self, SimError> {
+        // The bounds that need no mesh first: an absurd membrane is not built.
+        bounds::check_settings(&config).map_err(SimError::Bounds)?;
         config.signature.validate().map_err(SimError::Signature)?;
         config
             .depth_camera

@@ -26,6 +26,12 @@ pub fn check_press(flag: &str, press_m: f64, positive: bool) -> Result<()> {
             if positive { "positive" } else { "non-negative" }
         ));
     }
+    // Not millimetres either (a metre of press): no "did you mean", and no 309 digits for 1e308.
+    if press_m > 1000.0 {
+        return Err(anyhow!(
+            "{flag} {press_m:e} m is deeper than the whole sensor (at most {MAX_PRESS_M} m); depths are in metres"
+        ));
+    }
     if press_m > MAX_PRESS_M {
         return Err(anyhow!(
             "{flag} {press_m} m is deeper than the whole sensor; depths are in metres (did you mean {}?)",

@@ -217,10 +217,9 @@ fn say_how_to_resume_when_interrupted() {
     }
 }
 
-/// A dataset folder from before ledgers: its manifest or its run's progress file.
+/// A dataset folder from before ledgers: its manifest or its run's progress file, of tnd's format.
 fn earlier_dataset(dir: &Path) -> bool {
-    use tactile_derender::dataset::manifest::{MANIFEST_FILE, PROGRESS_FILE};
-    dir.join(MANIFEST_FILE).is_file() || dir.join(PROGRESS_FILE).is_file()
+    tactile_derender::dataset::manifest::written_by_tnd(dir)
 }
 
 fn gen(a: GenArgs) -> Result<()> {

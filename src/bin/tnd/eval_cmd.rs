@@ -436,8 +436,11 @@ fn tables_from(files: &[String]) -> Result<Vec<PaperEntry>> {
             Some((l, p)) if !l.is_empty() => (Some(l), p),
             _ => (None, spec.as_str()),
         };
-        let text =
-            std::fs::read_to_string(path).map_err(|e| anyhow!("{path}: cannot read: {e}"))?;
+        let text = tactile_derender::io::input::read_text_capped(
+            Path::new(path),
+            tactile_derender::io::input::MAX_RECORDS_BYTES,
+        )
+        .map_err(|e| anyhow!("{path}: cannot read: {e}"))?;
         let mut splits = 0;
         for (n, line) in text
             .lines()

@@ -107,11 +107,10 @@ pub fn run(a: ModelArgs) -> Result<()> {
         ModelCommand::Verify(v) => verify(&v),
         ModelCommand::Diagnose(d) => diagnose(&d),
         ModelCommand::Export(e) => {
-            // A model folder exported before ledgers: the three files of a diffusers model.
+            // A model folder tnd exported before ledgers: the README it writes.
             let exported = |dir: &Path| {
-                ["config.json", "diffusion_pytorch_model.safetensors"]
-                    .iter()
-                    .all(|f| dir.join(f).is_file())
+                std::fs::read_to_string(dir.join("README.md"))
+                    .is_ok_and(|t| t.starts_with(diffusers_folder::README_TITLE))
             };
             let _out = crate::outputs::folder_of(
                 "--diffusers",

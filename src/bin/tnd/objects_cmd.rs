@@ -94,11 +94,6 @@ pub enum ObjectsCommand {
     },
 }
 
-/// An object set folder tnd wrote before ledgers: its objects.json.
-fn earlier_set(dir: &Path) -> bool {
-    dir.join(MANIFEST_FILE).is_file()
-}
-
 pub fn run(a: ObjectsArgs) -> Result<()> {
     match a.command {
         ObjectsCommand::List { objects } => {
@@ -115,7 +110,7 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
             }
         }
         ObjectsCommand::Export { dir, force } => {
-            let _out = crate::outputs::folder_of("dir", &dir, force.force, &[], &earlier_set)?;
+            let _out = crate::outputs::folder("dir", &dir, force.force, &[])?;
             let set = ObjectSet::builtin();
             set.export(&dir)?;
             println!(
@@ -231,7 +226,7 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
             force,
         } => {
             let inputs: Vec<&Path> = include.iter().map(|(p, _)| p.as_path()).collect();
-            let _out = crate::outputs::folder_of("dir", &dir, force.force, &inputs, &earlier_set)?;
+            let _out = crate::outputs::folder("dir", &dir, force.force, &inputs)?;
             let config = ProceduralConfig {
                 count,
                 seed,

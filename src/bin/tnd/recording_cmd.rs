@@ -180,6 +180,19 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     let loaded = a.object.load()?;
     loaded.check_scale("a recording")?;
     let object = PreparedObject::new(loaded.mesh)?;
+    // The recording is built in memory: a press sequence, not an hour of frames.
+    const MAX_FRAMES: usize = 3000;
+    if a.rest
+        .saturating_mul(2)
+        .saturating_add(a.ramp.saturating_mul(2))
+        > MAX_FRAMES
+    {
+        anyhow::bail!(
+            "--rest {} --ramp {}: a press sequence of at most {MAX_FRAMES} frames (100 s at 30 fps) is simulated",
+            a.rest,
+            a.ramp
+        );
+    }
     let mut seq = PressSequence::down_and_up(pose, a.max_press, a.rest, a.ramp);
     seq.encoding = a.encoding;
     seq.seed = a.seed;

@@ -70,6 +70,12 @@ pub fn run(a: SimArgs) -> Result<()> {
     let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
     let pose = crate::args::parse_pose("--pose", &a.pose)?;
     crate::args::check_press("--press", a.press, false)?;
+    if !a.sensor_yaw.is_finite() {
+        anyhow::bail!(
+            "--sensor-yaw must be a finite angle in radians, got {}",
+            a.sensor_yaw
+        );
+    }
     let config = a.sensor.sim_config()?;
     let rrd = a.rerun.open("tnd sim")?;
     let loaded = a.object.load()?;

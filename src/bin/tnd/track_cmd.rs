@@ -349,8 +349,13 @@ pub fn run(a: TrackArgs) -> Result<()> {
         a.input.recording.as_path(),
         Path::new(&a.input.object.object),
     ]);
-    // A track folder from before ledgers: its track.json.
-    let earlier_track = |dir: &Path| dir.join("track.json").is_file();
+    // A track folder from before ledgers: its track.json, with the settings and recording a track records.
+    let earlier_track = |dir: &Path| {
+        std::fs::read_to_string(dir.join("track.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str::<Value>(&t).ok())
+            .is_some_and(|v| v.get("settings").is_some() && v.get("recording").is_some())
+    };
     let _out = crate::outputs::folder_of("--out", &a.out, a.force.force, &inputs, &earlier_track)?;
     let sim_config = a.input.sensor.sim_config()?;
     let settings = settings(&a, &sim_config);

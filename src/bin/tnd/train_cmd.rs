@@ -217,7 +217,9 @@ pub fn run(a: TrainArgs) -> Result<()> {
     inputs.extend(a.init.as_deref());
     inputs.extend(a.val_data.as_deref());
     // A run folder from before ledgers: its training state.
-    let earlier_run = |dir: &Path| dir.join("train_state.safetensors").is_file();
+    let earlier_run = |dir: &Path| {
+        tactile_derender::model::checkpoint::written_by_tnd(&dir.join("train_state.safetensors"))
+    };
     let _out = crate::outputs::folder_of("--out", &a.out, a.force.force, &inputs, &earlier_run)?;
     tactile_derender::io::lock::check_not_written(&a.data)?;
     if let Some(val) = &a.val_data {
