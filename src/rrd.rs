@@ -30,7 +30,24 @@ pub struct RrdLog {
     path: PathBuf,
     #[cfg(feature = "rerun")]
     rec: rerun::RecordingStream,
+    /// The claim on the file ([`crate::io::output`]), held while it is written.
+    claim: Option<crate::io::output::Claimed>,
 }
+
+/// Whether `path` is a rerun recording tnd wrote: the `.rrd` magic and, in its first message, tnd's application id.
+pub fn written_by_tnd(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = Vec::with_capacity(4096);
+    let read = std::fs::File::open(path).and_then(|f| f.take(4096).read_to_end(&mut head));
+    read.is_ok()
+        && head.starts_with(b"RRF")
+        && head
+            .windows(APPLICATION_ID.len())
+            .any(|w| w == APPLICATION_ID.as_bytes())
+}
+
+/// The application id of every recording tnd writes.
+const APPLICATION_ID: &str = "tactile-derender";
 
 #[cfg(feature = "rerun")]
 fn f32x3(v: glam::DVec3) -> [f32; 3] {
@@ -42,7 +59,7 @@ impl RrdLog {
     pub fn create(path: &Path, name: &str) -> Result<Self, RrdError> {
         #[cfg(feature = "rerun")]
         {
-            let rec = rerun::RecordingStreamBuilder::new("tactile-derender")
+            let rec = rerun::RecordingStreamBuilder::new(APPLICATION_ID)
                 .recording_name(name)
                 .save(path)
                 .map_err(|e| RrdError::Rerun {
@@ -52,6 +69,7 @@ impl RrdLog {
             Ok(Self {
                 path: path.to_path_buf(),
                 rec,
+                claim: None,
             })
         }
         #[cfg(not(feature = "rerun"))]
@@ -219,6 +237,12 @@ impl RrdLog {
     }
 
     /// Write everything out and close the file.
+    /// Hold `claim` (on this recording's file) until the recording is finished.
+    pub fn holding(mut self, claim: crate::io::output::Claimed) -> Self {
+        self.claim = Some(claim);
+        self
+    }
+
     pub fn finish(self) -> Result<PathBuf, RrdError> {
         #[cfg(feature = "rerun")]
         self.rec.flush_blocking().map_err(|e| self.err(e))?;

@@ -599,4 +599,47 @@ fn hostile_inputs_are_refused_in_a_line() {
         "{}",
         stderr(&o)
     );
+    // --rerun FILE is an output like --out: not a user's file, not the command's input.
+    std::fs::write(d.join("mine.rrd"), "mine").unwrap();
+    std::fs::write(d.join("notes.txt"), "mine").unwrap();
+    for file in ["mine.rrd", "notes.txt"] {
+        let o = tnd_in(
+            d,
+            &["sim", "--object", OBJECT, "--out", "s", "--rerun", file],
+        );
+        assert!(
+            !o.status.success() && stderr(&o).contains("--force"),
+            "{}",
+            stderr(&o)
+        );
+        assert_eq!(std::fs::read(d.join(file)).unwrap(), b"mine");
+    }
+    // `new/..` is the folder it names: the current folder, refused (it was written into, --force and all).
+    let o = tnd_in(
+        d,
+        &[
+            "sim",
+            "--object",
+            OBJECT,
+            "--out",
+            "nothing_here/..",
+            "--force",
+        ],
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("current folder"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!d.join("nothing_here").exists());
+    // A count that only exhausts memory (10^12 pairs allocated terabytes up front).
+    let o = tnd_in(
+        d,
+        &["dataset", "gen", "--pairs", "1000000000000", "--out", "big"],
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("more than"),
+        "{}",
+        stderr(&o)
+    );
 }

@@ -21,18 +21,6 @@ pub const MANIFEST_FILE: &str = "manifest.json";
 /// The manifest of an unfinished generation (removed when `manifest.json` is written).
 pub const PROGRESS_FILE: &str = "progress.json";
 
-/// Whether `dir` holds a dataset tnd wrote, finished or under way: its manifest or progress file names
-/// [`FORMAT_NAME`] as its format (a file of another's of that name does not).
-pub fn written_by_tnd(dir: &std::path::Path) -> bool {
-    [MANIFEST_FILE, PROGRESS_FILE].iter().any(|name| {
-        crate::io::input::read_text_capped(&dir.join(name), crate::io::input::MAX_SETTINGS_BYTES)
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .is_some_and(|v| {
-                v.get("format").and_then(serde_json::Value::as_str) == Some(FORMAT_NAME)
-            })
-    })
-}
 /// Directory of the exported object set inside a dataset.
 pub const OBJECTS_DIR: &str = "objects";
 

@@ -35,6 +35,20 @@ pub fn write_atomic_with(
     path: &Path,
     fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
+    write_plain_with(path, fill)?;
+    super::output::record_written(path);
+    Ok(())
+}
+
+/// [`write_atomic`] without recording the write ([`super::output::record_written`]): for the record itself.
+pub(crate) fn write_plain(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_plain_with(path, |f| f.write_all(bytes))
+}
+
+fn write_plain_with(
+    path: &Path,
+    fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
+) -> std::io::Result<()> {
     let named =
         |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", path.display()));
     let (dir, _) = parent_and_name(path);

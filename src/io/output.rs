@@ -4,16 +4,21 @@
 //! not write unless told to (`--force`):
 //!
 //! - **A folder output** carries a ledger, `.tnd-output.json`, written when tnd first claims it: the entries the
-//!   folder held *before* tnd wrote there (a user's files). A new or empty folder has none; a folder that holds other
-//!   files and no ledger is refused without `--force`, naming what is there; with `--force` its files are recorded
-//!   in the ledger. From then on those entries are **protected**: [`super::write_atomic`] and
-//!   [`super::atomic::replace_dir_atomic`] refuse to replace them, for this run and every later one, and a folder
-//!   replaced whole keeps them (hard links, not copies). So `--force` never deletes a user's file.
-//! - **A file output** that exists is replaced only when the command recognises it as its own (a caller's test,
-//!   e.g. the MCAP header tnd writes) or with `--force`.
+//!   folder held *before* tnd wrote there (a user's files), and, when a run ends, the entries tnd wrote. A new or
+//!   empty folder has none of the user's; a folder that holds other files and no ledger is refused without
+//!   `--force`, naming what is there; with `--force` its files are recorded in the ledger. Entries that appear
+//!   between runs are the user's too — unless the last run never ended (killed: the ledger still says it runs),
+//!   then they are what it wrote, and a resume goes on with them. The user's entries are **protected**:
+//!   [`super::write_atomic`] and [`super::atomic::replace_dir_atomic`] refuse to replace them, for this run and
+//!   every later one, and a folder replaced whole keeps them (hard links, not copies). So `--force` never deletes
+//!   a user's file. A run that writes nothing (refused after its claim) takes the ledger back.
+//! - **A file output** that exists is replaced only when the command recognises it as its own (a caller's test of
+//!   its format, e.g. the MCAP header tnd writes) *and* it is as tnd left it (size and modification time recorded
+//!   in `.tnd-files.json` beside it at each write: a sensor file the user edited is theirs), or with `--force`.
 //!
 //! The ledger is written before any other file, so a run killed at any point leaves a folder the next run (a resume)
-//! recognises as tnd's.
+//! recognises as tnd's. There is no guessing from file names: a folder a tnd older than the ledger wrote is, to this
+//! one, a folder of someone else's.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -75,8 +80,7 @@ pub struct Claim<'a> {
     pub force: bool,
     /// The files and folders the command reads: the output may be none of them, nor hold one.
     pub inputs: Vec<&'a Path>,
-    /// For a file output that exists: whether it is this command's own output (replaced without `--force`); for a
-    /// folder without a ledger: whether an earlier tnd wrote it (then it is adopted whole).
+    /// For a file output that exists: whether it is this command's own output (replaced without `--force`).
     pub ours: Option<&'a dyn Fn(&Path) -> bool>,
 }
 
@@ -126,6 +130,9 @@ impl<'a> Claim<'a> {
 pub struct Claimed {
     path: PathBuf,
     protected: Vec<PathBuf>,
+    /// A folder's user entries (its ledger's).
+    foreign: BTreeSet<String>,
+    kind: OutputKind,
     /// The claim made the folder: left without anything in it, it is removed again.
     created: bool,
     /// The claim wrote the folder's ledger: what the folder held then. A run that wrote nothing (refused after its
@@ -143,13 +150,34 @@ impl Claimed {
 
 impl Drop for Claimed {
     fn drop(&mut self) {
-        // A run refused after its claim (a bad mesh, a missing model) leaves no ledger, and no folder it made.
-        if let Some(before) = &self.fresh_ledger {
-            if entries(&self.path).is_ok_and(|now| now == *before) {
+        if self.kind == OutputKind::File {
+            // Written by a writer of its own (a rerun stream): recorded as it ends.
+            if self.path.exists() {
+                record_written(&self.path);
+            }
+            let mut files = CLAIMED_FILES.lock().unwrap_or_else(PoisonError::into_inner);
+            if let Some(i) = files.iter().position(|q| *q == self.path) {
+                files.swap_remove(i);
+            }
+        }
+        if self.kind == OutputKind::Folder {
+            let now = entries(&self.path).unwrap_or_default();
+            if self.fresh_ledger.as_ref() == Some(&now) {
+                // A run refused after its claim (a bad mesh, a missing model) leaves no ledger, and no folder it
+                // made.
                 let _ = std::fs::remove_file(self.path.join(LEDGER_FILE));
                 if self.created {
                     let _ = std::fs::remove_dir(&self.path);
                 }
+            } else {
+                // The run ended: what it left beside the user's entries is tnd's.
+                let ledger = Ledger {
+                    written_by: "tnd".into(),
+                    written: now.difference(&self.foreign).cloned().collect(),
+                    foreign: std::mem::take(&mut self.foreign),
+                    running: false,
+                };
+                let _ = write_ledger(&self.path, &ledger);
             }
         }
         let mut set = PROTECTED.lock().unwrap_or_else(PoisonError::into_inner);
@@ -163,6 +191,65 @@ impl Drop for Claimed {
 
 /// Paths this process must not replace or delete (the user files of claimed folders).
 static PROTECTED: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// The output files this process holds claims on: each write of one is recorded beside it ([`record_written`]).
+static CLAIMED_FILES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// The hidden file, in a folder where tnd wrote single output files, that records each one's size and modification
+/// time as tnd left it: a file that no longer matches was changed by someone else, and is theirs.
+pub const WRITTEN_FILES: &str = ".tnd-files.json";
+
+/// (size, modification time in ns) of a file.
+fn stat_of(path: &Path) -> Option<(u64, u128)> {
+    let meta = std::fs::metadata(path).ok()?;
+    let modified = meta
+        .modified()
+        .ok()?
+        .duration_since(std::time::UNIX_EPOCH)
+        .ok()?;
+    Some((meta.len(), modified.as_nanos()))
+}
+
+fn written_files(dir: &Path) -> std::collections::BTreeMap<String, (u64, u128)> {
+    std::fs::read_to_string(dir.join(WRITTEN_FILES))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_default()
+}
+
+/// Whether `path` is as tnd last wrote it ([`WRITTEN_FILES`]).
+fn written_as_recorded(path: &Path) -> bool {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
+        return false;
+    };
+    let name = name.to_string_lossy().into_owned();
+    written_files(dir)
+        .get(&name)
+        .is_some_and(|&r| stat_of(path) == Some(r))
+}
+
+/// After a write of `path`: when it is a claimed output file, record it as tnd left it ([`WRITTEN_FILES`]); a
+/// failure to record only means the next run asks for `--force`.
+pub(crate) fn record_written(path: &Path) {
+    let claimed = CLAIMED_FILES.lock().unwrap_or_else(PoisonError::into_inner);
+    if claimed.is_empty() {
+        return;
+    }
+    let real = resolve(path).unwrap_or_else(|_| path.to_path_buf());
+    if !claimed.contains(&real) {
+        return;
+    }
+    drop(claimed);
+    let (Some(dir), Some(name), Some(stat)) = (real.parent(), real.file_name(), stat_of(&real))
+    else {
+        return;
+    };
+    let mut files = written_files(dir);
+    files.insert(name.to_string_lossy().into_owned(), stat);
+    if let Ok(text) = serde_json::to_string(&files) {
+        let _ = super::atomic::write_plain(&dir.join(WRITTEN_FILES), text.as_bytes());
+    }
+}
 
 /// The protected path `path` is, or lies under, if any ([`Claimed`]).
 pub fn protected_by(path: &Path) -> Option<PathBuf> {
@@ -190,8 +277,15 @@ pub(crate) fn protected_error(path: &Path) -> std::io::Error {
 struct Ledger {
     /// Always "tnd".
     written_by: String,
-    /// Entries the folder held before tnd first wrote there.
+    /// The user's entries: those the folder held before tnd first wrote there, and those added between runs.
     foreign: BTreeSet<String>,
+    /// The entries tnd's runs had written when the last one ended.
+    #[serde(default)]
+    written: BTreeSet<String>,
+    /// A run holds the folder: set when it is claimed, cleared when the run ends. Found set by the next claim, the
+    /// run was killed, and the entries it left are tnd's (a resume goes on with them).
+    #[serde(default)]
+    running: bool,
 }
 
 /// Claim an output ([module docs](self)): check it, lock it, and for a folder write its ledger.
@@ -253,7 +347,7 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
     }
     let lock = OutputLock::acquire(&path)?;
     let created = c.kind == OutputKind::Folder && !path.exists();
-    let (protected, fresh_ledger) = match c.kind {
+    let (foreign, fresh_ledger) = match c.kind {
         OutputKind::Folder => claim_folder(&c, &path).map_err(|e| match e {
             FolderRefusal::Io(p, source) => OutputError::Io { path: p, source },
             FolderRefusal::Foreign(names) => OutputError::Foreign {
@@ -264,22 +358,33 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
             },
         })?,
         OutputKind::File => {
-            if path.exists() && !c.force && !c.ours.is_some_and(|ours| ours(&path)) {
+            // tnd's own: of its format, and as tnd left it (an edited sensor file is the user's now).
+            let own = |p: &Path| c.ours.is_some_and(|ours| ours(p)) && written_as_recorded(p);
+            if path.exists() && !c.force && !own(&path) {
                 return Err(OutputError::ForeignFile {
                     flag: c.flag.to_string(),
                     path: c.path.to_path_buf(),
                 });
             }
-            (Vec::new(), None)
+            (BTreeSet::new(), None)
         }
     };
+    let protected = protected_paths(&path, &foreign);
     PROTECTED
         .lock()
         .unwrap_or_else(PoisonError::into_inner)
         .extend(protected.iter().cloned());
+    if c.kind == OutputKind::File {
+        CLAIMED_FILES
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(path.clone());
+    }
     Ok(Claimed {
         path,
         protected,
+        foreign,
+        kind: c.kind,
         created,
         fresh_ledger,
         _lock: lock,
@@ -291,45 +396,62 @@ enum FolderRefusal {
     Foreign(Vec<String>),
 }
 
-/// Read or write the ledger of a folder output we hold; the paths of its protected entries, and what the folder held
-/// when this claim wrote its ledger.
-type FolderClaim = (Vec<PathBuf>, Option<BTreeSet<String>>);
+/// Read or write the ledger of a folder output we hold: the user's entries, and what the folder held when this
+/// claim wrote the ledger first.
+type FolderClaim = (BTreeSet<String>, Option<BTreeSet<String>>);
 
 fn claim_folder(c: &Claim<'_>, dir: &Path) -> Result<FolderClaim, FolderRefusal> {
     let ledger_path = dir.join(LEDGER_FILE);
-    let existing = ledger_of(&ledger_path);
-    let mut fresh = None;
-    let foreign: BTreeSet<String> = match existing {
-        Some(ledger) => ledger.foreign,
+    let entries = entries(dir).map_err(|e| FolderRefusal::Io(dir.to_path_buf(), e))?;
+    let (ledger, fresh) = match ledger_of(&ledger_path) {
+        Some(mut ledger) => {
+            // Entries neither the user's nor tnd's when the last run ended: a run killed part-way wrote them (it
+            // never ended), or else the user added them since (theirs, kept like the rest).
+            let new: Vec<String> = entries
+                .iter()
+                .filter(|e| !ledger.foreign.contains(*e) && !ledger.written.contains(*e))
+                .cloned()
+                .collect();
+            if ledger.running {
+                ledger.written.extend(new);
+            } else {
+                ledger.foreign.extend(new);
+            }
+            (ledger, None)
+        }
         None => {
-            let entries = entries(dir).map_err(|e| FolderRefusal::Io(dir.to_path_buf(), e))?;
-            // A folder an earlier tnd wrote before ledgers existed, recognised by the command (a dataset's
-            // manifest, a run's checkpoint): all of it is tnd's.
-            let adopted = !entries.is_empty() && c.ours.is_some_and(|ours| ours(dir));
-            if !entries.is_empty() && !c.force && !adopted {
+            if !entries.is_empty() && !c.force {
                 return Err(FolderRefusal::Foreign(entries.into_iter().collect()));
             }
             let ledger = Ledger {
                 written_by: "tnd".into(),
-                foreign: if adopted {
-                    BTreeSet::new()
-                } else {
-                    entries.clone()
-                },
+                foreign: entries.clone(),
+                ..Ledger::default()
             };
-            let text = serde_json::to_string_pretty(&ledger)
-                .map_err(|e| FolderRefusal::Io(ledger_path.clone(), std::io::Error::other(e)))?;
-            super::write_atomic(&ledger_path, format!("{text}\n").as_bytes())
-                .map_err(|e| FolderRefusal::Io(ledger_path.clone(), e))?;
-            fresh = Some(entries);
-            ledger.foreign
+            (ledger, Some(entries))
         }
     };
-    // A name is one entry of the folder: an empty or a path-like one (hand-edited) protects nothing more.
-    let names = foreign
+    let ledger = Ledger {
+        running: true,
+        ..ledger
+    };
+    write_ledger(dir, &ledger).map_err(|e| FolderRefusal::Io(ledger_path.clone(), e))?;
+    Ok((ledger.foreign, fresh))
+}
+
+fn write_ledger(dir: &Path, ledger: &Ledger) -> std::io::Result<()> {
+    let text = serde_json::to_string_pretty(ledger).map_err(std::io::Error::other)?;
+    super::write_atomic(&dir.join(LEDGER_FILE), format!("{text}\n").as_bytes())
+}
+
+/// The paths of a folder's user entries: a name is one entry; an empty or a path-like one (a hand-edited ledger)
+/// protects nothing more.
+fn protected_paths(dir: &Path, foreign: &BTreeSet<String>) -> Vec<PathBuf> {
+    foreign
         .iter()
-        .filter(|n| !n.is_empty() && *n != "." && *n != ".." && !n.contains(['/', '\\']));
-    Ok((names.map(|name| dir.join(name)).collect(), fresh))
+        .filter(|n| !n.is_empty() && *n != "." && *n != ".." && !n.contains(['/', '\\']))
+        .map(|name| dir.join(name))
+        .collect()
 }
 
 fn ledger_of(path: &Path) -> Option<Ledger> {
@@ -427,7 +549,17 @@ pub fn resolve(path: &Path) -> std::io::Result<PathBuf> {
         }
         return std::fs::canonicalize(path);
     }
-    let absolute = std::path::absolute(path)?;
+    // `new/..` is the folder it is in, as creating the path would make it (`absolute` keeps the `..`).
+    let mut absolute = PathBuf::new();
+    for part in std::path::absolute(path)?.components() {
+        match part {
+            std::path::Component::ParentDir => {
+                absolute.pop();
+            }
+            std::path::Component::CurDir => {}
+            other => absolute.push(other),
+        }
+    }
     let mut rest = Vec::new();
     let mut base = absolute.as_path();
     loop {

@@ -90,9 +90,18 @@ fn a_file_output_replaces_only_its_own_or_with_force() {
     assert!(e.contains("victim.mcap") && e.contains("--force"), "{e}");
     let no = |_: &Path| false;
     assert!(claim(Claim::file("--out", &f).ours(&no)).is_err());
+    // Of the command's format, but not as tnd left it (tnd never wrote it): still the user's.
     let yes = |p: &Path| std::fs::read(p).is_ok_and(|b| b.starts_with(b"a real"));
+    assert!(claim(Claim::file("--out", &f).ours(&yes)).is_err());
+    // Written by tnd under a claim, it is tnd's to replace; edited by the user since, it is theirs again.
+    let c = claim(Claim::file("--out", &f).force(true)).unwrap();
+    write_atomic(c.path(), b"a real recording, by tnd").unwrap();
+    drop(c);
     drop(claim(Claim::file("--out", &f).ours(&yes)).unwrap());
-    drop(claim(Claim::file("--out", &f).force(true)).unwrap());
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    std::fs::write(&f, "a real recording, edited").unwrap();
+    assert!(claim(Claim::file("--out", &f).ours(&yes)).is_err());
+    std::fs::write(&f, "a real recording").unwrap();
     // An output that is an input is refused even with --force; so is a folder that holds one.
     let e = claim(Claim::file("--out", &f).force(true).inputs([&f]))
         .unwrap_err()
@@ -116,7 +125,13 @@ fn a_file_output_replaces_only_its_own_or_with_force() {
 
 #[test]
 fn root_home_and_the_current_folder_are_refused_even_with_force() {
-    for p in [Path::new("/"), Path::new("."), Path::new("..")] {
+    for p in [
+        Path::new("/"),
+        Path::new("."),
+        Path::new(".."),
+        Path::new("./no_such_folder/.."),
+        Path::new("/no_such_folder/.."),
+    ] {
         let e = claim(Claim::folder("--out", p).force(true))
             .unwrap_err()
             .to_string();
@@ -210,7 +225,7 @@ fn a_claim_that_writes_nothing_takes_its_ledger_back() {
     // A hand-edited ledger naming "" or a path protects no more than its entries.
     std::fs::write(
         proj.join(LEDGER_FILE),
-        r#"{"written_by": "tnd", "foreign": ["", "../x", "README.md"]}"#,
+        r#"{"written_by": "tnd", "foreign": ["", "../x", "README.md"], "written": ["out.json"]}"#,
     )
     .unwrap();
     let c = claim(Claim::folder("--out", &proj)).unwrap();
@@ -218,6 +233,23 @@ fn a_claim_that_writes_nothing_takes_its_ledger_back() {
     assert!(write_atomic(&c.path().join("README.md"), b"x").is_err());
     drop(c);
     assert_user_tree(&proj);
+    // A file the user adds between runs is theirs, kept like the rest; one a killed run left is tnd's.
+    std::fs::write(proj.join("mean.npy"), "mine").unwrap();
+    let c = claim(Claim::folder("--out", &proj)).unwrap();
+    assert!(write_atomic(&c.path().join("mean.npy"), b"x").is_err());
+    write_atomic(&c.path().join("partial.npy"), b"half").unwrap();
+    drop(c);
+    // As a kill leaves the ledger: the run still marked as running, its end (what it wrote) not recorded.
+    let ledger = proj.join(LEDGER_FILE);
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&ledger).unwrap()).unwrap();
+    v["running"] = true.into();
+    v["written"] = serde_json::json!(["out.json"]);
+    std::fs::write(&ledger, v.to_string()).unwrap();
+    let c = claim(Claim::folder("--out", &proj)).unwrap();
+    write_atomic(&c.path().join("partial.npy"), b"whole").unwrap();
+    drop(c);
+    assert_eq!(std::fs::read(proj.join("mean.npy")).unwrap(), b"mine");
 }
 
 #[test]

@@ -114,14 +114,18 @@ impl Default for PoseConfig {
     }
 }
 
+/// Most random starts per registration (each holds its own registration state; 10^8 took gigabytes).
+pub const MAX_INITS: usize = 10_000;
+
 impl PoseConfig {
     /// Every setting in range (a session or config file can hold any number); the error names the first that is
     /// not.
     pub fn validate(&self) -> Result<(), PoseError> {
-        if self.inits == 0 {
-            return Err(PoseError::Config(
-                "pose: inits must be at least 1 (random starts per registration)".into(),
-            ));
+        if !(1..=MAX_INITS).contains(&self.inits) {
+            return Err(PoseError::Config(format!(
+                "pose: inits must be 1..={MAX_INITS} (random starts per registration), got {}",
+                self.inits
+            )));
         }
         if !(self.consensus_probability > 0.0 && self.consensus_probability <= 1.0) {
             return Err(PoseError::Config(format!(

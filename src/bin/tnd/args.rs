@@ -65,6 +65,19 @@ pub fn parse_pose(flag: &str, text: &str) -> Result<tactile_derender::sensor::Se
     ))
 }
 
+/// A count given on the command line, at most `MAX` (`value_parser = at_most::<MAX>`): past it a run would only
+/// exhaust memory or time (10^12 pairs allocated terabytes up front).
+pub fn at_most<const MAX: usize>(s: &str) -> Result<usize, String> {
+    let v: usize = s
+        .trim()
+        .parse()
+        .map_err(|e| format!("'{s}' is not a count: {e}"))?;
+    if v > MAX {
+        return Err(format!("{v} is more than the {MAX} this takes"));
+    }
+    Ok(v)
+}
+
 /// `--force` of a command that writes an output ([`tactile_derender::io::output`]).
 #[derive(Args, Clone, Copy, Debug, Default)]
 pub struct ForceArg {

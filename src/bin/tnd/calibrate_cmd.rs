@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, bail, Result};
 use clap::Args;
 use tactile_derender::io::preview::{render_panel, save_png, side_by_side, PanelStyle};
 use tactile_derender::recording::calibrate::{
@@ -235,6 +235,17 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
             &tactile_derender::mesh::obj::written_by_tnd,
         ),
     ];
+    let given: Vec<&Path> = outputs.iter().filter_map(|o| o.1).collect();
+    if let Some(twice) = given
+        .iter()
+        .enumerate()
+        .find_map(|(i, p)| given[..i].contains(p).then_some(p))
+    {
+        bail!(
+            "{} is given as two outputs: each needs a file of its own",
+            twice.display()
+        );
+    }
     let _claims = outputs
         .into_iter()
         .filter_map(|(flag, path, ours)| Some((flag, path?, ours)))

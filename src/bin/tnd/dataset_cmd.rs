@@ -65,7 +65,7 @@ pub struct GenArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Number of pairs.
-    #[arg(long, default_value_t = GenConfig::default().pairs)]
+    #[arg(long, value_parser = crate::args::at_most::<10_000_000>, default_value_t = GenConfig::default().pairs)]
     pub pairs: usize,
     /// Global seed.
     #[arg(long, default_value_t = GenConfig::default().seed)]
@@ -91,7 +91,7 @@ pub struct GenArgs {
     #[arg(long, default_value_t = GenConfig::default().shard_pairs)]
     pub shard_pairs: usize,
     /// Worker threads (default: all cores). The output does not depend on it.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::at_most::<1024>)]
     pub threads: Option<usize>,
     /// Vary the membrane's inflation per pair: MIN,MAX height in metres (e.g. 0.027,0.033 around a calibrated 0.030);
     /// each pair uses one of --inflation-levels evenly spaced heights. Default: the sensor's inflation for every pair.
@@ -217,15 +217,10 @@ fn say_how_to_resume_when_interrupted() {
     }
 }
 
-/// A dataset folder from before ledgers: its manifest or its run's progress file, of tnd's format.
-fn earlier_dataset(dir: &Path) -> bool {
-    tactile_derender::dataset::manifest::written_by_tnd(dir)
-}
-
 fn gen(a: GenArgs) -> Result<()> {
     let mut inputs = a.sensor.inputs();
     inputs.push(Path::new(&a.objects));
-    let _out = crate::outputs::folder_of("--out", &a.out, false, &inputs, &earlier_dataset)?;
+    let _out = crate::outputs::folder("--out", &a.out, false, &inputs)?;
     let pair = |flag: &str, s: &str, example: &str| {
         s.split_once(',')
             .and_then(|(x, y)| Some([x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?]))
@@ -342,7 +337,7 @@ fn gen(a: GenArgs) -> Result<()> {
 fn run_import(a: ImportArgs) -> Result<()> {
     let mut inputs = a.sensor.inputs();
     inputs.extend([a.from.as_path(), Path::new(&a.objects)]);
-    let _out = crate::outputs::folder_of("--out", &a.out, false, &inputs, &earlier_dataset)?;
+    let _out = crate::outputs::folder("--out", &a.out, false, &inputs)?;
     let sim = a.sensor.sim_config()?;
     let set = ObjectSet::open(&a.objects).with_context(|| format!("--objects {}", a.objects))?;
     let split = match a.split.as_str() {

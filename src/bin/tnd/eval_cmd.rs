@@ -46,7 +46,7 @@ pub struct EvalArgs {
     pub skip: usize,
     /// Model samples per pair: above 1 the model is also scored on the multi-sample estimate (registration of the
     /// samples' consensus contact), shown as an extra row.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, value_parser = crate::args::at_most::<256>, default_value_t = 1)]
     pub pose_samples: usize,
     /// Also print the rows per contact-size bin and per object (always in --json and --report).
     #[arg(long)]
@@ -69,10 +69,10 @@ pub struct EvalArgs {
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Pairs per split with an uncertainty analysis in the report.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, value_parser = crate::args::at_most::<10_000>, default_value_t = 3)]
     pub report_pairs: usize,
     /// Samples per uncertainty analysis in the report (`--pose-samples` are the samples every pair is scored on).
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, value_parser = crate::args::at_most::<256>, default_value_t = 50)]
     pub report_samples: usize,
     #[command(flatten)]
     pub pose: PoseConfig,
@@ -244,7 +244,7 @@ pub fn run(mut a: EvalArgs) -> Result<()> {
         pose_samples: a.pose_samples.max(1),
         ..EvalConfig::default()
     });
-    let rrd = a.rerun.open("tnd eval")?;
+    let rrd = a.rerun.open("tnd eval", force, &inputs)?;
     let mut pair_log = rrd.as_ref().map(PairLog::new);
     let mut markdown = String::new();
     let mut log = match &a.records {

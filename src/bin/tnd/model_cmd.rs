@@ -3,7 +3,7 @@
 //! `tnd model diagnose`: the one-step x0 quality of a checkpoint per diffusion timestep on dataset pairs.
 //! `tnd model export --diffusers DIR` / `tnd model import --diffusers DIR`: diffusers folders out and in.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context, Result};
 use candle_core::DType;
@@ -107,18 +107,7 @@ pub fn run(a: ModelArgs) -> Result<()> {
         ModelCommand::Verify(v) => verify(&v),
         ModelCommand::Diagnose(d) => diagnose(&d),
         ModelCommand::Export(e) => {
-            // A model folder tnd exported before ledgers: the README it writes.
-            let exported = |dir: &Path| {
-                std::fs::read_to_string(dir.join("README.md"))
-                    .is_ok_and(|t| t.starts_with(diffusers_folder::README_TITLE))
-            };
-            let _out = crate::outputs::folder_of(
-                "--diffusers",
-                &e.diffusers,
-                e.force,
-                &[&e.model],
-                &exported,
-            )?;
+            let _out = crate::outputs::folder("--diffusers", &e.diffusers, e.force, &[&e.model])?;
             let held = e.diffusers.join("diffusion_pytorch_model.safetensors");
             if held.exists() && !e.force {
                 bail!(

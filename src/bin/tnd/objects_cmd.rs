@@ -67,7 +67,7 @@ pub enum ObjectsCommand {
         /// Directory to write the meshes and objects.json into (created if missing).
         dir: PathBuf,
         /// Number of procedural objects.
-        #[arg(long, default_value_t = ProceduralConfig::default().count)]
+        #[arg(long, value_parser = crate::args::at_most::<100_000>, default_value_t = ProceduralConfig::default().count)]
         count: usize,
         /// Seed: object i depends only on (seed, i).
         #[arg(long, default_value_t = ProceduralConfig::default().seed)]
@@ -143,6 +143,10 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
                 "unseen" => Split::Unseen,
                 other => bail!("--split must be seen or unseen, got '{other}'"),
             };
+            let most = tactile_derender::mesh::MAX_FIT_SIZE_M;
+            if let Some(f) = fit.filter(|f| !(f.is_finite() && *f > 0.0 && *f <= most)) {
+                bail!("--fit must be a size in metres in (0, {most}], got {f}");
+            }
             let _lock = tactile_derender::io::lock::OutputLock::acquire(&dir)?;
             let path = dir.join(MANIFEST_FILE);
             if path.exists() && !force {

@@ -8,19 +8,7 @@ use tactile_derender::io::output::{claim, Claim, Claimed};
 
 /// Claim the output folder `path`, named by `flag`.
 pub fn folder(flag: &str, path: &Path, force: bool, inputs: &[&Path]) -> Result<Claimed> {
-    folder_of(flag, path, force, inputs, &|_| false)
-}
-
-/// Claim the output folder `path`, named by `flag`, adopting a folder an earlier tnd wrote (before ledgers) when
-/// `ours` recognises it.
-pub fn folder_of(
-    flag: &str,
-    path: &Path,
-    force: bool,
-    inputs: &[&Path],
-    ours: &dyn Fn(&Path) -> bool,
-) -> Result<Claimed> {
-    with(Claim::folder(flag, path), force, inputs, ours)
+    with(Claim::folder(flag, path), force, inputs, &|_| false)
 }
 
 /// Claim the output file `path`, named by `flag`; an existing file is replaced when `ours` recognises it as this

@@ -77,7 +77,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         .measured
         .read(a.sensor.sim_config()?, a.sensor.sensor.is_some(), false)?;
     let sim = Simulator::new(measured.sim.clone())?;
-    let rrd = a.rerun.open("tnd pose")?;
+    let rrd = a.rerun.open("tnd pose", a.force.force, &inputs)?;
     let (imprint, signature) = (measured.imprint, measured.signature);
     let input_name = a
         .measured

@@ -2,7 +2,7 @@
 //! rerun recording ([`tactile_derender::rrd`]): the camera with its intrinsics and pose, depth images under it,
 //! contact points and the object at its true and estimated poses in the world (the table) frame.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Args;
@@ -27,13 +27,23 @@ pub struct RerunArgs {
 }
 
 impl RerunArgs {
-    /// Start the recording (before any long work, so a build without rerun fails at once).
-    pub fn open(&self, name: &str) -> Result<Option<RrdLog>> {
-        Ok(self
-            .rerun
+    /// Start the recording (before any long work, so a build without rerun fails at once). An existing file is
+    /// replaced only when tnd wrote it, or with `force`; never one of `inputs`.
+    pub fn open(&self, name: &str, force: bool, inputs: &[&Path]) -> Result<Option<RrdLog>> {
+        self.rerun
             .as_ref()
-            .map(|p| RrdLog::create(p, name))
-            .transpose()?)
+            .map(|p| {
+                let claim = crate::outputs::file(
+                    "--rerun",
+                    p,
+                    force,
+                    inputs,
+                    &tactile_derender::rrd::written_by_tnd,
+                )?;
+                let log = RrdLog::create(claim.path(), name)?;
+                Ok(log.holding(claim))
+            })
+            .transpose()
     }
 }
 

@@ -55,7 +55,7 @@ pub fn run(a: SampleArgs) -> Result<()> {
         .measured
         .read(a.sensor.sim_config()?, a.sensor.sensor.is_some(), true)?;
     let imprint = measured.imprint;
-    let rrd = a.rerun.open("tnd sample")?;
+    let rrd = a.rerun.open("tnd sample", a.force.force, &inputs)?;
     let mut bar = super::progress::bar("sampling", " steps", 0);
     // Imprint guidance needs the membrane the imprint was measured against: the signature says where it was.
     let guidance = match &measured.signature {

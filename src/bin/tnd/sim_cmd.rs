@@ -77,7 +77,7 @@ pub fn run(a: SimArgs) -> Result<()> {
         );
     }
     let config = a.sensor.sim_config()?;
-    let rrd = a.rerun.open("tnd sim")?;
+    let rrd = a.rerun.open("tnd sim", a.force.force, &inputs)?;
     let loaded = a.object.load()?;
     loaded.check_scale("a simulation")?;
     let (name, mesh) = (loaded.name, loaded.mesh);

@@ -349,14 +349,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
         a.input.recording.as_path(),
         Path::new(&a.input.object.object),
     ]);
-    // A track folder from before ledgers: its track.json, with the settings and recording a track records.
-    let earlier_track = |dir: &Path| {
-        std::fs::read_to_string(dir.join("track.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str::<Value>(&t).ok())
-            .is_some_and(|v| v.get("settings").is_some() && v.get("recording").is_some())
-    };
-    let _out = crate::outputs::folder_of("--out", &a.out, a.force.force, &inputs, &earlier_track)?;
+    let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
     let sim_config = a.input.sensor.sim_config()?;
     let settings = settings(&a, &sim_config);
     // Refuse another run's folder before any long work; nothing is written until the track can start.

@@ -2,7 +2,7 @@
 //! the same command again resumes from the run directory's last checkpoint (also after kill -9); Ctrl-C or SIGTERM
 //! stop it after the step under way with a fresh checkpoint.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -216,11 +216,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
     let mut inputs = vec![a.data.as_path()];
     inputs.extend(a.init.as_deref());
     inputs.extend(a.val_data.as_deref());
-    // A run folder from before ledgers: its training state.
-    let earlier_run = |dir: &Path| {
-        tactile_derender::model::checkpoint::written_by_tnd(&dir.join("train_state.safetensors"))
-    };
-    let _out = crate::outputs::folder_of("--out", &a.out, a.force.force, &inputs, &earlier_run)?;
+    let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
     tactile_derender::io::lock::check_not_written(&a.data)?;
     if let Some(val) = &a.val_data {
         tactile_derender::io::lock::check_not_written(val)?;
@@ -236,6 +232,10 @@ pub fn run(a: TrainArgs) -> Result<()> {
         if !(0.0..1.0).contains(&d) {
             return Err(anyhow!("--ema must be in [0, 1), found {d}"));
         }
+    }
+    // A NaN rate trains a NaN model, found only when it is loaded.
+    if !(tc.lr.is_finite() && tc.lr > 0.0 && tc.lr <= 1.0) {
+        bail!("--lr must be a learning rate in (0, 1], got {}", tc.lr);
     }
     let val_dataset = a.val_data.as_deref().map(Dataset::open).transpose()?;
     if let Some(v) = &val_dataset {

@@ -59,10 +59,10 @@ pub struct SimBenchArgs {
     #[arg(long, default_value_t = 200)]
     pub runs: usize,
     /// Synthetic pairs to time.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, value_parser = crate::args::at_most::<10_000_000>, default_value_t = 2000)]
     pub pairs: usize,
     /// Thread counts to time the ray casts with.
-    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    #[arg(long, value_parser = crate::args::at_most::<1024>, value_delimiter = ',', default_value = "1,2")]
     pub threads: Vec<usize>,
 }
 

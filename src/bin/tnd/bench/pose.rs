@@ -44,13 +44,13 @@ pub struct PoseBenchArgs {
     #[arg(long, default_value_t = 0.006)]
     pub press: f64,
     /// Number of random starts (ignored with --problem, which brings its own).
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, value_parser = crate::args::at_most::<10_000>, default_value_t = 10)]
     pub inits: usize,
     /// Timed repetitions (median reported).
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
     /// Threads for the registration (rayon).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, value_parser = crate::args::at_most::<1024>, default_value_t = 2)]
     pub threads: usize,
     /// Gaussian noise added to every surface point, mm (isotropic 3-D).
     #[arg(long, default_value_t = 0.0)]

@@ -39,10 +39,10 @@ pub struct UnetBenchArgs {
     #[arg(long, default_value_t = 3)]
     pub warmup: usize,
     /// Forward batch sizes.
-    #[arg(long, value_delimiter = ',', default_value = "1,16")]
+    #[arg(long, value_parser = crate::args::at_most::<4096>, value_delimiter = ',', default_value = "1,16")]
     pub batches: Vec<usize>,
     /// Training batch size.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, value_parser = crate::args::at_most::<1024>, default_value_t = 16)]
     pub train_batch: usize,
     /// Convolution implementation: direct (ours, default; tiled where the geometry or CPU needs it), tiled (ours,
     /// im2col tiles), im2col (ours, full buffer) or candle.
