@@ -466,7 +466,11 @@ fn a_symbolic_link_is_the_output_it_names() {
 fn impossible_sensors_and_overflowing_posteriors_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 8] = [
+        (
+            &["--resolution", "18446744073709551615x8"],
+            "must look like 64x64",
+        ),
         (&["--inflation", "10"], "elastomer.inflation"),
         (&["--camera-offset", "100"], "mount.position"),
         (&["--noise-std", "10"], "signature.noise_std"),

@@ -35,12 +35,14 @@ pub fn write_atomic_with(
     path: &Path,
     fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
+    super::output::check_destination(path)?;
+    super::output::will_write(path);
     write_plain_with(path, fill)?;
     super::output::record_written(path);
     Ok(())
 }
 
-/// [`write_atomic`] without recording the write ([`super::output::record_written`]): for the record itself.
+/// [`write_atomic`] without the output checks and records ([`super::output`]): for the ledger and records themselves.
 pub(crate) fn write_plain(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     write_plain_with(path, |f| f.write_all(bytes))
 }
@@ -63,9 +65,6 @@ fn write_plain_with(
         ),
         None => named(e),
     })?;
-    if let Some(kept) = super::output::protected_by(path) {
-        return Err(super::output::protected_error(&kept));
-    }
     let tmp = sibling(path, "tmp", std::process::id());
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;

@@ -7,8 +7,8 @@
 //!   folder held *before* tnd wrote there (a user's files), and, when a run ends, the entries tnd wrote. A new or
 //!   empty folder has none of the user's; a folder that holds other files and no ledger is refused without
 //!   `--force`, naming what is there; with `--force` its files are recorded in the ledger. Entries that appear
-//!   between runs are the user's too — unless the last run never ended (killed: the ledger still says it runs),
-//!   then they are what it wrote, and a resume goes on with them. The user's entries are **protected**:
+//!   between runs are the user's too, also after a run was killed: each run records its entries in the ledger as
+//!   it writes them (an empty folder it made counts as its own). The user's entries are **protected**:
 //!   [`super::write_atomic`] and [`super::atomic::replace_dir_atomic`] refuse to replace them, for this run and
 //!   every later one, and a folder replaced whole keeps them (hard links, not copies). So `--force` never deletes
 //!   a user's file. A run that writes nothing (refused after its claim) takes the ledger back.
@@ -17,7 +17,7 @@
 //!   in `.tnd-files.json` beside it at each write: a sensor file the user edited is theirs), or with `--force`.
 //!
 //! The ledger is written before any other file, so a run killed at any point leaves a folder the next run (a resume)
-//! recognises as tnd's. There is no guessing from file names: a folder a tnd older than the ledger wrote is, to this
+//! recognises as tnd's. A write inside a claimed folder that a symbolic link would take out of it is refused. There is no guessing from file names: a folder a tnd older than the ledger wrote is, to this
 //! one, a folder of someone else's.
 
 use std::collections::BTreeSet;
@@ -179,6 +179,12 @@ impl Drop for Claimed {
                 };
                 let _ = write_ledger(&self.path, &ledger);
             }
+            let mut folders = CLAIMED_FOLDERS
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner);
+            if let Some(i) = folders.iter().position(|f| f.real == self.path) {
+                folders.swap_remove(i);
+            }
         }
         let mut set = PROTECTED.lock().unwrap_or_else(PoisonError::into_inner);
         for p in &self.protected {
@@ -194,6 +200,65 @@ static PROTECTED: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
 /// The output files this process holds claims on: each write of one is recorded beside it ([`record_written`]).
 static CLAIMED_FILES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// A folder this process holds a claim on, as its writes see it.
+struct FolderState {
+    /// The name the command was given (absolute, `..` resolved; maybe through a link).
+    given: PathBuf,
+    /// Its real path.
+    real: PathBuf,
+    foreign: BTreeSet<String>,
+    /// The entries tnd wrote there so far: recorded in the ledger as they appear, so that a run killed part-way
+    /// leaves a ledger that tells its files from those a user adds before the resume.
+    written: BTreeSet<String>,
+}
+
+static CLAIMED_FOLDERS: Mutex<Vec<FolderState>> = Mutex::new(Vec::new());
+
+/// Before a write of `path`: refused when it is a user's protected file, or when it lies in a claimed folder by
+/// name but outside it in fact (a symbolic link inside the folder to a user's folder elsewhere).
+pub(crate) fn check_destination(path: &Path) -> std::io::Result<()> {
+    if let Some(kept) = protected_by(path) {
+        return Err(protected_error(&kept));
+    }
+    let folders = CLAIMED_FOLDERS
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner);
+    if folders.is_empty() {
+        return Ok(());
+    }
+    let lexical = lexical_absolute(path)?;
+    let real = resolve(path).unwrap_or_else(|_| lexical.clone());
+    for f in folders.iter() {
+        let inside_by_name = lexical.starts_with(&f.given) || lexical.starts_with(&f.real);
+        if inside_by_name && !real.starts_with(&f.real) {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::PermissionDenied,
+                format!(
+                    "{} leads out of the output folder {} through a symbolic link; tnd writes only inside it",
+                    path.display(),
+                    f.real.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `path` made absolute with `.` and `..` taken lexically (as creating it would).
+fn lexical_absolute(path: &Path) -> std::io::Result<PathBuf> {
+    let mut out = PathBuf::new();
+    for part in std::path::absolute(path)?.components() {
+        match part {
+            std::path::Component::ParentDir => {
+                out.pop();
+            }
+            std::path::Component::CurDir => {}
+            other => out.push(other),
+        }
+    }
+    Ok(out)
+}
 
 /// The hidden file, in a folder where tnd wrote single output files, that records each one's size and modification
 /// time as tnd left it: a file that no longer matches was changed by someone else, and is theirs.
@@ -211,10 +276,53 @@ fn stat_of(path: &Path) -> Option<(u64, u128)> {
 }
 
 fn written_files(dir: &Path) -> std::collections::BTreeMap<String, (u64, u128)> {
-    std::fs::read_to_string(dir.join(WRITTEN_FILES))
+    super::input::read_text_capped(&dir.join(WRITTEN_FILES), super::input::MAX_SETTINGS_BYTES)
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok())
         .unwrap_or_default()
+}
+
+/// Before a write of `path`: when it lies in a claimed folder, its entry there is tnd's, said in the ledger first
+/// (a kill between the write and the record would leave a file the next run takes for the user's).
+pub(crate) fn will_write(path: &Path) {
+    if CLAIMED_FOLDERS
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .is_empty()
+    {
+        return;
+    }
+    record_in_folder(&resolve(path).unwrap_or_else(|_| path.to_path_buf()));
+}
+
+fn record_in_folder(real: &Path) {
+    let mut updates = Vec::new();
+    let mut folders = CLAIMED_FOLDERS
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner);
+    for f in folders.iter_mut() {
+        let Ok(rest) = real.strip_prefix(&f.real) else {
+            continue;
+        };
+        let Some(name) = rest.components().next() else {
+            continue;
+        };
+        let name = name.as_os_str().to_string_lossy().into_owned();
+        if name == LEDGER_FILE || f.foreign.contains(&name) || !f.written.insert(name) {
+            continue;
+        }
+        let ledger = Ledger {
+            written_by: "tnd".into(),
+            foreign: f.foreign.clone(),
+            written: f.written.clone(),
+            running: true,
+        };
+        updates.push((f.real.clone(), ledger));
+    }
+    drop(folders);
+    for (dir, ledger) in updates {
+        let _ = write_ledger(&dir, &ledger);
+    }
 }
 
 /// Whether `path` is as tnd last wrote it ([`WRITTEN_FILES`]).
@@ -231,11 +339,8 @@ fn written_as_recorded(path: &Path) -> bool {
 /// After a write of `path`: when it is a claimed output file, record it as tnd left it ([`WRITTEN_FILES`]); a
 /// failure to record only means the next run asks for `--force`.
 pub(crate) fn record_written(path: &Path) {
-    let claimed = CLAIMED_FILES.lock().unwrap_or_else(PoisonError::into_inner);
-    if claimed.is_empty() {
-        return;
-    }
     let real = resolve(path).unwrap_or_else(|_| path.to_path_buf());
+    let claimed = CLAIMED_FILES.lock().unwrap_or_else(PoisonError::into_inner);
     if !claimed.contains(&real) {
         return;
     }
@@ -333,8 +438,8 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
         if c.kind == OutputKind::Folder && real.starts_with(&path) {
             return Err(refuse(format!("holds an input ({})", input.display())));
         }
-        // A file of an input folder (a diffusers folder's weights) is part of that input.
-        if c.kind == OutputKind::File && real.is_dir() && path.starts_with(&real) && path.exists() {
+        // A file or folder of an input folder (a diffusers folder's weights, a dataset's shards) is part of it.
+        if real.is_dir() && path != real && path.starts_with(&real) && path.exists() {
             return Err(refuse(format!("is part of an input ({})", input.display())));
         }
     }
@@ -379,6 +484,19 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .push(path.clone());
+    } else {
+        let written = ledger_of(&path.join(LEDGER_FILE))
+            .map(|l| l.written)
+            .unwrap_or_default();
+        CLAIMED_FOLDERS
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(FolderState {
+                given: lexical_absolute(c.path).unwrap_or_else(|_| path.clone()),
+                real: path.clone(),
+                foreign: foreign.clone(),
+                written,
+            });
     }
     Ok(Claimed {
         path,
@@ -403,19 +521,32 @@ type FolderClaim = (BTreeSet<String>, Option<BTreeSet<String>>);
 fn claim_folder(c: &Claim<'_>, dir: &Path) -> Result<FolderClaim, FolderRefusal> {
     let ledger_path = dir.join(LEDGER_FILE);
     let entries = entries(dir).map_err(|e| FolderRefusal::Io(dir.to_path_buf(), e))?;
+    if std::fs::symlink_metadata(&ledger_path).is_ok() && ledger_of(&ledger_path).is_none() {
+        return Err(FolderRefusal::Io(
+            ledger_path.clone(),
+            std::io::Error::other("not tnd's ledger (a file of yours of that name?); move it away"),
+        ));
+    }
     let (ledger, fresh) = match ledger_of(&ledger_path) {
         Some(mut ledger) => {
-            // Entries neither the user's nor tnd's when the last run ended: a run killed part-way wrote them (it
-            // never ended), or else the user added them since (theirs, kept like the rest).
+            // Entries neither the user's nor tnd's (tnd's runs record each entry as they write it, a killed one
+            // too): the user added them since, and they are theirs, kept like the rest — but for an empty folder,
+            // which holds nothing to lose (a killed run may have made it before writing into it).
             let new: Vec<String> = entries
                 .iter()
                 .filter(|e| !ledger.foreign.contains(*e) && !ledger.written.contains(*e))
                 .cloned()
                 .collect();
-            if ledger.running {
-                ledger.written.extend(new);
-            } else {
-                ledger.foreign.extend(new);
+            for name in new {
+                let empty_dir =
+                    std::fs::read_dir(dir.join(&name)).is_ok_and(|mut d| d.next().is_none());
+                if empty_dir
+                    && !std::fs::symlink_metadata(dir.join(&name)).is_ok_and(|m| m.is_symlink())
+                {
+                    ledger.written.insert(name);
+                } else {
+                    ledger.foreign.insert(name);
+                }
             }
             (ledger, None)
         }
@@ -441,7 +572,7 @@ fn claim_folder(c: &Claim<'_>, dir: &Path) -> Result<FolderClaim, FolderRefusal>
 
 fn write_ledger(dir: &Path, ledger: &Ledger) -> std::io::Result<()> {
     let text = serde_json::to_string_pretty(ledger).map_err(std::io::Error::other)?;
-    super::write_atomic(&dir.join(LEDGER_FILE), format!("{text}\n").as_bytes())
+    super::atomic::write_plain(&dir.join(LEDGER_FILE), format!("{text}\n").as_bytes())
 }
 
 /// The paths of a folder's user entries: a name is one entry; an empty or a path-like one (a hand-edited ledger)
@@ -455,7 +586,7 @@ fn protected_paths(dir: &Path, foreign: &BTreeSet<String>) -> Vec<PathBuf> {
 }
 
 fn ledger_of(path: &Path) -> Option<Ledger> {
-    let text = std::fs::read_to_string(path).ok()?;
+    let text = super::input::read_text_capped(path, super::input::MAX_SETTINGS_BYTES).ok()?;
     serde_json::from_str::<Ledger>(&text)
         .ok()
         .filter(|l| l.written_by == "tnd")

@@ -233,23 +233,39 @@ fn a_claim_that_writes_nothing_takes_its_ledger_back() {
     assert!(write_atomic(&c.path().join("README.md"), b"x").is_err());
     drop(c);
     assert_user_tree(&proj);
-    // A file the user adds between runs is theirs, kept like the rest; one a killed run left is tnd's.
+    // A file the user adds between runs is theirs, kept like the rest; one a killed run wrote is tnd's (each entry
+    // is recorded as it is written), and a file the user adds after the kill is theirs again.
     std::fs::write(proj.join("mean.npy"), "mine").unwrap();
     let c = claim(Claim::folder("--out", &proj)).unwrap();
     assert!(write_atomic(&c.path().join("mean.npy"), b"x").is_err());
     write_atomic(&c.path().join("partial.npy"), b"half").unwrap();
-    drop(c);
-    // As a kill leaves the ledger: the run still marked as running, its end (what it wrote) not recorded.
     let ledger = proj.join(LEDGER_FILE);
-    let mut v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&ledger).unwrap()).unwrap();
-    v["running"] = true.into();
-    v["written"] = serde_json::json!(["out.json"]);
-    std::fs::write(&ledger, v.to_string()).unwrap();
+    let during = std::fs::read_to_string(&ledger).unwrap();
+    drop(c);
+    // As a kill leaves the ledger: the one written during the run (no end recorded).
+    std::fs::write(&ledger, &during).unwrap();
+    assert!(
+        during.contains("partial.npy") && during.contains("\"running\": true"),
+        "{during}"
+    );
+    std::fs::write(proj.join("added.npy"), "mine too").unwrap();
     let c = claim(Claim::folder("--out", &proj)).unwrap();
     write_atomic(&c.path().join("partial.npy"), b"whole").unwrap();
+    assert!(write_atomic(&c.path().join("added.npy"), b"x").is_err());
     drop(c);
     assert_eq!(std::fs::read(proj.join("mean.npy")).unwrap(), b"mine");
+    assert_eq!(std::fs::read(proj.join("added.npy")).unwrap(), b"mine too");
+    // A symbolic link inside the folder to a folder of the user's elsewhere is not a way out of it.
+    let elsewhere = tmp.path().join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, proj.join("shards")).unwrap();
+    let c = claim(Claim::folder("--out", &proj)).unwrap();
+    let e = write_atomic(&c.path().join("shards/a.npz"), b"x")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("symbolic link"), "{e}");
+    drop(c);
+    assert!(!elsewhere.join("a.npz").exists());
 }
 
 #[test]

@@ -499,6 +499,9 @@ fn append_log(
         val_loss,
         samples_per_s: sps,
     })?;
+    // Appended, not replaced: checked and recorded as an output's writes are (crate::io::output).
+    crate::io::output::check_destination(&path).map_err(io)?;
+    crate::io::output::will_write(&path);
     let mut f = std::fs::OpenOptions::new()
         .create(true)
         .append(true)

@@ -201,7 +201,15 @@ pub fn parse_resolution(s: &str) -> Result<(usize, usize), InvalidSetting> {
         )
     };
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let parse = |t: &str| t.trim().parse::<usize>().map_err(|_| bad());
+    // Any image here is at most 16384 pixels a side (the model's at most MAX_RESOLUTION, a figure's more): larger
+    // numbers would overflow a pixel count.
+    let parse = |t: &str| {
+        t.trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|&v| v <= 16_384)
+            .ok_or_else(bad)
+    };
     Ok((parse(w)?, parse(h)?))
 }
 

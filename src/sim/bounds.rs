@@ -36,6 +36,9 @@ fn mm(m: f64) -> String {
 
 /// The bounds that need no mesh: membrane size, camera distance, noise and shadow width.
 pub fn check_settings(config: &SimConfig) -> Result<(), InvalidSetting> {
+    // Finite, non-negative noise and shadow (the camera is checked where a sensor is read: its native frames
+    // render at a resolution that is no model's).
+    config.signature.validate()?;
     let e = &config.elastomer;
     if e.mesh_file.is_none() {
         let (lo, hi) = FOOTPRINT_RANGE_M;

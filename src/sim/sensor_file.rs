@@ -71,7 +71,10 @@ pub fn load(path: &Path) -> Result<SimConfig, SensorFileError> {
         )));
     }
     let mut config: SimConfig = serde_json::from_value(value).map_err(|e| format(e.to_string()))?;
-    super::bounds::check_settings(&config)
+    config
+        .camera
+        .validate()
+        .and_then(|()| super::bounds::check_settings(&config))
         .map_err(|e| format(format!("{}: {}", e.setting, e.message)))?;
     if let Some(mesh) = &config.elastomer.mesh_file {
         if mesh.is_relative() {

@@ -163,7 +163,9 @@ impl SensorArgs {
         if let Some(n) = self.noise_std {
             cfg.signature.noise_std = n;
         }
-        tactile_derender::sim::bounds::check_settings(&cfg)
+        cfg.camera
+            .validate()
+            .and_then(|()| tactile_derender::sim::bounds::check_settings(&cfg))
             .map_err(|e| anyhow!("sensor setting {}: {}", e.setting, e.message))?;
         Ok(cfg)
     }

@@ -260,6 +260,7 @@ fn yaw_error_deg(est: Se2, truth: Se2, rotation: RotationSymmetry) -> Option<f64
 }
 
 pub fn run(a: &PoseBenchArgs) -> Result<()> {
+    crate::args::check_press("--press", a.press, false)?;
     let mut p = match &a.problem {
         Some(dir) => load_peer_problem(dir)?,
         None => simulated_problem(a)?,

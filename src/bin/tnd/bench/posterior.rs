@@ -75,6 +75,7 @@ struct RunRecord {
 }
 
 pub fn run(a: &PosteriorBenchArgs) -> Result<()> {
+    crate::args::check_press("--press", a.press, false)?;
     let sim = Simulator::new(SimConfig::default())?;
     let object = ObjectSpec::library("builtin", &a.object).load()?;
     let prepared = PreparedObject::new(object.mesh.clone())?;
