@@ -8,6 +8,7 @@ pub mod input;
 pub mod lock;
 pub mod npy;
 pub mod output;
+pub mod paths;
 pub mod ply;
 pub mod preview;
 pub mod settings;
