@@ -565,60 +565,6 @@ fn eval_runs_on_the_device_it_is_given() {
     assert!(err.contains("gpu0") && err.contains("cuda:N"), "{err}");
 }
 
-/// A millimetre mesh read as metres (a 40 m cube) is refused by `tnd sim` before anything is written, naming the
-/// units that fit; with `--units mm` the same file simulates.
-#[test]
-fn a_mis_scaled_mesh_is_refused_before_any_work() {
-    let dir = tempfile::tempdir().unwrap();
-    let mut obj = String::new();
-    for i in 0..8 {
-        let c = |bit: usize| if i >> bit & 1 == 1 { 40 } else { 0 };
-        obj.push_str(&format!("v {} {} {}\n", c(0), c(1), c(2)));
-    }
-    for f in [
-        "1 3 4 2", "5 6 8 7", "1 2 6 5", "3 7 8 4", "1 5 7 3", "2 4 8 6",
-    ] {
-        obj.push_str(&format!("f {f}\n"));
-    }
-    std::fs::write(dir.path().join("cube_mm.obj"), obj).unwrap();
-    let sim = |extra: &[&str]| {
-        let base = ["sim", "-q", "--object", "cube_mm.obj", "--out", "out"];
-        tnd_in(dir.path(), &[&base[..], extra].concat())
-    };
-    let o = sim(&[]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
-    assert!(
-        err.contains("probably in mm") && err.contains("a simulation of it would be meaningless"),
-        "{err}"
-    );
-    assert!(!dir.path().join("out").exists());
-    let o = sim(&["--units", "mm"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    // A fit size past any object (the vertices overflowed and the simulation hung), and a set's object, which
-    // the set sizes.
-    let o = sim(&["--fit-size", "1e308"]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("above 10 m"), "{err}");
-    let o = tnd_in(
-        dir.path(),
-        &[
-            "sim",
-            "--object",
-            "cross_w12_s50",
-            "--fit-size",
-            "0.05",
-            "--out",
-            "set",
-        ],
-    );
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        !o.status.success() && err.contains("mesh files only"),
-        "{err}"
-    );
-}
-
 /// A sensor whose contact lies nearer the camera than the default's (inflation 15 mm, camera 25 mm behind the base):
 /// `tnd train` from scratch fits the model's target mapping to it and says so (the default's 50 mm contact cut would
 /// make every sample of such a model "no contact"); a fine-tune of the default, whose mapping cannot hold it, is

@@ -1,6 +1,7 @@
 //! The smaller ways a run could go wrong for an unlucky user, each with the one-line message that names the file:
 //! an MCAP whose depth channel holds no messages, a second import into a finished dataset, a report folder that
-//! cannot be written (refused before the evaluation, not after it).
+//! cannot be written (refused before the evaluation, not after it), a mesh in the wrong units or fitted to an
+//! impossible size.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -149,4 +150,58 @@ fn an_unwritable_report_folder_is_refused_before_the_evaluation() {
     // Refused before the model is loaded or a pair is scored (an evaluation takes far longer).
     assert!(t0.elapsed() < Duration::from_secs(5), "{:?}", t0.elapsed());
     assert_eq!(err.trim().lines().count(), 1, "{err}");
+}
+
+/// A millimetre mesh read as metres (a 40 m cube) is refused by `tnd sim` before anything is written, naming the
+/// units that fit; with `--units mm` the same file simulates.
+#[test]
+fn a_mis_scaled_mesh_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut obj = String::new();
+    for i in 0..8 {
+        let c = |bit: usize| if i >> bit & 1 == 1 { 40 } else { 0 };
+        obj.push_str(&format!("v {} {} {}\n", c(0), c(1), c(2)));
+    }
+    for f in [
+        "1 3 4 2", "5 6 8 7", "1 2 6 5", "3 7 8 4", "1 5 7 3", "2 4 8 6",
+    ] {
+        obj.push_str(&format!("f {f}\n"));
+    }
+    std::fs::write(dir.path().join("cube_mm.obj"), obj).unwrap();
+    let sim = |extra: &[&str]| {
+        let base = ["sim", "-q", "--object", "cube_mm.obj", "--out", "out"];
+        tnd_in(dir.path(), &[&base[..], extra].concat())
+    };
+    let o = sim(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("probably in mm") && err.contains("a simulation of it would be meaningless"),
+        "{err}"
+    );
+    assert!(!dir.path().join("out").exists());
+    let o = sim(&["--units", "mm"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // A fit size past any object (the vertices overflowed and the simulation hung), and a set's object, which
+    // the set sizes.
+    let o = sim(&["--fit-size", "1e308"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("above 10 m"), "{err}");
+    let o = tnd_in(
+        dir.path(),
+        &[
+            "sim",
+            "--object",
+            "cross_w12_s50",
+            "--fit-size",
+            "0.05",
+            "--out",
+            "set",
+        ],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("mesh files only"),
+        "{err}"
+    );
 }

@@ -35,10 +35,11 @@ pub fn write_atomic_with(
     path: &Path,
     fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
-    super::output::check_destination(path)?;
-    super::output::will_write(path);
+    let real = super::output::before_write(path)?;
     write_plain_with(path, fill)?;
-    super::output::record_written(path);
+    if let Some(real) = real {
+        super::output::after_write(&real);
+    }
     Ok(())
 }
 

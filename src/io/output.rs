@@ -132,8 +132,6 @@ impl<'a> Claim<'a> {
 pub struct Claimed {
     path: PathBuf,
     protected: Vec<PathBuf>,
-    /// A folder's user entries (its ledger's).
-    foreign: BTreeSet<String>,
     kind: OutputKind,
     /// The claim made the folder: left without anything in it, it is removed again.
     created: bool,
@@ -155,7 +153,7 @@ impl Drop for Claimed {
         if self.kind == OutputKind::File {
             // Written by a writer of its own (a rerun stream): recorded as it ends.
             if self.path.exists() {
-                record_written(&self.path);
+                after_write(&self.path);
             }
             let mut files = CLAIMED_FILES.lock().unwrap_or_else(PoisonError::into_inner);
             if let Some(i) = files.iter().position(|q| *q == self.path) {
@@ -163,6 +161,16 @@ impl Drop for Claimed {
             }
         }
         if self.kind == OutputKind::Folder {
+            let state = {
+                let mut folders = CLAIMED_FOLDERS
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner);
+                folders
+                    .iter()
+                    .position(|f| f.real == self.path)
+                    .map(|i| folders.swap_remove(i))
+            };
+            let foreign = state.map(|f| f.foreign).unwrap_or_default();
             let now = entries(&self.path).unwrap_or_default();
             if self.fresh_ledger.as_ref() == Some(&now) {
                 // A run refused after its claim (a bad mesh, a missing model) leaves no ledger, and no folder it
@@ -175,17 +183,11 @@ impl Drop for Claimed {
                 // The run ended: what it left beside the user's entries is tnd's.
                 let ledger = Ledger {
                     written_by: "tnd".into(),
-                    written: now.difference(&self.foreign).cloned().collect(),
-                    foreign: std::mem::take(&mut self.foreign),
+                    written: now.difference(&foreign).cloned().collect(),
+                    foreign,
                     running: false,
                 };
                 let _ = write_ledger(&self.path, &ledger);
-            }
-            let mut folders = CLAIMED_FOLDERS
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner);
-            if let Some(i) = folders.iter().position(|f| f.real == self.path) {
-                folders.swap_remove(i);
             }
         }
         let mut set = PROTECTED.lock().unwrap_or_else(PoisonError::into_inner);
@@ -200,7 +202,7 @@ impl Drop for Claimed {
 /// Paths this process must not replace or delete (the user files of claimed folders).
 static PROTECTED: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
-/// The output files this process holds claims on: each write of one is recorded beside it ([`record_written`]).
+/// The output files this process holds claims on: each write of one is recorded beside it ([`after_write`]).
 static CLAIMED_FILES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
 /// A folder this process holds a claim on, as its writes see it.
@@ -217,21 +219,32 @@ struct FolderState {
 
 static CLAIMED_FOLDERS: Mutex<Vec<FolderState>> = Mutex::new(Vec::new());
 
-/// Before a write of `path`: refused when it is a user's protected file, or when it lies in a claimed folder by
-/// name but outside it in fact (a symbolic link inside the folder to a user's folder elsewhere).
-pub(crate) fn check_destination(path: &Path) -> std::io::Result<()> {
-    if let Some(kept) = protected_by(path) {
-        return Err(protected_error(&kept));
-    }
-    let folders = CLAIMED_FOLDERS
-        .lock()
-        .unwrap_or_else(PoisonError::into_inner);
-    if folders.is_empty() {
-        return Ok(());
+/// Before a write of `path` ([`super::write_atomic`], the training log's append): refused when it is a user's
+/// protected file, or when it lies in a claimed folder by name but outside it in fact (a symbolic link inside the
+/// folder to a user's folder elsewhere); otherwise its entry in a claimed folder is said to be tnd's, in the ledger,
+/// before the write (a kill between the write and the record would leave a file the next run takes for the
+/// user's). The real path, for [`after_write`]; `None` when this process holds no claim (nothing to check).
+pub(crate) fn before_write(path: &Path) -> std::io::Result<Option<PathBuf>> {
+    let no_claims = |m: &Mutex<Vec<_>>| m.lock().unwrap_or_else(PoisonError::into_inner).is_empty();
+    if no_claims(&PROTECTED)
+        && no_claims(&CLAIMED_FILES)
+        && CLAIMED_FOLDERS
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .is_empty()
+    {
+        return Ok(None);
     }
     let lexical = lexical_absolute(path)?;
     let real = resolve(path).unwrap_or_else(|_| lexical.clone());
-    for f in folders.iter() {
+    if let Some(kept) = protected_at(&real) {
+        return Err(protected_error(&kept));
+    }
+    for f in CLAIMED_FOLDERS
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .iter()
+    {
         let inside_by_name = lexical.starts_with(&f.given) || lexical.starts_with(&f.real);
         if inside_by_name && !real.starts_with(&f.real) {
             return Err(std::io::Error::new(
@@ -244,7 +257,8 @@ pub(crate) fn check_destination(path: &Path) -> std::io::Result<()> {
             ));
         }
     }
-    Ok(())
+    record_in_folder(&real);
+    Ok(Some(real))
 }
 
 /// The hidden file, in a folder where tnd wrote single output files, that records each one's size and modification
@@ -267,19 +281,6 @@ fn written_files(dir: &Path) -> std::collections::BTreeMap<String, (u64, u128)> 
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok())
         .unwrap_or_default()
-}
-
-/// Before a write of `path`: when it lies in a claimed folder, its entry there is tnd's, said in the ledger first
-/// (a kill between the write and the record would leave a file the next run takes for the user's).
-pub(crate) fn will_write(path: &Path) {
-    if CLAIMED_FOLDERS
-        .lock()
-        .unwrap_or_else(PoisonError::into_inner)
-        .is_empty()
-    {
-        return;
-    }
-    record_in_folder(&resolve(path).unwrap_or_else(|_| path.to_path_buf()));
 }
 
 fn record_in_folder(real: &Path) {
@@ -323,16 +324,18 @@ fn written_as_recorded(path: &Path) -> bool {
         .is_some_and(|&r| stat_of(path) == Some(r))
 }
 
-/// After a write of `path`: when it is a claimed output file, record it as tnd left it ([`WRITTEN_FILES`]); a
-/// failure to record only means the next run asks for `--force`.
-pub(crate) fn record_written(path: &Path) {
-    let real = resolve(path).unwrap_or_else(|_| path.to_path_buf());
-    let claimed = CLAIMED_FILES.lock().unwrap_or_else(PoisonError::into_inner);
-    if !claimed.contains(&real) {
+/// After a write of `real` (the path [`before_write`] gave): when it is a claimed output file, record it as tnd left
+/// it ([`WRITTEN_FILES`]); a failure to record only means the next run asks for `--force`.
+pub(crate) fn after_write(real: &Path) {
+    if !CLAIMED_FILES
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .iter()
+        .any(|f| f == real)
+    {
         return;
     }
-    drop(claimed);
-    let (Some(dir), Some(name), Some(stat)) = (real.parent(), real.file_name(), stat_of(&real))
+    let (Some(dir), Some(name), Some(stat)) = (real.parent(), real.file_name(), stat_of(real))
     else {
         return;
     };
@@ -345,11 +348,19 @@ pub(crate) fn record_written(path: &Path) {
 
 /// The protected path `path` is, or lies under, if any ([`Claimed`]).
 pub fn protected_by(path: &Path) -> Option<PathBuf> {
-    let set = PROTECTED.lock().unwrap_or_else(PoisonError::into_inner);
-    if set.is_empty() {
+    if PROTECTED
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .is_empty()
+    {
         return None;
     }
-    let real = resolve(path).unwrap_or_else(|_| path.to_path_buf());
+    protected_at(&resolve(path).unwrap_or_else(|_| path.to_path_buf()))
+}
+
+/// [`protected_by`] of a path already resolved.
+fn protected_at(real: &Path) -> Option<PathBuf> {
+    let set = PROTECTED.lock().unwrap_or_else(PoisonError::into_inner);
     set.iter().find(|p| real.starts_with(p)).cloned()
 }
 
@@ -439,7 +450,7 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
     }
     let lock = OutputLock::acquire(&path)?;
     let created = c.kind == OutputKind::Folder && !path.exists();
-    let (foreign, fresh_ledger) = match c.kind {
+    let (ledger, fresh_ledger) = match c.kind {
         OutputKind::Folder => claim_folder(&c, &path).map_err(|e| match e {
             FolderRefusal::Io(p, source) => OutputError::Io { path: p, source },
             FolderRefusal::Foreign(names) => OutputError::Foreign {
@@ -458,10 +469,10 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
                     path: c.path.to_path_buf(),
                 });
             }
-            (BTreeSet::new(), None)
+            (Ledger::default(), None)
         }
     };
-    let protected = protected_paths(&path, &foreign);
+    let protected = protected_paths(&path, &ledger.foreign);
     PROTECTED
         .lock()
         .unwrap_or_else(PoisonError::into_inner)
@@ -472,23 +483,19 @@ pub fn claim(c: Claim<'_>) -> Result<Claimed, OutputError> {
             .unwrap_or_else(PoisonError::into_inner)
             .push(path.clone());
     } else {
-        let written = ledger_of(&path.join(LEDGER_FILE))
-            .map(|l| l.written)
-            .unwrap_or_default();
         CLAIMED_FOLDERS
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .push(FolderState {
                 given: lexical_absolute(c.path).unwrap_or_else(|_| path.clone()),
                 real: path.clone(),
-                foreign: foreign.clone(),
-                written,
+                foreign: ledger.foreign,
+                written: ledger.written,
             });
     }
     Ok(Claimed {
         path,
         protected,
-        foreign,
         kind: c.kind,
         created,
         fresh_ledger,
@@ -501,9 +508,9 @@ enum FolderRefusal {
     Foreign(Vec<String>),
 }
 
-/// Read or write the ledger of a folder output we hold: the user's entries, and what the folder held when this
-/// claim wrote the ledger first.
-type FolderClaim = (BTreeSet<String>, Option<BTreeSet<String>>);
+/// Read or write the ledger of a folder output we hold: the ledger, and what the folder held when this claim wrote
+/// the ledger first.
+type FolderClaim = (Ledger, Option<BTreeSet<String>>);
 
 fn claim_folder(c: &Claim<'_>, dir: &Path) -> Result<FolderClaim, FolderRefusal> {
     let ledger_path = dir.join(LEDGER_FILE);
@@ -554,7 +561,7 @@ fn claim_folder(c: &Claim<'_>, dir: &Path) -> Result<FolderClaim, FolderRefusal>
         ..ledger
     };
     write_ledger(dir, &ledger).map_err(|e| FolderRefusal::Io(ledger_path.clone(), e))?;
-    Ok((ledger.foreign, fresh))
+    Ok((ledger, fresh))
 }
 
 fn write_ledger(dir: &Path, ledger: &Ledger) -> std::io::Result<()> {

@@ -60,13 +60,10 @@ pub fn file_kind(meta: &std::fs::Metadata) -> Option<&'static str> {
 pub fn resolve(path: &Path) -> std::io::Result<PathBuf> {
     if let Ok(meta) = std::fs::symlink_metadata(path) {
         if meta.file_type().is_symlink() && !path.exists() {
-            let target = std::fs::read_link(path)?;
-            return Err(std::io::Error::new(
-                std::io::ErrorKind::NotFound,
-                format!(
-                    "a symbolic link to {}, which does not exist",
-                    target.display()
-                ),
+            // A link to nowhere, named as such.
+            return Err(super::input::explained(
+                path,
+                std::io::ErrorKind::NotFound.into(),
             ));
         }
         return std::fs::canonicalize(path);

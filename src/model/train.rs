@@ -500,8 +500,7 @@ fn append_log(
         samples_per_s: sps,
     })?;
     // Appended, not replaced: checked and recorded as an output's writes are (crate::io::output).
-    crate::io::output::check_destination(&path).map_err(io)?;
-    crate::io::output::will_write(&path);
+    crate::io::output::before_write(&path).map_err(io)?;
     let mut f = std::fs::OpenOptions::new()
         .create(true)
         .append(true)

@@ -3,8 +3,8 @@
 //! inflation, a 100 000-pixel shadow) is refused with one line naming the setting and the limit instead of giving
 //! silent nonsense or exhausting memory.
 //!
-//! [`check_settings`] needs only the numbers; [`check_membrane`] also the membrane mesh and the camera's view of it
-//! (the simulator runs both when it is built).
+//! [`check_settings`] needs only the numbers; [`check_membrane`], run after it, the membrane mesh and the camera's
+//! view of it (the simulator runs both when it is built).
 
 use glam::DVec3;
 
@@ -108,7 +108,7 @@ pub fn check_settings(config: &SimConfig) -> Result<(), InvalidSetting> {
     Ok(())
 }
 
-/// The bounds of the camera against the membrane: behind its base, within its footprint, farther than
+/// The bounds of the camera against the membrane (after [`check_settings`]): behind its base, within its footprint, farther than
 /// [`MIN_RANGE_M`] from what it sees of it; a membrane mesh closed; the camera seeing the membrane (`nominal`: the
 /// rendered membrane depth, metres, 0 where a pixel misses it).
 pub fn check_membrane(
@@ -116,7 +116,6 @@ pub fn check_membrane(
     membrane: &Mesh,
     nominal: &crate::image::Image,
 ) -> Result<(), InvalidSetting> {
-    check_settings(config)?;
     let (lo, hi) = membrane.aabb();
     let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
     if config.elastomer.mesh_file.is_some() && !membrane.report().closed {

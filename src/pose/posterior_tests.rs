@@ -1,0 +1,188 @@
+//! Tests of [`super`]: eigen-decomposition, the Laplace covariance, region masses against the chi-square law, mode
+//! weights and merging, symmetry.
+use super::*;
+use crate::objects::RotationSymmetry;
+
+fn diag(a: f64, b: f64, c: f64) -> Mat3 {
+    [[a, 0.0, 0.0], [0.0, b, 0.0], [0.0, 0.0, c]]
+}
+
+#[test]
+fn jacobi_eigen_decomposes_a_symmetric_matrix() {
+    // Invariant: A v = λ v for each pair, and the vectors orthonormal.
+    let a = [[4.0, 1.0, -2.0], [1.0, 3.0, 0.5], [-2.0, 0.5, 1.0]];
+    let (values, v) = symmetric_eigen3(&a);
+    for k in 0..3 {
+        for i in 0..3 {
+            let av: f64 = (0..3).map(|j| a[i][j] * v[j][k]).sum();
+            assert!((av - values[k] * v[i][k]).abs() < 1e-10);
+        }
+        for m in 0..3 {
+            let dot: f64 = (0..3).map(|i| v[i][k] * v[i][m]).sum();
+            assert!((dot - f64::from(u8::from(k == m))).abs() < 1e-10);
+        }
+    }
+    // Trace and determinant are preserved.
+    assert!((values.iter().sum::<f64>() - 8.0).abs() < 1e-10);
+}
+
+#[test]
+#[allow(clippy::needless_range_loop)] // a matrix's indices read best as indices
+fn laplace_covariance_inverts_the_tempered_hessian() {
+    // Analytic: H = diag(1e6, 4e6, 1e2) nats per (m², m², rad²), τ = 4: variances τ/H, plus the floors squared.
+    let config = PosteriorConfig {
+        temperature: 4.0,
+        floor_position_m: 0.001,
+        floor_theta_rad: 0.01,
+        ..PosteriorConfig::default()
+    };
+    let cov = laplace_covariance(&diag(1e6, 4e6, 1e2), 1.0, &config);
+    assert!((cov[0][0] - (4e-6 + 1e-6)).abs() < 1e-15);
+    assert!((cov[1][1] - (1e-6 + 1e-6)).abs() < 1e-15);
+    assert!((cov[2][2] - (0.04 + 1e-4)).abs() < 1e-12);
+    // A flat direction is capped at max_sigma (rotation as arc at the lever).
+    let flat = laplace_covariance(&diag(1e6, 0.0, -5.0), 1.0, &config);
+    assert!((flat[1][1] - (0.03f64.powi(2) + 1e-6)).abs() < 1e-12);
+    assert!((flat[2][2] - ((0.03f64 / 0.02).powi(2) + 1e-4)).abs() < 1e-9);
+    // A coupled Hessian gives an exactly symmetric covariance whose inverse (less the floors) is H / τ.
+    let h = [[2e6, 3e5, 1e4], [3e5, 1e6, -2e3], [1e4, -2e3, 300.0]];
+    let bare = PosteriorConfig {
+        floor_position_m: 0.0,
+        floor_theta_rad: 0.0,
+        ..config.clone()
+    };
+    let c = laplace_covariance(&h, 1.0, &bare);
+    for i in 0..3 {
+        for j in 0..3 {
+            assert_eq!(c[i][j], c[j][i]);
+            let product: f64 = (0..3).map(|k| c[i][k] * h[k][j]).sum::<f64>() / bare.temperature;
+            assert!(
+                (product - f64::from(u8::from(i == j))).abs() < 1e-9,
+                "{i} {j}: {product}"
+            );
+        }
+    }
+    // A contact a quarter the reference size with exponent ½ doubles the floors.
+    let small = PosePosterior::from_evidence(
+        &[ModeEvidence {
+            pose: Se2::default(),
+            nats: 0.0,
+            hessian: diag(1e6, 4e6, 1e2),
+        }],
+        75,
+        &Symmetry::default(),
+        &PosteriorConfig {
+            floor_exponent: 0.5,
+            ..config
+        },
+    );
+    assert!((small.modes[0].cov[0][0] - (4e-6 + 4e-6)).abs() < 1e-15);
+}
+
+#[test]
+fn region_mass_of_one_gaussian_follows_the_chi_square_law() {
+    // Analytic truth: for one 3-D Gaussian the HPD region through a point at Mahalanobis distance d holds
+    // P(χ²₃ ≤ d²) = erf(d/√2) − √(2/π) d e^{−d²/2}.
+    let sd = [0.002, 0.001, 0.05];
+    let mode = PosteriorMode {
+        weight: 1.0,
+        mean: [0.01, -0.02, 0.3],
+        cov: diag(sd[0] * sd[0], sd[1] * sd[1], sd[2] * sd[2]),
+        nats: 0.0,
+        hessian: diag(1.0, 1.0, 1.0),
+    };
+    let post = PosePosterior {
+        modes: vec![mode],
+        contact_px: 300,
+    };
+    let none = Symmetry::default();
+    for d in [0.5f64, 1.5, 2.5] {
+        // Along a diagonal direction, d in Mahalanobis units.
+        let u = d / 3f64.sqrt();
+        let pose = Se2::new(0.01 + u * sd[0], -0.02 - u * sd[1], 0.3 + u * sd[2]);
+        let want =
+            erf(d / 2f64.sqrt()) - (2.0 / std::f64::consts::PI).sqrt() * d * (-d * d / 2.0).exp();
+        let got = post.region_mass(pose, &none, 20_000).unwrap();
+        assert!((got - want).abs() < 0.015, "d {d}: {got} vs {want}");
+    }
+    // θ is circular: a turn by a full period is the same point.
+    let at = Se2::new(0.01, -0.02, 0.3 + std::f64::consts::TAU);
+    assert!(post.region_mass(at, &none, 2000).unwrap() < 0.01);
+}
+
+#[test]
+fn weights_follow_the_tempered_likelihood_and_modes_merge() {
+    // Δ = 0, 8 nats and a duplicate of the first at τ = 4: weights 1 : e^{-2}, the duplicate merged.
+    let h = diag(1e7, 1e7, 1e3);
+    let ev = |x: f64, nats: f64| ModeEvidence {
+        pose: Se2::new(x, 0.0, 0.0),
+        nats,
+        hessian: h,
+    };
+    let config = PosteriorConfig {
+        temperature: 4.0,
+        ..PosteriorConfig::default()
+    };
+    let post = PosePosterior::from_evidence(
+        &[ev(0.01, 8.0), ev(0.0, 0.0), ev(0.0005, 1.0)],
+        300,
+        &Symmetry::default(),
+        &config,
+    );
+    assert_eq!(post.modes.len(), 2);
+    let ratio = post.modes[1].weight / post.modes[0].weight;
+    assert!((ratio - (-2.0f64).exp()).abs() < 1e-12);
+    assert!((post.modes.iter().map(|m| m.weight).sum::<f64>() - 1.0).abs() < 1e-12);
+    // Analytic: the region through the light mode's peak (density ratio e^{-2} to the heavy one's, same
+    // covariance, far apart) holds the heavy mode out to d² = 4: w₁ · P(χ²₃ ≤ 4), with P = erf(√2) − √(2/π)·2e^{-2}.
+    let m = post
+        .region_mass(Se2::new(0.01, 0.0, 0.0), &Symmetry::default(), 20_000)
+        .unwrap();
+    let chi = erf(2f64.sqrt()) - (2.0 / std::f64::consts::PI).sqrt() * 2.0 * (-2.0f64).exp();
+    let want = post.modes[0].weight * chi;
+    assert!((m - want).abs() < 0.015, "{m} vs {want}");
+    // Recalibrated with τ = 1 from the kept evidence: e^{-8} < min_weight, so the light mode goes.
+    let sharp = post.recalibrated(
+        &Symmetry::default(),
+        &PosteriorConfig {
+            temperature: 1.0,
+            ..config
+        },
+    );
+    assert_eq!(sharp.modes.len(), 1);
+    assert_eq!(sharp.modes[0].weight, 1.0);
+}
+
+#[test]
+fn symmetry_reduces_the_difference() {
+    // A 4-fold object turned by π/2 is the same pose; a translation axis along x (object frame), the object at
+    // θ = π/2: its world axis is y, so a y offset does not count.
+    let four = Symmetry {
+        rotation: RotationSymmetry::NFold(4),
+        translation_axis: None,
+    };
+    assert!(same_pose(
+        Se2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2),
+        Se2::default(),
+        &four
+    ));
+    let bar = Symmetry {
+        rotation: RotationSymmetry::Continuous,
+        translation_axis: Some([1.0, 0.0]),
+    };
+    let r = Se2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+    let (e, rows) = reduced_difference(Se2::new(0.003, 0.05, 1.0), r, &bar);
+    assert_eq!((e.len(), rows.len()), (1, 1));
+    assert!((e[0].abs() - 0.003).abs() < 1e-12);
+}
+
+/// erf by Abramowitz–Stegun 7.1.26 (|error| < 1.5e-7), for the test's analytic truth.
+fn erf(x: f64) -> f64 {
+    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
+    let y = 1.0
+        - (((((1.061_405_429 * t - 1.453_152_027) * t) + 1.421_413_741) * t - 0.284_496_736) * t
+            + 0.254_829_592)
+            * t
+            * (-x * x).exp();
+    y.copysign(x)
+}
