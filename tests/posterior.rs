@@ -6,6 +6,8 @@
 use crate::cli_common;
 
 use cli_common::{stderr, tnd_in};
+use rand::SeedableRng;
+use rand_distr::Distribution;
 use tactile_derender::metrics::evaluate::{
     EvalConfig, GroundTruthGenerator, MethodResult, PairRecord,
 };
@@ -83,16 +85,13 @@ fn exact_samples_give_posteriors_that_hold_the_truth() {
     assert_eq!(coverage.confidently_wrong, 0);
 }
 
-/// A record whose pipeline row is off by `off_m` in x with a posterior of σ = 0.5 mm (raw: τ = 1, no floors).
-fn record(name: &str, off_m: f64) -> PairRecord {
+/// A record whose pipeline row is off by `off` (the truth at the origin) with a posterior of σ = 0.5 mm and 2.9°
+/// (raw: τ = 1, no floors or tails).
+fn record(name: &str, off: Se2) -> PairRecord {
     let hessian = [[4e6, 0.0, 0.0], [0.0, 4e6, 0.0], [0.0, 0.0, 400.0]];
-    let raw = PosteriorConfig {
-        temperature: 1.0,
-        floor_position_m: 0.0,
-        floor_theta_rad: 0.0,
-        ..PosteriorConfig::default()
-    };
-    let estimate = Se2::new(off_m, 0.0, 0.0);
+    let raw = PosteriorConfig::untempered();
+    let estimate = off;
+    let off_m = off.x.hypot(off.y);
     let posterior = PosePosterior::from_evidence(
         &[ModeEvidence {
             pose: estimate,
@@ -108,7 +107,7 @@ fn record(name: &str, off_m: f64) -> PairRecord {
         pose: Some(tactile_derender::metrics::pose::PoseErrors {
             position_mm: off_m * 1e3,
             position_axis_excluded: false,
-            theta_rad: Some(0.0),
+            theta_rad: Some(off.theta.abs()),
             chamfer_m2: 0.0,
         }),
         posterior: Some(posterior),
@@ -147,11 +146,24 @@ fn record_base() -> MethodResult {
 #[test]
 fn tnd_posterior_scores_records_and_fits_a_calibration_that_covers_them() {
     let dir = tempfile::tempdir().unwrap();
-    // 40 pairs off by 0..4 mm while each posterior says σ = 0.5 mm: overconfident as recorded.
+    // 120 pairs off by N(0, 1.5 mm) in x and y and N(0, 6°) in θ while each posterior says σ = 0.5 mm and 2.9°:
+    // overconfident as recorded.
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let (position, theta) = (
+        rand_distr::Normal::new(0.0, 0.0015).unwrap(),
+        rand_distr::Normal::new(0.0, 6f64.to_radians()).unwrap(),
+    );
+    let mut offsets = Vec::new();
     let mut text = String::from("{\"settings\":{\"seed\":0}}\n");
-    for i in 0..40 {
+    for i in 0..120 {
+        let off = Se2::new(
+            position.sample(&mut rng),
+            position.sample(&mut rng),
+            theta.sample(&mut rng),
+        );
+        offsets.push(off);
         let line = serde_json::json!({"split": "unseen_objects", "index": i,
-            "record": record(&format!("p{i}"), 0.0001 * f64::from(i))});
+            "record": record(&format!("p{i}"), off)});
         text.push_str(&format!("{line}\n"));
     }
     std::fs::write(dir.path().join("r.jsonl"), text).unwrap();
@@ -168,13 +180,21 @@ fn tnd_posterior_scores_records_and_fits_a_calibration_that_covers_them() {
     assert!(o.status.success(), "{}", stderr(&o));
     let before = &lines(&o)[0];
     assert_eq!(before["rows"], "combined");
-    assert_eq!(before["coverage"]["pairs"], 40);
-    // Independent truth: inside the 90 % region of a 3-D Gaussian means d² ≤ 6.25, d = off / 0.5 mm: off ≤ 1.25 mm,
-    // 13 of the 40 offsets (0, 0.1, …, 1.2 mm).
+    assert_eq!(before["coverage"]["pairs"], 120);
+    // Independent truth: inside the 90 % region of a 3-D Gaussian means d² ≤ 6.25 (χ²₃), d the Mahalanobis
+    // distance of the offset under σ = 0.5 mm, 0.5 mm, 0.05 rad.
+    let want = offsets
+        .iter()
+        .filter(|o| {
+            (o.x / 5e-4).powi(2) + (o.y / 5e-4).powi(2) + (o.theta / 0.05).powi(2) <= 6.2514
+        })
+        .count() as f64
+        / 120.0;
     let inside90 = before["coverage"]["inside"][1].as_f64().unwrap();
-    assert!((inside90 - 13.0 / 40.0).abs() < 0.03, "{before}");
+    assert!((inside90 - want).abs() < 0.03, "{before} vs {want}");
+    assert!(inside90 < 0.4, "{before}");
     assert!(
-        stderr(&o).contains("| combined | all | 40 |"),
+        stderr(&o).contains("| combined | all | 120 |"),
         "{}",
         stderr(&o)
     );
@@ -192,8 +212,15 @@ fn tnd_posterior_scores_records_and_fits_a_calibration_that_covers_them() {
     );
     assert!(o.status.success(), "{}", stderr(&o));
     let after = &lines(&o)[0];
-    let fitted = after["coverage"]["inside"][1].as_f64().unwrap();
-    assert!((fitted - 0.9).abs() <= 0.06, "{after}");
+    // Fitted by the log density of the truth, the 50 % and 90 % regions hold about that share, and the top mode's σ
+    // is near the 1.5 mm the estimates are off by.
+    let inside = &after["coverage"]["inside"];
+    assert!((inside[0].as_f64().unwrap() - 0.5).abs() <= 0.1, "{after}");
+    assert!((inside[1].as_f64().unwrap() - 0.9).abs() <= 0.06, "{after}");
+    let sigma = after["reliability"]["median_sigma_position_mm"]
+        .as_f64()
+        .unwrap();
+    assert!(sigma > 1.0 && sigma < 2.2, "{after}");
     // The fitted file is a calibration the other commands take, and scores the same.
     let o = tnd_in(
         dir.path(),

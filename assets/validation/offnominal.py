@@ -15,7 +15,7 @@ the same signature check (mm, pooled over every pair), and pipeline / baseline.
 
 Usage:
   python3 assets/validation/offnominal.py --tnd target/release/tnd --objects data/real_meshes --out data/offnominal \
-      [--conditions main,inflation+3,...] [--stride 1] [--seed 300]
+      [--conditions main,inflation+3,...] [--stride 1] [--offset 0] [--seed 300]
 Needs only Python's standard library.
 """
 
@@ -84,12 +84,13 @@ def main():
     ap.add_argument("--conditions", default="main")
     ap.add_argument("--modes", default="true,nominal,calibrated")
     ap.add_argument("--stride", type=int, default=1, help="every n-th object of the set")
+    ap.add_argument("--offset", type=int, default=0, help="starting from this one (0-based, sorted by name)")
     ap.add_argument("--every", type=int, default=2, help="import every n-th frame of a recording")
     ap.add_argument("--seed", type=int, default=300)
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     with open(os.path.join(a.objects, "objects.json")) as f:
-        names = sorted(o["name"] for o in json.load(f)["objects"])[:: a.stride]
+        names = sorted(o["name"] for o in json.load(f)["objects"])[a.offset :: a.stride]
     rows = []
     for cond in a.conditions.split(","):
         true_flags = CONDITIONS[cond]
@@ -120,7 +121,9 @@ def main():
                         continue
                 out = ds + ".eval.json"
                 if not os.path.exists(out):
-                    r = run([a.tnd, "eval", "--data", ds, "--split", "unseen_objects", "--json"])
+                    # The records (each pair's estimate and posterior) feed `tnd posterior` (docs/uncertainty.md).
+                    r = run([a.tnd, "eval", "--data", ds, "--split", "unseen_objects", "--json", "--records",
+                             ds + ".records.jsonl"])
                     with open(out, "w") as f:
                         f.write(r.stdout.strip().splitlines()[-1] + "\n")
                 with open(out) as f:

@@ -3,7 +3,8 @@
 //! ([`pose`]); [`summary`] aggregates them into mean/std rows; [`evaluate`] runs the whole loop over a
 //! [`evaluate::PairSource`] ([`sources`]: dataset splits, simulated pairs) with a [`evaluate::Generator`];
 //! [`paper_table`] sets runs side by side in the paper's layout and units; [`saved_samples`] keeps each pair's
-//! samples for analysis; [`eval_log`] keeps every pair's scores as they come, so that a killed run resumes.
+//! samples for analysis; [`eval_log`] keeps every pair's scores as they come, so that a killed run resumes;
+//! [`coverage`] scores and fits the pose posterior, [`reliability_figure`] draws how it forecasts.
 
 pub mod breakdown;
 pub mod coverage;
@@ -13,6 +14,7 @@ pub mod evaluate;
 pub mod model_generator;
 pub mod paper_table;
 pub mod pose;
+pub mod reliability_figure;
 pub mod report;
 pub mod saved_samples;
 pub mod sources;

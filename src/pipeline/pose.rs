@@ -560,7 +560,12 @@ fn posterior_comment(posterior: &crate::pose::posterior::PosePosterior) -> Strin
         posterior.modes.len()
     )];
     for (k, m) in posterior.modes.iter().enumerate() {
-        let cov: Vec<String> = m.cov.iter().flatten().map(|c| format!("{c:e}")).collect();
+        let cov: Vec<String> = m
+            .spread_cov()
+            .iter()
+            .flatten()
+            .map(|c| format!("{c:e}"))
+            .collect();
         lines.push(format!(
             "posterior mode {k} weight {} mean {} {} {} cov {}",
             m.weight,

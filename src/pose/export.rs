@@ -28,9 +28,11 @@ pub fn transform_4x4(pose: Se2) -> [[f64; 4]; 4] {
     ]
 }
 
-/// The covariance of `posterior` about `estimate` (x m, y m, θ rad): every mode's covariance plus the outer
-/// product of its mean's offset from the estimate (θ wrapped by the symmetry period), weighted: a single Gaussian
-/// that keeps the other modes' spread. `None` without modes.
+/// The covariance of `posterior` about `estimate` (x m, y m, θ rad): every mode's spread (core and tail,
+/// [`super::posterior::PosteriorMode::spread_cov`]) plus the outer product of its mean's offset from the estimate (θ wrapped by the
+/// symmetry period), weighted: a single Gaussian that keeps the other modes' spread. The far components (a pose no
+/// hypothesis came near, θ anywhere) are left out: no Gaussian holds them; their share is in pose.json.
+/// `None` without modes.
 #[allow(clippy::needless_range_loop)] // a matrix's indices read best as indices
 pub fn covariance_about(
     posterior: &PosePosterior,
@@ -48,9 +50,10 @@ pub fn covariance_about(
     for m in &posterior.modes {
         let (e, _) = reduced_difference(m.pose(), estimate, &no_axis);
         let d = [e[0], e[1], e.get(2).copied().unwrap_or(0.0)];
+        let spread = m.spread_cov();
         for i in 0..3 {
             for j in 0..=i {
-                cov[i][j] += m.weight * (m.cov[i][j] + d[i] * d[j]);
+                cov[i][j] += m.weight * (spread[i][j] + d[i] * d[j]);
             }
         }
     }
@@ -234,6 +237,7 @@ mod tests {
             cov,
             nats: 0.0,
             hessian: cov,
+            tails: Default::default(),
         };
         let post = PosePosterior {
             modes: vec![mode(0.0), mode(0.02)],

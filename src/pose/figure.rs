@@ -1,6 +1,7 @@
 //! The SE(2) fit figure (paper Fig. "SE(2) fits"): a top view in millimetres, world frame, of the object's outline at
 //! the true pose, at the single-sample and multi-sample estimates and at the threshold baseline's, with the
-//! back-projected contact points the estimate was fitted to. SVG and PNG through [`crate::io::figure`].
+//! back-projected contact points the estimate was fitted to, and the pose posterior: each mode's 90 % position ellipse
+//! and the outline at the top mode's 90 % θ extremes. SVG and PNG through [`crate::io::figure`].
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -23,12 +24,17 @@ pub struct FitFigure<'a> {
     pub baseline: Option<Se2>,
     /// The registered samples' positions `(x, y)`, world frame, metres.
     pub samples: &'a [[f64; 2]],
-    /// The pose posterior: each mode's 90 % position ellipse.
+    /// The pose posterior: each mode's 90 % position ellipse, and the outline at the top mode's 90 % θ extremes.
     pub posterior: Option<&'a super::posterior::PosePosterior>,
 }
 
-/// The probability of the posterior's position ellipses in the fit figure.
+/// An outline placed in the world: loops of (x, y) millimetres.
+type Outlines = Vec<Vec<[f64; 2]>>;
+
+/// The probability of the posterior's position ellipses and θ range in the fit figure.
 pub const ELLIPSE_P: f64 = 0.9;
+/// The two-sided standard normal quantile of [`ELLIPSE_P`]: the θ range is ± this many σθ.
+const THETA_Z: f64 = 1.644_853_626_951_472_2;
 
 impl Draw for FitFigure<'_> {
     fn draw<DB: DrawingBackend>(
@@ -73,9 +79,29 @@ impl Draw for FitFigure<'_> {
                     .collect()
             })
             .unwrap_or_default();
+        // θ uncertainty: the outline at the top mode's 90 % θ extremes (±1.645 σθ of its spread).
+        let theta_range: Option<(f64, [Outlines; 2])> =
+            self.posterior.and_then(|p| p.top()).and_then(|top| {
+                let half = (THETA_Z * top.sigmas()[2]).min(std::f64::consts::PI);
+                (half.is_finite() && half > 0.0).then(|| {
+                    let at = |sign: f64| {
+                        let mean = top.pose();
+                        placed_mm(
+                            self.outline,
+                            &Se2::new(mean.x, mean.y, mean.theta + sign * half),
+                        )
+                    };
+                    (half, [at(-1.0), at(1.0)])
+                })
+            });
         let all = placed
             .iter()
             .flat_map(|(loops, _, _)| loops.iter().flatten().map(|p| (p[0], p[1])))
+            .chain(
+                theta_range
+                    .iter()
+                    .flat_map(|(_, sides)| sides.iter().flatten().flatten().map(|p| (p[0], p[1]))),
+            )
             .chain(contacts.iter().copied())
             .chain(samples.iter().copied())
             .chain(ellipses.iter().flat_map(|(e, _)| e.iter().copied()));
@@ -151,6 +177,28 @@ impl Draw for FitFigure<'_> {
                 }
             }
         }
+        if let Some((half, sides)) = &theta_range {
+            let colour = RGBColor(0, 170, 190);
+            let style = colour.mix(0.6).stroke_width(stroke.div_ceil(2));
+            for (k, loops) in sides.iter().enumerate() {
+                let series = chart
+                    .draw_series(loops.iter().flat_map(|l| {
+                        l.windows(2).map(move |w| {
+                            PathElement::new(vec![(w[0][0], w[0][1]), (w[1][0], w[1][1])], style)
+                        })
+                    }))
+                    .map_err(err)?;
+                if k == 0 {
+                    series
+                        .label(format!(
+                            "{:.0} % θ range of the top mode (±{:.1}°)",
+                            ELLIPSE_P * 100.0,
+                            half.to_degrees()
+                        ))
+                        .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], style));
+                }
+            }
+        }
         // Each outline edge on its own: a thick polyline's mitred joins shoot far out of the plot at the sharp
         // turns of a real mesh's outline (the bitmap backend has no miter limit).
         for (loops, colour, label) in placed {
@@ -192,6 +240,7 @@ mod tests {
                 cov,
                 nats: 0.0,
                 hessian: cov,
+                tails: Default::default(),
             }],
             contact_px: 100,
         };
@@ -212,6 +261,10 @@ mod tests {
         };
         let [svg, png] = write_figure(dir.path(), "fit", &size, &fig).unwrap();
         let text = std::fs::read_to_string(svg).unwrap();
+        let theta_label = format!(
+            "90 % θ range of the top mode (±{:.1}°)",
+            (1.644_853_6 * posterior.modes[0].cov[2][2].sqrt()).to_degrees()
+        );
         for want in [
             "SE(2) fits: box",
             "x, world frame [mm]",
@@ -219,6 +272,8 @@ mod tests {
             "threshold baseline",
             "registered samples (2)",
             "posterior: 90 % region of 1 mode",
+            // The θ range: ±1.645 σθ of the mode's θ variance (below).
+            theta_label.as_str(),
         ] {
             assert!(text.contains(want), "no '{want}' in the SVG");
         }

@@ -1,6 +1,6 @@
 //! **Fusing a track's frames**: the object does not move while the sensor presses it, so the posterior of one frame
 //! is evidence for the next. [`fuse`] weighs each mode of a frame's posterior by how well the previous frame's
-//! posterior predicts it — for a static pose the predictive weight of mode i is ∫ N(x; mᵢ, Cᵢ) p₋(x) dx =
+//! posterior predicts it — for a static pose the predictive weight of mode i is ∫ N(x; mᵢ, Cᵢ) (Cᵢ each mode's spread, core and tail) p₋(x) dx =
 //! Σⱼ πⱼ N(mᵢ; mⱼ, Cᵢ + Cⱼ) over the previous modes j — plus a small [`REINIT_SHARE`] for a pose the earlier frames
 //! did not see (a wrong start is not locked in). Means and covariances stay the frame's own: neighbouring frames
 //! share the model's errors, so multiplying their Gaussians would claim more certainty than the data holds.
@@ -33,10 +33,10 @@ pub fn fuse(
                 .iter()
                 .map(|p| {
                     let (e, rows) = reduced_difference(m.pose(), p.pose(), symmetry);
-                    let mut cov = m.cov;
+                    let (mut cov, previous) = (m.spread_cov(), p.spread_cov());
                     for (r, row) in cov.iter_mut().enumerate() {
                         for (c, v) in row.iter_mut().enumerate() {
-                            *v += p.cov[r][c];
+                            *v += previous[r][c];
                         }
                     }
                     p.weight.ln() + gaussian_log_density(&e, &project(&cov, &rows))
@@ -80,6 +80,7 @@ mod tests {
             cov,
             nats: 0.0,
             hessian: [[0.0; 3]; 3],
+            tails: Default::default(),
         }
     }
 

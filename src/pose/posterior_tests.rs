@@ -31,7 +31,7 @@ fn jacobi_eigen_decomposes_a_symmetric_matrix() {
 fn laplace_covariance_inverts_the_tempered_hessian() {
     // Analytic: H = diag(1e6, 4e6, 1e2) nats per (m², m², rad²), τ = 4: variances τ/H, plus the floors squared.
     let config = PosteriorConfig {
-        temperature: 4.0,
+        covariance_temperature: 4.0,
         floor_position_m: 0.001,
         floor_theta_rad: 0.01,
         ..PosteriorConfig::default()
@@ -55,7 +55,8 @@ fn laplace_covariance_inverts_the_tempered_hessian() {
     for i in 0..3 {
         for j in 0..3 {
             assert_eq!(c[i][j], c[j][i]);
-            let product: f64 = (0..3).map(|k| c[i][k] * h[k][j]).sum::<f64>() / bare.temperature;
+            let product: f64 =
+                (0..3).map(|k| c[i][k] * h[k][j]).sum::<f64>() / bare.covariance_temperature;
             assert!(
                 (product - f64::from(u8::from(i == j))).abs() < 1e-9,
                 "{i} {j}: {product}"
@@ -90,6 +91,7 @@ fn region_mass_of_one_gaussian_follows_the_chi_square_law() {
         cov: diag(sd[0] * sd[0], sd[1] * sd[1], sd[2] * sd[2]),
         nats: 0.0,
         hessian: diag(1.0, 1.0, 1.0),
+        tails: Default::default(),
     };
     let post = PosePosterior {
         modes: vec![mode],
@@ -121,7 +123,7 @@ fn weights_follow_the_tempered_likelihood_and_modes_merge() {
     };
     let config = PosteriorConfig {
         temperature: 4.0,
-        ..PosteriorConfig::default()
+        ..PosteriorConfig::untempered()
     };
     let post = PosePosterior::from_evidence(
         &[ev(0.01, 8.0), ev(0.0, 0.0), ev(0.0005, 1.0)],
@@ -151,6 +153,66 @@ fn weights_follow_the_tempered_likelihood_and_modes_merge() {
     );
     assert_eq!(sharp.modes.len(), 1);
     assert_eq!(sharp.modes[0].weight, 1.0);
+}
+
+#[test]
+fn tails_follow_the_contact_and_their_densities_are_exact() {
+    // The shares are the logistic of logit + slope · ln(pixels / reference), the far one first.
+    let config = PosteriorConfig {
+        tail_logit: -1.0,
+        tail_contact_slope: -0.5,
+        far_logit: -3.0,
+        far_contact_slope: -1.0,
+        tail_exponent: 0.0,
+        tail_core_scale: 2.0,
+        tail_position_m: 0.001,
+        tail_theta_rad: 0.1,
+        far_position_m: 0.004,
+        ..PosteriorConfig::untempered()
+    };
+    let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
+    let evidence = [ModeEvidence {
+        pose: Se2::new(0.001, 0.002, 0.5),
+        nats: 0.0,
+        hessian: diag(1e8, 1e8, 1e4),
+    }];
+    let none = Symmetry::default();
+    for px in [75usize, 300, 1200] {
+        let l = (px as f64 / 300.0).ln();
+        let post = PosePosterior::from_evidence(&evidence, px, &none, &config);
+        let t = post.modes[0].tails;
+        let far = logistic(-3.0 - l);
+        assert!((t.far - far).abs() < 1e-12);
+        assert!((t.tail - (1.0 - far) * logistic(-1.0 - 0.5 * l)).abs() < 1e-12);
+        // The tail: the core scaled by 2 and widened.
+        let core = post.modes[0].cov;
+        assert!((t.tail_cov[0][0] - (4.0 * core[0][0] + 1e-6)).abs() < 1e-15);
+        assert!((t.tail_cov[2][2] - (4.0 * core[2][2] + 0.01)).abs() < 1e-12);
+        // The spread is the moment of core and tail (the far share apart).
+        let spread = post.modes[0].spread_cov();
+        let near = 1.0 - t.far;
+        for i in 0..3 {
+            let want = ((near - t.tail) * core[i][i] + t.tail * t.tail_cov[i][i]) / near;
+            assert!((spread[i][i] - want).abs() <= 1e-12 * want, "{px} {i}");
+        }
+    }
+    // The far component alone: θ uniform (the density does not change with θ and is the position Gaussian's over
+    // 2π) and the region through a point at Mahalanobis distance d in position holds P(χ²₂ ≤ d²) = 1 − e^{−d²/2}.
+    let mut far_only = PosePosterior::from_evidence(&evidence, 300, &none, &config);
+    far_only.modes[0].tails.far = 1.0;
+    far_only.modes[0].tails.tail = 0.0;
+    let s = 0.004;
+    let at = |d: f64, theta: f64| Se2::new(0.001 + d * s, 0.002, theta);
+    let want_log = -0.5 - (std::f64::consts::TAU * s * s).ln() - std::f64::consts::TAU.ln();
+    for theta in [0.5, -2.0, 3.0] {
+        let got = far_only.log_density(at(1.0, theta), &none);
+        assert!((got - want_log).abs() < 1e-9, "{got} vs {want_log}");
+    }
+    for d in [0.5f64, 1.5, 2.5] {
+        let got = far_only.region_mass(at(d, 1.0), &none, 20_000).unwrap();
+        let want = 1.0 - (-d * d / 2.0).exp();
+        assert!((got - want).abs() < 0.015, "d {d}: {got} vs {want}");
+    }
 }
 
 #[test]

@@ -45,9 +45,25 @@ impl Draw for KdeFigure<'_> {
         } else {
             "estimate"
         };
+        // Without the truth, the "errors" are distances from the estimate: say so on the axes.
+        let (position_title, position_axis, theta_title, theta_axis) = if r.reference_is_truth {
+            (
+                "position error",
+                "position error [mm]",
+                "θ error",
+                "θ error [deg]",
+            )
+        } else {
+            (
+                "position distance from the estimate",
+                "distance from the estimate [mm]",
+                "θ distance from the estimate",
+                "θ − θ of the estimate [deg]",
+            )
+        };
         let mut panels = vec![Panel {
-            title: "position error",
-            axis: "position error [mm]",
+            title: position_title,
+            axis: position_axis,
             curve: &r.position_kde,
             samples: r.samples.iter().map(|s| s.position_mm).collect(),
             baseline: r.baseline.map(|b| b.position_mm),
@@ -58,8 +74,8 @@ impl Draw for KdeFigure<'_> {
         let theta: Vec<f64> = r.samples.iter().filter_map(|s| s.theta_deg).collect();
         if !theta.is_empty() {
             panels.push(Panel {
-                title: "θ error",
-                axis: "θ error [deg]",
+                title: theta_title,
+                axis: theta_axis,
                 curve: &r.theta_kde,
                 samples: theta,
                 baseline: r.baseline.and_then(|b| b.theta_deg),
@@ -69,6 +85,11 @@ impl Draw for KdeFigure<'_> {
             });
         }
         let rose = panels.get(1).map(|theta| Rose {
+            title: if r.reference_is_truth {
+                "θ error, circular"
+            } else {
+                "θ from the estimate, circular"
+            },
             period_deg: r.theta_period_deg.unwrap_or(360.0),
             errors: &theta.samples,
             lines: [
@@ -82,7 +103,7 @@ impl Draw for KdeFigure<'_> {
         let body = root
             .margin((6.0 * scale) as u32, 0, 0, 0)
             .titled(
-                &format!("pose errors of the registered samples against the {truth}"),
+                &format!("pose of the registered samples against the {truth}"),
                 font(18.0, scale),
             )
             .map_err(err)?;
@@ -224,6 +245,7 @@ fn panel<DB: DrawingBackend>(
 
 /// A circular histogram of the θ errors ([`super::rose`]), with the estimates' errors as rays.
 struct Rose<'a> {
+    title: &'static str,
     period_deg: f64,
     errors: &'a [f64],
     lines: [(Option<f64>, RGBColor, &'static str); 3],
@@ -244,7 +266,7 @@ impl Rose<'_> {
         let stroke = (2.0 * s).round().max(1.0) as u32;
         let margin = (12.0 * s) as u32;
         let inner = area
-            .titled("θ error, circular", font(18.0, s))
+            .titled(self.title, font(18.0, s))
             .map_err(err)?
             .margin(margin, margin, margin, margin);
         // Equal units on both axes (a circle on unequal ones is an ellipse): the rose (radius 1, labels out to

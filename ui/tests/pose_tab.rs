@@ -102,7 +102,7 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
         "{checked:?}"
     );
     assert!(h.query_by_label_contains("signature check: x").is_some());
-    // The posterior: modes with weights, σ about the estimate, and where the truth lies in it.
+    // The posterior: modes with weights, σ about the estimate, the error beside it and where the truth lies in it.
     let post = r.posterior.as_ref().expect("pose posterior");
     assert!(!post.modes.is_empty());
     assert!(
@@ -111,7 +111,13 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
         r.truth_region
     );
     assert!(h.query_by_label_contains("posterior: ").is_some());
-    assert!(h.query_by_label_contains("the truth lies in its").is_some());
+    assert!(h
+        .query_by_label_contains("that it is none of them); σ x")
+        .is_some());
+    assert!(h.query_by_label_contains("; error x").is_some());
+    assert!(h
+        .query_by_label_contains("the truth is inside its")
+        .is_some());
     // It says whose hypothesis won: the sample's or the imprint's threshold contact's.
     let source = if r.checked_from_imprint {
         "the imprint's proposal"

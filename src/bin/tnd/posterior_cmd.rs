@@ -1,5 +1,6 @@
 //! `tnd posterior`: how well the pose posterior's regions cover the truth on `tnd eval --records` files (per method
-//! and per contact-size bin, [`tactile_derender::metrics::coverage`]), and a calibration fitted to them (`--fit`)
+//! and per contact-size bin: coverage at every level, sharpness and the log density of the truth,
+//! [`tactile_derender::metrics::coverage`]; `--figures` draws them), and a calibration fitted to them (`--fit`)
 //! that `tnd eval`, `tnd pose` and `tnd recording track` take as `--posterior FILE`: a user with labelled
 //! recordings of their own sensor calibrates the uncertainty it reports.
 
@@ -8,12 +9,14 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use serde_json::json;
+use tactile_derender::io::figure::{write_figure, FigureConfig};
 use tactile_derender::metrics::breakdown::{bin_label, CONTACT_BINS};
 use tactile_derender::metrics::coverage::{
-    coverage_with, fit_posterior, Coverage, Scored, WRONG_MM,
+    coverage_with, fit_posterior, reliability, Coverage, Reliability, Scored, WRONG_MM,
 };
 use tactile_derender::metrics::eval_log::EvalLog;
 use tactile_derender::metrics::evaluate::{MethodResult, PairRecord, REGION_DRAWS};
+use tactile_derender::metrics::reliability_figure::ReliabilityFigure;
 use tactile_derender::pose::posterior::PosteriorConfig;
 
 #[derive(Args, Debug)]
@@ -28,10 +31,15 @@ pub struct PosteriorArgs {
     /// Recalibrate the recorded posteriors with this calibration (JSON, as --fit writes) before scoring.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
-    /// Fit the calibration (temperature and floors) to the chosen rows of these records, print their coverage
-    /// under it, and write it here (JSON) for `--posterior FILE`.
+    /// Fit the calibration (temperatures, floors and heavy tails, by the mean negative log density of the truth) to
+    /// the chosen rows of these records, print their coverage under it, and write it here (JSON) for
+    /// `--posterior FILE`.
     #[arg(long, value_name = "FILE")]
     pub fit: Option<PathBuf>,
+    /// Draw the reliability diagram and sharpness (per contact-size bin, of the first chosen rows) into this folder:
+    /// reliability.svg and reliability.png.
+    #[arg(long, value_name = "DIR")]
+    pub figures: Option<PathBuf>,
     /// JSON lines only (no markdown table on stderr).
     #[arg(long)]
     pub json: bool,
@@ -84,6 +92,11 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
         .as_deref()
         .map(|p| crate::outputs::file("--fit", p, a.force.force, &inputs, &fitted_file))
         .transpose()?;
+    let figures = a
+        .figures
+        .as_deref()
+        .map(|p| crate::outputs::folder("--figures", p, a.force.force, &inputs))
+        .transpose()?;
     let config = a
         .config
         .as_deref()
@@ -103,6 +116,7 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
                     truth: r.truth,
                     symmetry: r.symmetry,
                     position_mm: m.pose?.position_mm,
+                    theta_rad: m.pose?.theta_rad,
                     contact_pixels: r.contact_pixels,
                 })
             })
@@ -122,8 +136,9 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
         .map(|_| fit_posterior(&all, &config.clone().unwrap_or_default()));
     let used = fitted.as_ref().map(|f| &f.config).or(config.as_ref());
     let mut table = String::from(
-        "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong |\n|---|---|---|---|---|---|---|\n",
+        "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong | mean NLL | median σ / error, position [mm] | median σ / error, θ [deg] |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
+    let mut drawn: Vec<(String, Reliability)> = Vec::new();
     for (name, get) in &methods {
         let rows = scored(*get);
         let mut groups: Vec<(String, Vec<Scored<'_>>)> = vec![("all".into(), rows.clone())];
@@ -138,14 +153,20 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
             }
         }
         for (group, mine) in groups {
-            let Some(c) = coverage_with(&mine, used, REGION_DRAWS) else {
+            let (Some(c), Some(r)) = (
+                coverage_with(&mine, used, REGION_DRAWS),
+                reliability(&mine, used, REGION_DRAWS),
+            ) else {
                 continue;
             };
             println!(
                 "{}",
-                json!({"rows": name, "contact": group, "coverage": c, "wrong_mm": WRONG_MM})
+                json!({"rows": name, "contact": group, "coverage": c, "wrong_mm": WRONG_MM, "reliability": r})
             );
-            table.push_str(&row(name, &group, &c));
+            table.push_str(&row(name, &group, &c, &r));
+            if figures.is_some() && *name == methods[0].0 {
+                drawn.push((group, r));
+            }
         }
     }
     if !a.json {
@@ -156,6 +177,33 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
                 (None, Some(p)) => format!("calibration {}", p.display()),
                 (None, None) => "as recorded".into(),
             }
+        );
+    }
+    if let Some(dir) = &figures {
+        let title = format!(
+            "pose posterior: {} rows, {}",
+            methods[0].0,
+            match (&fitted, &a.config) {
+                (Some(_), _) => "fitted to these records".to_string(),
+                (None, Some(p)) => format!("calibration {}", p.display()),
+                (None, None) => "as recorded".into(),
+            }
+        );
+        let [svg, png] = write_figure(
+            dir.path(),
+            "reliability",
+            &FigureConfig {
+                width_px: 3000,
+                height_px: 1000,
+            },
+            &ReliabilityFigure {
+                title: &title,
+                groups: &drawn,
+            },
+        )?;
+        println!(
+            "{}",
+            json!({"figures": [crate::path_json(&svg), crate::path_json(&png)]})
         );
     }
     if let (Some(f), Some(path)) = (&fitted, &a.fit) {
@@ -172,8 +220,21 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
     Ok(())
 }
 
-fn row(name: &str, group: &str, c: &Coverage) -> String {
-    format!("| {name} | {group} | {} |\n", coverage_cells(c))
+fn row(name: &str, group: &str, c: &Coverage, r: &Reliability) -> String {
+    let pair = |sigma: Option<f64>, error: Option<f64>| match (sigma, error) {
+        (Some(s), Some(e)) => format!("{s:.2} / {e:.2}"),
+        _ => "-".into(),
+    };
+    format!(
+        "| {name} | {group} | {} | {:.2} | {} | {} |\n",
+        coverage_cells(c),
+        r.mean_nll,
+        pair(
+            Some(r.median_sigma_position_mm),
+            Some(r.median_error_position_mm)
+        ),
+        pair(r.median_sigma_theta_deg, r.median_error_theta_deg)
+    )
 }
 
 /// A coverage's markdown cells: pairs, inside 50 / 90 / 95 %, confidently wrong (this table's and `tnd eval`'s).

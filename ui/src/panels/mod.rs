@@ -16,6 +16,7 @@ pub mod derender_panel;
 pub mod elastomer_panel;
 pub mod image_card;
 pub mod pose_panel;
+pub mod pose_posterior;
 pub mod recording_panel;
 pub mod scene_panel;
 pub mod sensor_panel;

@@ -257,47 +257,6 @@ fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, heigh
 /// Colour of the posterior's regions in the top view.
 const POSTERIOR_COLOUR: Color32 = Color32::from_rgb(0, 170, 190);
 
-/// The posterior in one line: its modes, the estimate's σ (the covariance about it, other modes included) and,
-/// with a truth, the smallest region holding it.
-fn posterior_summary(ui: &mut egui::Ui, r: &PoseAnalysis) {
-    let (Some(post), Some(est)) = (&r.posterior, r.single_estimate()) else {
-        return;
-    };
-    let Some(cov) = tactile_derender::pose::export::covariance_about(post, est, &r.symmetry) else {
-        return;
-    };
-    let top = post.modes.first().map_or(0.0, |m| m.weight);
-    let truth = r
-        .truth_region
-        .map(|m| {
-            format!(
-                "; the truth lies in its {:.0} % region",
-                (m * 100.0).ceil().min(100.0)
-            )
-        })
-        .unwrap_or_default();
-    let text = format!(
-        "posterior: {} mode{} (top weight {:.2}); σ x {:.1} mm, y {:.1} mm, θ {:.1}°{truth}",
-        post.modes.len(),
-        if post.modes.len() == 1 { "" } else { "s" },
-        top,
-        cov[0][0].sqrt() * 1e3,
-        cov[1][1].sqrt() * 1e3,
-        cov[2][2].sqrt().to_degrees()
-    );
-    let label = if top < 0.7 {
-        ui.colored_label(ui.visuals().warn_fg_color, text)
-    } else {
-        ui.label(text)
-    };
-    label.on_hover_text(
-        "What the measured signature supports: each pose the signature check refined is a mode, weighted by how well \
-         it explains the signature (tempered for correlated pixels) with a covariance from the curvature of that fit \
-         plus a floor that grows on small contacts; calibrated on validation data (docs/uncertainty.md). σ is about \
-         the estimate, other modes included — what pose.json's pose_with_covariance carries.",
-    );
-}
-
 fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
     ui.strong(format!(
         "{}: hypotheses of sample {} (best first)",
@@ -326,7 +285,7 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
              the sensor's noise decides which one is picked.",
         );
     }
-    posterior_summary(ui, r);
+    super::pose_posterior::posterior_summary(ui, r);
     if let Some(p) = r.press_found_m {
         ui.label(format!("press {:.2} mm, found from the samples", p * 1e3))
             .on_hover_text(

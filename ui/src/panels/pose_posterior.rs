@@ -1,0 +1,75 @@
+//! The Pose tab's posterior line ([`tactile_derender::pose::posterior`]): its modes, the share that the pose is none
+//! of them, σ about the estimate and, with a truth, the estimate's error beside it and the smallest region holding it.
+
+use crate::pose_view::PoseAnalysis;
+
+/// The posterior in one line: its modes, the share that the pose is none of them, the estimate's σ (the covariance
+/// about it, other modes included) and, with a truth, the estimate's error beside it and the smallest region holding
+/// the truth.
+pub fn posterior_summary(ui: &mut egui::Ui, r: &PoseAnalysis) {
+    let (Some(post), Some(est)) = (&r.posterior, r.single_estimate()) else {
+        return;
+    };
+    let Some(cov) = tactile_derender::pose::export::covariance_about(post, est, &r.symmetry) else {
+        return;
+    };
+    let top = post.modes.first().map_or(0.0, |m| m.weight);
+    let far = post.modes.first().map_or(0.0, |m| m.tails.far);
+    let theta_free = r.symmetry.rotation.period_rad().is_none();
+    let theta_sigma = if theta_free {
+        "θ free".to_string()
+    } else {
+        format!("θ {:.1}°", cov[2][2].sqrt().to_degrees())
+    };
+    let truth = r
+        .truth
+        .map(|t| {
+            let no_axis = tactile_derender::objects::Symmetry {
+                translation_axis: None,
+                ..r.symmetry
+            };
+            let (e, _) = tactile_derender::pose::posterior::reduced_difference(est, t, &no_axis);
+            let theta = e
+                .get(2)
+                .map(|v| format!(", θ {:.1}°", v.abs().to_degrees()))
+                .unwrap_or_default();
+            let region = r
+                .truth_region
+                .map(|m| {
+                    format!(
+                        " — the truth is inside its {:.0} % region and every wider one",
+                        (m * 100.0).ceil().clamp(1.0, 100.0)
+                    )
+                })
+                .unwrap_or_default();
+            format!(
+                "; error x {:.2} mm, y {:.2} mm{theta}{region}",
+                e[0].abs() * 1e3,
+                e[1].abs() * 1e3
+            )
+        })
+        .unwrap_or_default();
+    let text = format!(
+        "posterior: {} mode{} (top weight {:.2}; {:.0} % that it is none of them); σ x {:.2} mm, y {:.2} mm, \
+         {theta_sigma}{truth}",
+        post.modes.len(),
+        if post.modes.len() == 1 { "" } else { "s" },
+        top,
+        far * 100.0,
+        cov[0][0].sqrt() * 1e3,
+        cov[1][1].sqrt() * 1e3,
+    );
+    let label = if top < 0.7 {
+        ui.colored_label(ui.visuals().warn_fg_color, text)
+    } else {
+        ui.label(text)
+    };
+    label.on_hover_text(
+        "What the measured signature supports: each pose the signature check refined is a mode, weighted by how well \
+         it explains the signature (tempered for correlated pixels), with a sharp core from the curvature of that \
+         fit, a wider tail for a contact the sample got somewhat wrong and a far share for a pose no hypothesis came \
+         near; the shares grow on small contacts. Fitted to validation data by the log density of the truth \
+         (docs/uncertainty.md). σ is about the estimate, other modes' cores and tails included — what pose.json's \
+         pose_with_covariance carries.",
+    );
+}
