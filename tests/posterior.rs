@@ -70,6 +70,15 @@ fn exact_samples_give_posteriors_that_hold_the_truth() {
                 );
             }
             assert!(p.mode_of(m.estimate.unwrap(), &r.symmetry).is_some());
+            // The contact the best mode predicts is the true contact's size (the estimate is within a millimetre
+            // of the truth), where the count on the noisy signature is not held to it.
+            let predicted = p.predicted_contact_px.unwrap() as f64;
+            let truth = r.contact_pixels as f64;
+            assert!(
+                (predicted - truth).abs() <= 0.15 * truth + 5.0,
+                "{}: {row}: predicted {predicted} px, true {truth}",
+                r.name
+            );
             if row != "baseline_checked" {
                 let region = m.truth_region.unwrap();
                 assert!(

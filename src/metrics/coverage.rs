@@ -228,8 +228,41 @@ pub struct Fit {
     pub coverage: Option<Coverage>,
 }
 
-/// The calibration fitted to `scored` (module docs): `base`'s other settings kept, its fitted ones the first start.
+/// The calibration fitted to `scored` (module docs): `base`'s other settings kept, its fitted ones the first start;
+/// where the records keep the contact the best mode predicts, fitted with each contact count and the better kept.
 pub fn fit_posterior(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
+    // Where the records keep the contact the best mode predicts, both contact counts are tried.
+    let counts = if scored
+        .iter()
+        .any(|s| s.posterior.predicted_contact_px.is_some())
+    {
+        vec![false, true]
+    } else {
+        vec![base.contact_from_prediction]
+    };
+    let fits: Vec<Fit> = counts
+        .into_iter()
+        .map(|predicted| {
+            fit_one(
+                scored,
+                &PosteriorConfig {
+                    contact_from_prediction: predicted,
+                    ..base.clone()
+                },
+            )
+        })
+        .collect();
+    fits.into_iter()
+        .min_by(|a, b| a.mean_nll.total_cmp(&b.mean_nll))
+        .unwrap_or(Fit {
+            config: base.clone(),
+            mean_nll: f64::NAN,
+            coverage: None,
+        })
+}
+
+/// [`fit_posterior`] with `base`'s contact count.
+fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
     let x0 = encode(base);
     // Each contact-size bin counts alike (a pair weighs 1 / its bin's pairs): the posterior is to be calibrated in
     // every bin, and small contacts, the hardest, are the fewest.

@@ -243,6 +243,7 @@ mod tests {
                 tails: Default::default(),
             }],
             contact_px: 100,
+            predicted_contact_px: None,
         };
         let fig = FitFigure {
             object: "box",

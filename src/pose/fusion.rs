@@ -93,10 +93,12 @@ mod tests {
         let current = PosePosterior {
             modes: vec![mode(0.55, flipped, 0.001, 0.05), mode(0.45, a, 0.001, 0.05)],
             contact_px: 100,
+            predicted_contact_px: None,
         };
         let previous = PosePosterior {
             modes: vec![mode(1.0, Se2::new(0.0005, 0.0, 0.32), 0.001, 0.05)],
             contact_px: 100,
+            predicted_contact_px: None,
         };
         let fused = fuse(&current, &previous, &symmetry);
         assert_eq!(fused.modes[0].pose(), a);
@@ -112,6 +114,7 @@ mod tests {
         let strong = PosePosterior {
             modes: vec![mode(0.99, flipped, 0.001, 0.05), mode(0.01, a, 0.001, 0.05)],
             contact_px: 100,
+            predicted_contact_px: None,
         };
         assert_eq!(fuse(&strong, &previous, &symmetry).modes[0].pose(), flipped);
         // Nothing to fuse with: unchanged.

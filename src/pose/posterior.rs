@@ -145,9 +145,16 @@ impl PosteriorMode {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PosePosterior {
     pub modes: Vec<PosteriorMode>,
-    /// The signature's contact pixels the floors were scaled by ([`PosteriorConfig::floor_contact_px`]).
+    /// The measured signature's contact pixels (in front of the membrane by more than
+    /// [`PosteriorConfig::contact_threshold_m`]); the floors and tails scale by these unless
+    /// [`PosteriorConfig::contact_from_prediction`].
     #[serde(default)]
     pub contact_px: usize,
+    /// The contact pixels the best mode predicts (the object rendered at its pose in front of the membrane): free of
+    /// the sensor's noise, which puts hundreds of pixels past the threshold on a noisy frame. `None` in records
+    /// from before it was kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub predicted_contact_px: Option<usize>,
 }
 
 /// `estimate − reference` in the coordinates the object's symmetry leaves identifiable: the position difference with
@@ -202,6 +209,18 @@ impl PosePosterior {
         symmetry: &Symmetry,
         config: &PosteriorConfig,
     ) -> Self {
+        Self::from_evidence_with(evidence, contact_px, None, symmetry, config)
+    }
+
+    /// [`Self::from_evidence`] with the contact the best mode predicts beside the measured one (see
+    /// [`Self::predicted_contact_px`]); `config` chooses which the floors and tails scale by.
+    pub fn from_evidence_with(
+        evidence: &[ModeEvidence],
+        contact_px: usize,
+        predicted_contact_px: Option<usize>,
+        symmetry: &Symmetry,
+        config: &PosteriorConfig,
+    ) -> Self {
         let mut order: Vec<&ModeEvidence> =
             evidence.iter().filter(|e| e.nats.is_finite()).collect();
         order.sort_by(|a, b| a.nats.total_cmp(&b.nats));
@@ -214,7 +233,11 @@ impl PosePosterior {
             }
         }
         let best = kept.first().map_or(0.0, |e| e.nats);
-        let contact = contact_px.max(10) as f64;
+        let used = match predicted_contact_px {
+            Some(p) if config.contact_from_prediction => p,
+            _ => contact_px,
+        };
+        let contact = used.max(10) as f64;
         let floor_scale = (config.floor_contact_px / contact).powf(config.floor_exponent);
         let ln_contact = (contact / config.floor_contact_px).ln();
         let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
@@ -268,7 +291,11 @@ impl PosePosterior {
             .collect();
         let kept_total: f64 = modes.iter().map(|m| m.weight).sum();
         modes.iter_mut().for_each(|m| m.weight /= kept_total);
-        Self { modes, contact_px }
+        Self {
+            modes,
+            contact_px,
+            predicted_contact_px,
+        }
     }
 
     /// The same evidence calibrated again with `config` (e.g. one fitted to a user's own sensor).
@@ -282,7 +309,13 @@ impl PosePosterior {
                 hessian: m.hessian,
             })
             .collect();
-        Self::from_evidence(&evidence, self.contact_px, symmetry, config)
+        Self::from_evidence_with(
+            &evidence,
+            self.contact_px,
+            self.predicted_contact_px,
+            symmetry,
+            config,
+        )
     }
 
     /// The heaviest mode.

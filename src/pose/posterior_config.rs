@@ -30,6 +30,9 @@ pub struct PosteriorConfig {
     /// Depth in front of the membrane that counts as contact for `floor_contact_px`, metres (the threshold
     /// baseline's 3 mm).
     pub contact_threshold_m: f64,
+    /// Scale the floors and tails by the contact the best mode predicts instead of the one counted on the measured
+    /// signature (which the sensor's noise inflates); falls back to the measured count where no prediction was kept.
+    pub contact_from_prediction: bool,
     /// Modes lighter than this are left out (and the rest renormalised).
     pub min_weight: f64,
     /// Most modes kept (the lowest Δ first); each costs a Hessian (18 predicted signatures).
@@ -82,6 +85,7 @@ impl Default for PosteriorConfig {
             floor_contact_px: 300.0,
             floor_exponent: 0.660,
             contact_threshold_m: 0.003,
+            contact_from_prediction: false,
             min_weight: 1e-3,
             max_modes: 10,
             step_m: 5e-4,

@@ -81,6 +81,38 @@ fn laplace_covariance_inverts_the_tempered_hessian() {
 }
 
 #[test]
+fn the_predicted_contact_scales_the_floors_when_chosen() {
+    // Measured 300 px, predicted 75 px, exponent ½: the floors double only when the prediction is chosen, and a
+    // posterior without a prediction falls back to the measured count; both counts are kept for recalibration.
+    let config = PosteriorConfig {
+        floor_position_m: 0.001,
+        floor_exponent: 0.5,
+        ..PosteriorConfig::untempered()
+    };
+    let evidence = [ModeEvidence {
+        pose: Se2::default(),
+        nats: 0.0,
+        hessian: diag(1e12, 1e12, 1e8),
+    }];
+    let none = Symmetry::default();
+    let floor = |p: &PosePosterior| p.modes[0].cov[0][0].sqrt();
+    let measured = PosePosterior::from_evidence_with(&evidence, 300, Some(75), &none, &config);
+    assert!((floor(&measured) - 0.001).abs() < 1e-5);
+    let chosen = PosteriorConfig {
+        contact_from_prediction: true,
+        ..config.clone()
+    };
+    let predicted = measured.recalibrated(&none, &chosen);
+    assert!((floor(&predicted) - 0.002).abs() < 1e-5);
+    assert_eq!(
+        (predicted.contact_px, predicted.predicted_contact_px),
+        (300, Some(75))
+    );
+    let fallback = PosePosterior::from_evidence(&evidence, 300, &none, &chosen);
+    assert!((floor(&fallback) - 0.001).abs() < 1e-5);
+}
+
+#[test]
 fn region_mass_of_one_gaussian_follows_the_chi_square_law() {
     // Analytic truth: for one 3-D Gaussian the HPD region through a point at Mahalanobis distance d holds
     // P(χ²₃ ≤ d²) = erf(d/√2) − √(2/π) d e^{−d²/2}.
@@ -96,6 +128,7 @@ fn region_mass_of_one_gaussian_follows_the_chi_square_law() {
     let post = PosePosterior {
         modes: vec![mode],
         contact_px: 300,
+        predicted_contact_px: None,
     };
     let none = Symmetry::default();
     for d in [0.5f64, 1.5, 2.5] {

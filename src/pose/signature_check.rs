@@ -239,10 +239,15 @@ impl SignatureCheck<'_> {
         Ok(())
     }
 
+    /// The object's depth from the camera with the object at `pose` (metres; 0 where the ray misses it).
+    fn object_depth(&self, pose: Se2) -> Image {
+        let t_object_camera = pose.to_affine().inverse() * self.t_world_camera;
+        render_depth(self.caster, self.intrinsics, &t_object_camera)
+    }
+
     /// Ŝ(q): the noise-free signature the sensor would measure with the object at `pose` (metres).
     pub fn predict(&self, pose: Se2) -> Image {
-        let t_object_camera = pose.to_affine().inverse() * self.t_world_camera;
-        let depth = render_depth(self.caster, self.intrinsics, &t_object_camera);
+        let depth = self.object_depth(pose);
         let mask = depth.zip_map(self.membrane, |d, e| {
             if d > 0.0 && e > 0.0 && d < e {
                 1.0
@@ -475,9 +480,25 @@ impl SignatureCheck<'_> {
                 s > 0.0 && s.is_finite() && e > 0.0 && f64::from(e - s) > config.contact_threshold_m
             })
             .count();
-        Ok(PosePosterior::from_evidence(
-            &evidence, contact_px, symmetry, config,
+        let predicted_contact_px = distinct.first().map(|&(pose, _)| self.contact_px_at(pose));
+        Ok(PosePosterior::from_evidence_with(
+            &evidence,
+            contact_px,
+            predicted_contact_px,
+            symmetry,
+            config,
         ))
+    }
+
+    /// The contact pixels with the object at `pose`: where it reaches in front of the membrane (the contact mask
+    /// [`Self::predict`] renders), free of the sensor's noise.
+    pub fn contact_px_at(&self, pose: Se2) -> usize {
+        self.object_depth(pose)
+            .data
+            .iter()
+            .zip(&self.membrane.data)
+            .filter(|(&d, &e)| d > 0.0 && e > 0.0 && d < e)
+            .count()
     }
 
     /// Hessian of `scale · cost` at `pose` (whose cost is `at`) over (x m, y m, θ rad): central differences with
