@@ -22,7 +22,7 @@ pub const LEVELS: [f64; 3] = [0.5, 0.9, 0.95];
 pub const WRONG_MM: f64 = 5.0;
 /// Levels of the reliability diagram ([`reliability`]).
 pub const RELIABILITY_LEVELS: [f64; 11] = [0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95];
-/// Each pair's negative log density is capped at this in [`mean_nll`] (so that one pair far outside every mode does
+/// Each pair's negative log density is capped at this in [`mean_nll`] and [`reliability`] (so that one pair far outside every mode does
 /// not decide alone).
 pub const NLL_CAP: f64 = 50.0;
 
@@ -114,14 +114,16 @@ pub struct Reliability {
     pub median_error_theta_deg: Option<f64>,
 }
 
-/// The reliability diagram, sharpness and mean negative log density of `scored`'s posteriors, recalibrated by
-/// `config` (as recorded when `None`), `draws` Monte Carlo draws per region; `None` without pairs.
+/// The coverage, reliability diagram, sharpness and mean negative log density of `scored`'s posteriors,
+/// recalibrated by `config` (as recorded when `None`), from one Monte Carlo region mass per pair (`draws` draws);
+/// pairs without modes are left out; `None` without pairs.
 pub fn reliability(
     scored: &[Scored<'_>],
     config: Option<&PosteriorConfig>,
     draws: usize,
-) -> Option<Reliability> {
-    let per_pair: Vec<(f64, f64, [f64; 3])> = scored
+) -> Option<(Coverage, Reliability)> {
+    // Each pair with its region mass, negative log density and top mode's σ.
+    let per_pair: Vec<(&Scored<'_>, f64, f64, [f64; 3])> = scored
         .par_iter()
         .filter_map(|s| {
             let recalibrated = config.map(|c| s.posterior.recalibrated(&s.symmetry, c));
@@ -129,63 +131,48 @@ pub fn reliability(
             let mass = p.region_mass(s.truth, &s.symmetry, draws)?;
             let nll = (-p.log_density(s.truth, &s.symmetry)).min(NLL_CAP);
             let sigmas = p.top()?.sigmas();
-            Some((mass, nll, sigmas))
+            Some((s, mass, nll, sigmas))
         })
         .collect();
-    if per_pair.is_empty() {
-        return None;
-    }
+    let coverage = Coverage::of(per_pair.iter().map(|(s, m, _, _)| (*m, s.position_mm)))?;
     let n = per_pair.len() as f64;
-    let theta_free = |s: &Scored<'_>| s.symmetry.rotation.period_rad().is_none();
     let sigma_theta: Vec<f64> = per_pair
         .iter()
-        .zip(scored)
-        .filter(|(_, s)| !theta_free(s))
-        .map(|((_, _, sig), _)| sig[2].to_degrees())
+        .filter(|(s, _, _, _)| s.symmetry.rotation.period_rad().is_some())
+        .map(|(_, _, _, sig)| sig[2].to_degrees())
         .collect();
-    let error_theta: Vec<f64> = scored
+    let error_theta: Vec<f64> = per_pair
         .iter()
-        .filter_map(|s| s.theta_rad.map(|t| t.abs().to_degrees()))
+        .filter_map(|(s, _, _, _)| s.theta_rad.map(|t| t.abs().to_degrees()))
         .collect();
-    Some(Reliability {
+    let median_or_nan = |v: Vec<f64>| median(v).unwrap_or(f64::NAN);
+    let reliability = Reliability {
         pairs: per_pair.len(),
         levels: RELIABILITY_LEVELS.to_vec(),
         inside: RELIABILITY_LEVELS
             .iter()
-            .map(|&p| per_pair.iter().filter(|(m, _, _)| *m <= p).count() as f64 / n)
+            .map(|&p| per_pair.iter().filter(|(_, m, _, _)| *m <= p).count() as f64 / n)
             .collect(),
-        mean_nll: per_pair.iter().map(|(_, v, _)| v).sum::<f64>() / n,
-        median_sigma_position_mm: median(
+        mean_nll: per_pair.iter().map(|(_, _, v, _)| v).sum::<f64>() / n,
+        median_sigma_position_mm: median_or_nan(
             per_pair
                 .iter()
-                .map(|(_, _, s)| ((s[0] * s[0] + s[1] * s[1]) / 2.0).sqrt() * 1e3)
+                .map(|(_, _, _, s)| ((s[0] * s[0] + s[1] * s[1]) / 2.0).sqrt() * 1e3)
                 .collect(),
-        )
-        .unwrap_or(f64::NAN),
+        ),
         median_sigma_theta_deg: median(sigma_theta),
-        median_error_position_mm: median(scored.iter().map(|s| s.position_mm).collect())
-            .unwrap_or(f64::NAN),
+        median_error_position_mm: median_or_nan(
+            per_pair.iter().map(|(s, _, _, _)| s.position_mm).collect(),
+        ),
         median_error_theta_deg: median(error_theta),
-    })
+    };
+    Some((coverage, reliability))
 }
 
 /// The median of the finite values ([`super::summary::MeanStd`]); `None` without any.
 fn median(v: Vec<f64>) -> Option<f64> {
     let m = super::summary::MeanStd::of(v.into_iter().map(Some)).median;
     m.is_finite().then_some(m)
-}
-
-/// Mean negative log density of the truths under `scored`'s posteriors recalibrated by `config`, each capped at
-/// `cap` (so that one pair far outside every mode does not decide alone).
-pub fn mean_nll(scored: &[Scored<'_>], config: &PosteriorConfig, cap: f64) -> f64 {
-    let total: f64 = scored
-        .par_iter()
-        .map(|s| {
-            let p = s.posterior.recalibrated(&s.symmetry, config);
-            (-p.log_density(s.truth, &s.symmetry)).min(cap)
-        })
-        .sum();
-    total / scored.len().max(1) as f64
 }
 
 /// Per pair, 1 / the number of pairs in its contact-size bin ([`super::breakdown::CONTACT_BINS`]), scaled to a
@@ -207,8 +194,9 @@ fn bin_weights(scored: &[Scored<'_>]) -> Vec<f64> {
         .collect()
 }
 
-/// [`mean_nll`] with a weight per pair.
-fn weighted_nll(scored: &[Scored<'_>], weights: &[f64], config: &PosteriorConfig, cap: f64) -> f64 {
+/// Mean negative log density of the truths under `scored`'s posteriors recalibrated by `config`, each pair weighted
+/// by `weights` and capped at `cap` (so that one pair far outside every mode does not decide alone).
+pub fn mean_nll(scored: &[Scored<'_>], weights: &[f64], config: &PosteriorConfig, cap: f64) -> f64 {
     let total: f64 = scored
         .par_iter()
         .zip(weights)
@@ -224,6 +212,7 @@ fn weighted_nll(scored: &[Scored<'_>], weights: &[f64], config: &PosteriorConfig
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Fit {
     pub config: PosteriorConfig,
+    /// The fit's objective: [`mean_nll`] with each contact-size bin weighted alike.
     pub mean_nll: f64,
     pub coverage: Option<Coverage>,
 }
@@ -267,7 +256,7 @@ fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
     // Each contact-size bin counts alike (a pair weighs 1 / its bin's pairs): the posterior is to be calibrated in
     // every bin, and small contacts, the hardest, are the fewest.
     let weights = bin_weights(scored);
-    let objective = |x: &[f64]| weighted_nll(scored, &weights, &decode(x, base), NLL_CAP);
+    let objective = |x: &[f64]| mean_nll(scored, &weights, &decode(x, base), NLL_CAP);
     // From the given calibration and from two others (sharp / broad), each refined from its optimum once more.
     let mut starts = vec![x0.clone()];
     for (ln_tau, ln_floor) in [(0.0, -9.0), (3.0, -7.0)] {
@@ -542,7 +531,7 @@ mod tests {
         let posteriors = raw_posteriors(&truths, 1e-4, 0.1f64.to_radians());
         let scored = scored_of(&posteriors, 300);
         let fit = fit_posterior(&scored, &PosteriorConfig::default());
-        let r = reliability(&scored, Some(&fit.config), 2000).unwrap();
+        let (_, r) = reliability(&scored, Some(&fit.config), 2000).unwrap();
         let at =
             |level: f64| r.inside[RELIABILITY_LEVELS.iter().position(|&l| l == level).unwrap()];
         assert!((at(0.5) - 0.5).abs() <= 0.08, "{r:?} {fit:?}");

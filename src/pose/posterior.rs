@@ -258,14 +258,12 @@ impl PosePosterior {
         let tails = |core: &Mat3| {
             let k2 = config.tail_core_scale * config.tail_core_scale;
             let mut tail_cov = core.map(|row| row.map(|v| v * k2));
-            let spread = [
-                config.tail_position_m,
+            widen(
+                &mut tail_cov,
                 config.tail_position_m,
                 config.tail_theta_rad,
-            ];
-            for (i, s) in spread.iter().enumerate() {
-                tail_cov[i][i] += (s * tail_scale).powi(2);
-            }
+                tail_scale,
+            );
             ModeTails {
                 tail: (1.0 - far) * tail,
                 tail_cov,
@@ -459,15 +457,20 @@ fn laplace_covariance(hessian: &Mat3, floor_scale: f64, config: &PosteriorConfig
     }
     // Exactly symmetric (the products above are not commutative in floating point).
     mirror_lower(&mut cov);
-    let floors = [
-        config.floor_position_m,
+    widen(
+        &mut cov,
         config.floor_position_m,
         config.floor_theta_rad,
-    ];
-    for (i, f) in floors.iter().enumerate() {
-        cov[i][i] += (f * floor_scale).powi(2);
-    }
+        floor_scale,
+    );
     cov
+}
+
+/// Add independent spreads (x and y: `position_m`, θ: `theta_rad`, each times `scale`) to `cov`'s diagonal.
+fn widen(cov: &mut Mat3, position_m: f64, theta_rad: f64, scale: f64) {
+    for (i, s) in [position_m, position_m, theta_rad].iter().enumerate() {
+        cov[i][i] += (s * scale).powi(2);
+    }
 }
 
 #[cfg(test)]

@@ -12,7 +12,7 @@ use serde_json::json;
 use tactile_derender::io::figure::{write_figure, FigureConfig};
 use tactile_derender::metrics::breakdown::{bin_label, CONTACT_BINS};
 use tactile_derender::metrics::coverage::{
-    coverage_with, fit_posterior, reliability, Coverage, Reliability, Scored, WRONG_MM,
+    fit_posterior, reliability, Coverage, Reliability, Scored, WRONG_MM,
 };
 use tactile_derender::metrics::eval_log::EvalLog;
 use tactile_derender::metrics::evaluate::{MethodResult, PairRecord, REGION_DRAWS};
@@ -153,10 +153,7 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
             }
         }
         for (group, mine) in groups {
-            let (Some(c), Some(r)) = (
-                coverage_with(&mine, used, REGION_DRAWS),
-                reliability(&mine, used, REGION_DRAWS),
-            ) else {
+            let Some((c, r)) = reliability(&mine, used, REGION_DRAWS) else {
                 continue;
             };
             println!(
