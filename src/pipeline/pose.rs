@@ -556,7 +556,7 @@ pub fn write_pose_geometry(
 /// C10 … C22` (metres, radians, the world frame; θ circular).
 fn posterior_comment(posterior: &crate::pose::posterior::PosePosterior) -> String {
     let mut lines = vec![format!(
-        "posterior modes {} (weight, mean x y theta, 3x3 covariance row by row; metres, radians)",
+        "posterior modes {} (weight, mean x y theta, 3x3 covariance of core and tail row by row; metres, radians)",
         posterior.modes.len()
     )];
     for (k, m) in posterior.modes.iter().enumerate() {

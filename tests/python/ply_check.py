@@ -2,7 +2,7 @@
 """CI check: trimesh reads the PLY files `tnd pose` writes (binary or ASCII) and finds what pose.json says is in
 them: the point counts, and for the object meshes a closed (watertight) surface with the object's volume at every
 estimated pose (a rigid motion keeps it); the pose posterior written into object_estimate.ply's header comments
-equals pose.json's, and posterior_region_points.ply holds 64 points per mode on the table (z = 0).
+equals pose.json's (each mode's core and tail moment-matched), and posterior_region_points.ply holds 64 points per mode on the table (z = 0).
 
     python tests/python/ply_check.py OUT/pose.json
 """
@@ -45,7 +45,15 @@ if posterior:
         cov = [float(w) for w in words[words.index("cov") + 1:]]
         assert math.isclose(weight, mode["weight"], rel_tol=1e-12), (weight, mode["weight"])
         assert all(math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-15) for a, b in zip(mean, mode["mean"]))
-        flat = [c for row in mode["cov"] for c in row]
+        # The comment carries the spread to act on: the core and its tail moment-matched (PosteriorMode::spread_cov),
+        # the far component left out (its share is in pose.json).
+        tails = mode.get("tails") or {"tail": 0.0, "far": 0.0}
+        near = 1.0 - tails["far"]
+        if tails["tail"] > 0.0 and near > 0.0:
+            core, tail = (near - tails["tail"]) / near, tails["tail"] / near
+            flat = [core * c + tail * t for row, trow in zip(mode["cov"], tails["tail_cov"]) for c, t in zip(row, trow)]
+        else:
+            flat = [c for row in mode["cov"] for c in row]
         assert len(cov) == 9 and all(math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-30) for a, b in zip(cov, flat))
     rings = trimesh.load(by_name["posterior_region_points.ply"]["path"], process=False)
     assert len(rings.vertices) == 64 * len(posterior["modes"]), len(rings.vertices)
