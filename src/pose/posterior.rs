@@ -363,6 +363,24 @@ impl PosePosterior {
         log_density_of(&self.components(), pose, symmetry)
     }
 
+    /// Log of ∫ N(x; `pose`, `spread`) p(x) dx for this mixture p: how well it predicts a pose known only to within
+    /// the Gaussian `spread` (over x, y, θ; m², m·rad, rad²), over the identifiable coordinates. −∞ without modes.
+    pub fn predictive_log_density(&self, pose: Se2, spread: &Mat3, symmetry: &Symmetry) -> f64 {
+        let widened: Vec<Component> = self
+            .components()
+            .into_iter()
+            .map(|mut c| {
+                for (row, add) in c.cov.iter_mut().zip(spread) {
+                    for (v, a) in row.iter_mut().zip(add) {
+                        *v += a;
+                    }
+                }
+                c
+            })
+            .collect();
+        log_density_of(&widened, pose, symmetry)
+    }
+
     /// The probability mass of the highest-density region whose boundary passes through `pose` (0: at the peak,
     /// near 1: far in the tails): `pose` lies inside the reported `p` region when this is ≤ p. Monte Carlo with
     /// `draws` draws from a fixed seed (a numerical integral, the same on every run). `None` without modes.
