@@ -33,7 +33,7 @@ use crate::image::Image;
 use crate::objects::ObjectSet;
 use crate::recording::calibrate::{calibrate, CalibrateConfig, SensorCalibration};
 use crate::recording::source::{nearest_stamp, DEFAULT_MAX_POSE_GAP_S};
-use crate::recording::{self, FolderOptions, ProcessConfig, Recording};
+use crate::recording::{self, FolderOptions, ProcessConfig, ProcessedRecording, Recording};
 use crate::sensor::{Scene, Se2};
 use crate::sim::{PreparedObject, SimConfig, SimError, Simulator};
 
@@ -151,36 +151,7 @@ pub fn import_recording(
     config: &RecordingImportConfig,
     progress: &mut dyn FnMut(usize, usize) -> bool,
 ) -> Result<RecordingImportReport, DatasetError> {
-    let object_index = set
-        .entries()
-        .iter()
-        .position(|e| e.name == config.object)
-        .ok_or_else(|| {
-            // A pair names its object in the dataset's set, so a mesh file has to join a set first.
-            let path = Path::new(&config.object);
-            let hint = if path.extension().is_some() || path.exists() {
-                let dir = path
-                    .parent()
-                    .filter(|d| !d.as_os_str().is_empty())
-                    .unwrap_or(Path::new("."));
-                let name = path
-                    .file_stem()
-                    .map_or_else(|| config.object.clone(), |s| s.to_string_lossy().into_owned());
-                format!(
-                    "; a mesh file becomes an object of a set with `tnd objects import {}` (its folder), then \
-                     --objects {} --object {name}",
-                    dir.display(),
-                    dir.display()
-                )
-            } else {
-                String::new()
-            };
-            DatasetError::Config(format!(
-                "object '{}' is not in the object set {}{hint}",
-                config.object,
-                set.spec()
-            ))
-        })?;
+    let object_index = object_index(set, &config.object)?;
     if config.every == 0 {
         return Err(DatasetError::Config("--every must be at least 1".into()));
     }
@@ -203,81 +174,38 @@ pub fn import_recording(
 
     let object = PreparedObject::new(set.mesh(&config.object)?)?;
 
-    let mut skipped_no_contact = 0;
-    let mut skipped_no_pose = 0;
-    let mut skipped_missing = Vec::new();
-    let mut todo = Vec::new();
-    for i in (0..processed.len()).step_by(config.every) {
-        if let Some(why) = processed.unusable(i) {
-            skipped_missing.push(why);
-        } else if processed.contact_px[i] < config.min_contact_px {
-            skipped_no_contact += 1;
-        } else if let Some(p) = poses[i] {
-            todo.push((i, p));
-        } else {
-            skipped_no_pose += 1;
-        }
-    }
+    let chosen = ChosenFrames::of(&processed, &poses, config);
     // The tactile shadow, which frames without contact cannot show, from the contact frames with a pose.
     if let Some(cal) = &mut calibration {
-        let sim = noise_free_simulator(&cal.sensor)?;
-        let frames: Vec<ContactFrame> = todo
-            .iter()
-            .map(|&(i, fp)| ContactFrame {
-                imprint: &processed.imprints[i],
-                pose: fp.pose,
-                press: fp.press,
-            })
-            .collect();
-        if let Some(fit) = fit_shadow(&sim, &object, &frames, config.max_press_m) {
-            cal.set_shadow(fit.shadow_px);
-        }
+        calibrate_shadow(cal, &processed, &object, &chosen.todo, config.max_press_m)?;
     }
     let sim_config = calibration.as_ref().map_or(given, |c| &c.sensor);
     let sim = noise_free_simulator(sim_config)?;
-    let made: Vec<(Record, Option<f64>)> = todo
-        .par_iter()
-        .map(|&(i, fp)| {
-            let y = &processed.imprints[i];
-            let t = frame_truth(&sim, &object, fp.pose, y, fp.press, config.max_press_m);
-            let record = Record {
-                index: i,
-                seed: 0,
-                object: object_index,
-                split: SplitName::Train,
-                pose: fp.pose,
-                sensor: t.scene.sensor,
-                press: t.press,
-                contact_pixels: t.mask.count_nonzero(),
-                imprint: y.clone(),
-                target: t.target,
-                signature: processed.signatures[i].clone(),
-                reference: processed.reference_for(i).clone(),
-                mask: t.mask,
-            };
-            (record, t.press_fit_residual_m)
-        })
-        .collect();
+    let made = frame_records(
+        &sim,
+        &object,
+        &processed,
+        &chosen.todo,
+        object_index,
+        config.max_press_m,
+    );
     let residuals: Vec<f64> = made.iter().filter_map(|(_, r)| *r).collect();
     let mut records: Vec<Record> = made.into_iter().map(|(r, _)| r).collect();
     if records.is_empty() {
         return Err(DatasetError::Import {
             path: from.to_path_buf(),
             message: format!(
-                "no frame became a pair: {skipped_no_contact} frames without contact (< {} px over {} mm), \
-                 {skipped_no_pose} without a pose, {} with too few pixels that have a return",
+                "no frame became a pair: {} frames without contact (< {} px over {} mm), \
+                 {} without a pose, {} with too few pixels that have a return",
+                chosen.skipped_no_contact,
                 config.min_contact_px,
                 config.process.contact_threshold_m * 1e3,
-                skipped_missing.len()
+                chosen.skipped_no_pose,
+                chosen.skipped_missing.len()
             ),
         });
     }
-    // Each pair's frame and time stamp, for frames.csv.
-    let mut frames_csv = String::from("index,frame,stamp_ns\n");
-    for (k, r) in records.iter_mut().enumerate() {
-        frames_csv += &format!("{k},{},{}\n", r.index, processed.stamps_ns[r.index]);
-        r.index = k;
-    }
+    let frames_csv = frames_table(&mut records, &processed.stamps_ns);
     let n = records.len();
     let written = write_real_dataset(
         out,
@@ -305,9 +233,9 @@ pub fn import_recording(
         reference_frames: processed.reference_frames.clone(),
         drift_m: processed.drift_m(),
         local_references: processed.reference_of.is_some(),
-        skipped_no_contact,
-        skipped_no_pose,
-        skipped_missing,
+        skipped_no_contact: chosen.skipped_no_contact,
+        skipped_no_pose: chosen.skipped_no_pose,
+        skipped_missing: chosen.skipped_missing,
         press_estimated: residuals.len(),
         press_fit_residual_m: if residuals.is_empty() {
             0.0
@@ -317,6 +245,151 @@ pub fn import_recording(
         calibration,
         calibration_failed,
     })
+}
+
+/// The index of `object` in `set`; an error naming the set otherwise (and, where `object` looks like a mesh file,
+/// how to make it an object of a set: a pair names its object in the dataset's set).
+fn object_index(set: &ObjectSet, object: &str) -> Result<usize, DatasetError> {
+    set.entries()
+        .iter()
+        .position(|e| e.name == object)
+        .ok_or_else(|| {
+            // A pair names its object in the dataset's set, so a mesh file has to join a set first.
+            let path = Path::new(object);
+            let hint = if path.extension().is_some() || path.exists() {
+                let dir = path
+                    .parent()
+                    .filter(|d| !d.as_os_str().is_empty())
+                    .unwrap_or(Path::new("."));
+                let name = path
+                    .file_stem()
+                    .map_or_else(|| object.to_string(), |s| s.to_string_lossy().into_owned());
+                format!(
+                    "; a mesh file becomes an object of a set with `tnd objects import {}` (its folder), then \
+                     --objects {} --object {name}",
+                    dir.display(),
+                    dir.display()
+                )
+            } else {
+                String::new()
+            };
+            DatasetError::Config(format!(
+                "object '{}' is not in the object set {}{hint}",
+                object,
+                set.spec()
+            ))
+        })
+}
+
+/// The frames of a recording that become pairs, and how many of the others were left out, and why.
+struct ChosenFrames {
+    /// Each chosen frame's index and its known pose.
+    todo: Vec<(usize, FramePose)>,
+    /// Frames with less contact than `min_contact_px`.
+    skipped_no_contact: usize,
+    /// Contact frames without a known pose.
+    skipped_no_pose: usize,
+    /// Frames with too few pixels that have a return, one line each naming the frame.
+    skipped_missing: Vec<String>,
+}
+
+impl ChosenFrames {
+    /// Every `config.every`-th frame of `processed` with enough pixels that have a return, at least
+    /// `config.min_contact_px` of contact and a pose in `poses`.
+    fn of(
+        processed: &ProcessedRecording,
+        poses: &[Option<FramePose>],
+        config: &RecordingImportConfig,
+    ) -> Self {
+        let mut chosen = Self {
+            todo: Vec::new(),
+            skipped_no_contact: 0,
+            skipped_no_pose: 0,
+            skipped_missing: Vec::new(),
+        };
+        for i in (0..processed.len()).step_by(config.every) {
+            if let Some(why) = processed.unusable(i) {
+                chosen.skipped_missing.push(why);
+            } else if processed.contact_px[i] < config.min_contact_px {
+                chosen.skipped_no_contact += 1;
+            } else if let Some(p) = poses[i] {
+                chosen.todo.push((i, p));
+            } else {
+                chosen.skipped_no_pose += 1;
+            }
+        }
+        chosen
+    }
+}
+
+/// Set the tactile-shadow width of the calibration `cal` from the contact frames `todo` of `processed` with their
+/// poses ([`fit_shadow`]; left as it is where the fit finds none).
+fn calibrate_shadow(
+    cal: &mut SensorCalibration,
+    processed: &ProcessedRecording,
+    object: &PreparedObject,
+    todo: &[(usize, FramePose)],
+    max_press_m: f64,
+) -> Result<(), SimError> {
+    let sim = noise_free_simulator(&cal.sensor)?;
+    let frames: Vec<ContactFrame> = todo
+        .iter()
+        .map(|&(i, fp)| ContactFrame {
+            imprint: &processed.imprints[i],
+            pose: fp.pose,
+            press: fp.press,
+        })
+        .collect();
+    if let Some(fit) = fit_shadow(&sim, object, &frames, max_press_m) {
+        cal.set_shadow(fit.shadow_px);
+    }
+    Ok(())
+}
+
+/// One pair per frame of `todo` (in parallel): the frame's imprint, signature and reference from `processed`, its
+/// pose, and the true contact the noise-free `sim` gives there ([`frame_truth`]), with the press fit's residual where
+/// the press was estimated. Each record keeps its frame's index.
+fn frame_records(
+    sim: &Simulator,
+    object: &PreparedObject,
+    processed: &ProcessedRecording,
+    todo: &[(usize, FramePose)],
+    object_index: usize,
+    max_press_m: f64,
+) -> Vec<(Record, Option<f64>)> {
+    todo.par_iter()
+        .map(|&(i, fp)| {
+            let y = &processed.imprints[i];
+            let t = frame_truth(sim, object, fp.pose, y, fp.press, max_press_m);
+            let record = Record {
+                index: i,
+                seed: 0,
+                object: object_index,
+                split: SplitName::Train,
+                pose: fp.pose,
+                sensor: t.scene.sensor,
+                press: t.press,
+                contact_pixels: t.mask.count_nonzero(),
+                imprint: y.clone(),
+                target: t.target,
+                signature: processed.signatures[i].clone(),
+                reference: processed.reference_for(i).clone(),
+                mask: t.mask,
+            };
+            (record, t.press_fit_residual_m)
+        })
+        .collect()
+}
+
+/// [`FRAMES_CSV`]: each pair's frame and time stamp (`stamps_ns` of the recording's frames); the records are
+/// renumbered from 0 as they go.
+fn frames_table(records: &mut [Record], stamps_ns: &[u64]) -> String {
+    let mut frames_csv = String::from("index,frame,stamp_ns\n");
+    for (k, r) in records.iter_mut().enumerate() {
+        frames_csv += &format!("{k},{},{}\n", r.index, stamps_ns[r.index]);
+        r.index = k;
+    }
+    frames_csv
 }
 
 /// The sensor calibrated from the recording's no-contact frames, or why it could not be (then the given sensor is

@@ -277,14 +277,30 @@ impl UNet2DConfig {
 
     /// Reject settings we do not implement, with the field named.
     pub fn validate(&self, source: &str) -> Result<(), ModelError> {
-        let bad = |message: String| {
-            Err(ModelError::Config {
-                source_name: source.into(),
-                message,
-            })
+        let bad = |message: String| ModelError::Config {
+            source_name: source.into(),
+            message,
         };
-        // Sizes are bounded before anything is allocated: an absurd value in a config or a checkpoint's metadata is
-        // refused naming the field, instead of aborting in a multi-terabyte allocation.
+        self.check_sizes().map_err(bad)?;
+        self.check_numbers().map_err(bad)?;
+        self.check_block_types().map_err(bad)?;
+        self.check_fixed_choices().map_err(bad)?;
+        self.check_divisibility().map_err(bad)?;
+        self.tactile_derender.imprint.validate("imprint", source)?;
+        self.tactile_derender.target.validate("target", source)?;
+        let cut = self.tactile_derender.contact_min_depth_m;
+        if !(cut.is_finite() && cut >= 0.0) {
+            return Err(bad(format!(
+                "tactile_derender.contact_min_depth_m must be finite and not negative (found {cut})"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Sizes bounded before anything is allocated: an absurd value in a config or a checkpoint's metadata is
+    /// refused naming the field, instead of aborting in a multi-terabyte allocation ([`Self::validate`]'s first
+    /// step).
+    fn check_sizes(&self) -> Result<(), String> {
         let n = self.block_out_channels.len();
         for (field, value, max) in [
             ("sample_size", self.sample_size, MAX_SAMPLE_SIZE),
@@ -319,29 +335,34 @@ impl UNet2DConfig {
             ),
         ] {
             if value > max {
-                return bad(format!("{field} {value} is out of range (at most {max})"));
+                return Err(format!("{field} {value} is out of range (at most {max})"));
             }
         }
         if self.time_embedding_dim == Some(0) {
-            return bad("time_embedding_dim must be at least 1".into());
+            return Err("time_embedding_dim must be at least 1".into());
         }
         for &c in &self.block_out_channels {
             if c == 0 || c > MAX_CHANNELS {
-                return bad(format!(
+                return Err(format!(
                     "block_out_channels {c} is out of range (1 to {MAX_CHANNELS})"
                 ));
             }
         }
         let parameters = self.parameter_estimate();
         if parameters > MAX_PARAMETERS {
-            return bad(format!(
+            return Err(format!(
                 "block_out_channels {:?} with layers_per_block {} make about {:.1e} parameters, more than the {:.0e} \
                  a model here may have",
                 self.block_out_channels, self.layers_per_block, parameters as f64, MAX_PARAMETERS as f64
             ));
         }
+        Ok(())
+    }
+
+    /// The dropout is a probability below 1 and the other real-valued settings are finite.
+    fn check_numbers(&self) -> Result<(), String> {
         if !(self.dropout.is_finite() && (0.0..1.0).contains(&self.dropout)) {
-            return bad(format!("dropout {} must be in [0, 1)", self.dropout));
+            return Err(format!("dropout {} must be in [0, 1)", self.dropout));
         }
         for (field, value) in [
             ("norm_eps", self.norm_eps),
@@ -349,11 +370,17 @@ impl UNet2DConfig {
             ("freq_shift", self.freq_shift),
         ] {
             if !value.is_finite() {
-                return bad(format!("{field} {value} must be finite"));
+                return Err(format!("{field} {value} must be finite"));
             }
         }
+        Ok(())
+    }
+
+    /// One down and one up block per level, of the block types implemented here, and the one middle block.
+    fn check_block_types(&self) -> Result<(), String> {
+        let n = self.block_out_channels.len();
         if n == 0 || self.down_block_types.len() != n || self.up_block_types.len() != n {
-            return bad(format!(
+            return Err(format!(
                 "block_out_channels, down_block_types and up_block_types must have the same non-zero length \
                  (found {n}, {}, {})",
                 self.down_block_types.len(),
@@ -362,25 +389,31 @@ impl UNet2DConfig {
         }
         for t in &self.down_block_types {
             if t != "DownBlock2D" && t != "AttnDownBlock2D" {
-                return bad(format!(
+                return Err(format!(
                     "down block type '{t}' is not supported (DownBlock2D, AttnDownBlock2D)"
                 ));
             }
         }
         for t in &self.up_block_types {
             if t != "UpBlock2D" && t != "AttnUpBlock2D" {
-                return bad(format!(
+                return Err(format!(
                     "up block type '{t}' is not supported (UpBlock2D, AttnUpBlock2D)"
                 ));
             }
         }
         if let Some(m) = &self.mid_block_type {
             if m != "UNetMidBlock2D" {
-                return bad(format!(
+                return Err(format!(
                     "mid_block_type '{m}' is not supported (UNetMidBlock2D or null)"
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// The settings that have one implemented value (embedding, resampling, activation, no class conditioning, the
+    /// noise schedule) and the simple bounds on the others.
+    fn check_fixed_choices(&self) -> Result<(), String> {
         let checks = [
             (
                 self.time_embedding_type == "positional",
@@ -427,19 +460,26 @@ impl UNet2DConfig {
         ];
         for (ok, msg) in checks {
             if !ok {
-                return bad(msg.into());
+                return Err(msg.into());
             }
         }
+        Ok(())
+    }
+
+    /// Every level's channels split into the norm groups and attention heads, and the sample size halves at every
+    /// level but the last. After [`Self::check_block_types`] (at least one level).
+    fn check_divisibility(&self) -> Result<(), String> {
+        let n = self.block_out_channels.len();
         let g = self.norm_num_groups;
         for &c in &self.block_out_channels {
             if g == 0 || c % g != 0 {
-                return bad(format!(
+                return Err(format!(
                     "block_out_channels {c} is not divisible by norm_num_groups {g}"
                 ));
             }
             if let Some(h) = self.attention_head_dim {
                 if h == 0 || c % h != 0 {
-                    return bad(format!(
+                    return Err(format!(
                         "block_out_channels {c} is not divisible by attention_head_dim {h}"
                     ));
                 }
@@ -447,21 +487,10 @@ impl UNet2DConfig {
         }
         let factor = 1usize << (n - 1);
         if self.sample_size == 0 || !self.sample_size.is_multiple_of(factor) {
-            return bad(format!(
+            return Err(format!(
                 "sample_size {} must be a positive multiple of {factor} (2^(levels-1))",
                 self.sample_size
             ));
-        }
-        self.tactile_derender.imprint.validate("imprint", source)?;
-        self.tactile_derender.target.validate("target", source)?;
-        let cut = self.tactile_derender.contact_min_depth_m;
-        if !(cut.is_finite() && cut >= 0.0) {
-            return Err(ModelError::Config {
-                source_name: source.into(),
-                message: format!(
-                    "tactile_derender.contact_min_depth_m must be finite and not negative (found {cut})"
-                ),
-            });
         }
         Ok(())
     }

@@ -6,7 +6,7 @@ use crate::objects::ObjectSet;
 use crate::recording::synth::{write_press_recording, DepthEncoding, PressSequence};
 use crate::recording::FolderOptions;
 use crate::sensor::Se2;
-use crate::sim::PreparedObject;
+use crate::sim::{PreparedObject, Simulator};
 
 /// Calibrate starting from the nominal sensor.
 fn nominal(

@@ -12,7 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use super::ros::{self, ImageMsg, PointCloudMsg, PointField};
 use super::RecordingError;
-use crate::sensor::{Scene, Se2};
+use crate::image::Image;
+use crate::sensor::{Intrinsics, Scene, Se2};
 use crate::sim::{PreparedObject, SimConfig, Simulator};
 
 /// How depth is written.
@@ -88,30 +89,7 @@ pub fn write_press_recording(
     let k = *sim.intrinsics();
     let mcap_err = mcap_error(path);
     let mut w = new_mcap(path)?;
-    let no_meta = BTreeMap::new();
-    let (schema_name, schema_text) = match seq.encoding {
-        DepthEncoding::Cloud => ("sensor_msgs/msg/PointCloud2", point_cloud_schema()),
-        _ => ("sensor_msgs/msg/Image", image_schema()),
-    };
-    let depth_schema = w
-        .add_schema(schema_name, "ros2msg", schema_text.as_bytes())
-        .map_err(mcap_err)?;
-    let depth_channel = w
-        .add_channel(depth_schema, &seq.depth_topic, "cdr", &no_meta)
-        .map_err(mcap_err)?;
-    let pose_channel = match &seq.pose_topic {
-        Some(topic) => {
-            let s = w
-                .add_schema(
-                    "geometry_msgs/msg/PoseStamped",
-                    "ros2msg",
-                    pose_stamped_schema().as_bytes(),
-                )
-                .map_err(mcap_err)?;
-            Some(w.add_channel(s, topic, "cdr", &no_meta).map_err(mcap_err)?)
-        }
-        None => None,
-    };
+    let (depth_channel, pose_channel) = add_press_channels(&mut w, path, seq)?;
     let t0_ns: u64 = 1_700_000_000_000_000_000;
     if seq.drift_m != 0.0 && sim_config.elastomer.mesh_file.is_some() {
         return Err(RecordingError::Frames {
@@ -146,75 +124,9 @@ pub fn write_press_recording(
             sim_config.signature.noise_std,
             frame_seed,
         );
-        let nan = if seq.missing_as_zero { 0.0 } else { f32::NAN };
         let data = match seq.encoding {
-            DepthEncoding::Mm16 | DepthEncoding::F32 => {
-                let (encoding, bytes_per_px, data): (&str, u32, Vec<u8>) = match seq.encoding {
-                    DepthEncoding::Mm16 => (
-                        "16UC1",
-                        2,
-                        s.data
-                            .iter()
-                            .flat_map(|&d| millimetres(d).to_le_bytes())
-                            .collect(),
-                    ),
-                    _ => (
-                        "32FC1",
-                        4,
-                        s.data
-                            .iter()
-                            .flat_map(|&d| if d > 0.0 { d } else { nan }.to_le_bytes())
-                            .collect(),
-                    ),
-                };
-                let m = ImageMsg {
-                    stamp_ns: stamp,
-                    height: k.height as u32,
-                    width: k.width as u32,
-                    encoding: encoding.into(),
-                    is_bigendian: false,
-                    step: bytes_per_px * k.width as u32,
-                    data,
-                };
-                ros::encode_image(&m, "bubble_camera")
-            }
-            DepthEncoding::Cloud => {
-                let mut data = Vec::with_capacity(12 * s.data.len());
-                let mut n = 0u32;
-                for v in 0..k.height {
-                    for u in 0..k.width {
-                        let d = s.get(u, v);
-                        if d.is_finite() && d > 0.0 {
-                            let p = k.back_project(u as f64, v as f64, f64::from(d));
-                            for c in [p.x, p.y, p.z] {
-                                data.extend((c as f32).to_le_bytes());
-                            }
-                            n += 1;
-                        }
-                    }
-                }
-                let fields = ["x", "y", "z"]
-                    .iter()
-                    .enumerate()
-                    .map(|(j, name)| PointField {
-                        name: (*name).into(),
-                        offset: 4 * j as u32,
-                        datatype: 7,
-                        count: 1,
-                    })
-                    .collect();
-                let m = PointCloudMsg {
-                    stamp_ns: stamp,
-                    height: 1,
-                    width: n,
-                    fields,
-                    is_bigendian: false,
-                    point_step: 12,
-                    row_step: 12 * n,
-                    data,
-                };
-                ros::encode_point_cloud(&m, "bubble_camera")
-            }
+            DepthEncoding::Mm16 | DepthEncoding::F32 => encode_depth_image(s, &k, seq, stamp),
+            DepthEncoding::Cloud => encode_depth_cloud(s, &k, stamp),
         };
         let header = |channel_id| mcap::records::MessageHeader {
             channel_id,
@@ -234,6 +146,115 @@ pub fn write_press_recording(
     }
     save_mcap(path, w)?;
     Ok(seq.presses.len())
+}
+
+/// The schemas and channels of a press recording in `w` (the MCAP file at `path`): the depth topic (an image or a
+/// point cloud, as `seq.encoding` says) and, where `seq` names one, the pose topic; returns their channel ids.
+fn add_press_channels(
+    w: &mut mcap::Writer<Cursor<Vec<u8>>>,
+    path: &Path,
+    seq: &PressSequence,
+) -> Result<(u16, Option<u16>), RecordingError> {
+    let mcap_err = mcap_error(path);
+    let no_meta = BTreeMap::new();
+    let (schema_name, schema_text) = match seq.encoding {
+        DepthEncoding::Cloud => ("sensor_msgs/msg/PointCloud2", point_cloud_schema()),
+        _ => ("sensor_msgs/msg/Image", image_schema()),
+    };
+    let depth_schema = w
+        .add_schema(schema_name, "ros2msg", schema_text.as_bytes())
+        .map_err(mcap_err)?;
+    let depth_channel = w
+        .add_channel(depth_schema, &seq.depth_topic, "cdr", &no_meta)
+        .map_err(mcap_err)?;
+    let pose_channel = match &seq.pose_topic {
+        Some(topic) => {
+            let s = w
+                .add_schema(
+                    "geometry_msgs/msg/PoseStamped",
+                    "ros2msg",
+                    pose_stamped_schema().as_bytes(),
+                )
+                .map_err(mcap_err)?;
+            Some(w.add_channel(s, topic, "cdr", &no_meta).map_err(mcap_err)?)
+        }
+        None => None,
+    };
+    Ok((depth_channel, pose_channel))
+}
+
+/// One frame's depth `s` (metres, native intrinsics `k`) as a CDR `sensor_msgs/Image`: `16UC1` millimetres or
+/// `32FC1` metres as `seq.encoding` says, a missing return as 0 or (32FC1 without `missing_as_zero`) NaN.
+fn encode_depth_image(s: &Image, k: &Intrinsics, seq: &PressSequence, stamp: u64) -> Vec<u8> {
+    let nan = if seq.missing_as_zero { 0.0 } else { f32::NAN };
+    let (encoding, bytes_per_px, data): (&str, u32, Vec<u8>) = match seq.encoding {
+        DepthEncoding::Mm16 => (
+            "16UC1",
+            2,
+            s.data
+                .iter()
+                .flat_map(|&d| millimetres(d).to_le_bytes())
+                .collect(),
+        ),
+        _ => (
+            "32FC1",
+            4,
+            s.data
+                .iter()
+                .flat_map(|&d| if d > 0.0 { d } else { nan }.to_le_bytes())
+                .collect(),
+        ),
+    };
+    let m = ImageMsg {
+        stamp_ns: stamp,
+        height: k.height as u32,
+        width: k.width as u32,
+        encoding: encoding.into(),
+        is_bigendian: false,
+        step: bytes_per_px * k.width as u32,
+        data,
+    };
+    ros::encode_image(&m, "bubble_camera")
+}
+
+/// One frame's depth `s` (metres, native intrinsics `k`) as a CDR `sensor_msgs/PointCloud2`: float32 x, y, z in the
+/// camera's optical frame, one point per pixel with a return.
+fn encode_depth_cloud(s: &Image, k: &Intrinsics, stamp: u64) -> Vec<u8> {
+    let mut data = Vec::with_capacity(12 * s.data.len());
+    let mut n = 0u32;
+    for v in 0..k.height {
+        for u in 0..k.width {
+            let d = s.get(u, v);
+            if d.is_finite() && d > 0.0 {
+                let p = k.back_project(u as f64, v as f64, f64::from(d));
+                for c in [p.x, p.y, p.z] {
+                    data.extend((c as f32).to_le_bytes());
+                }
+                n += 1;
+            }
+        }
+    }
+    let fields = ["x", "y", "z"]
+        .iter()
+        .enumerate()
+        .map(|(j, name)| PointField {
+            name: (*name).into(),
+            offset: 4 * j as u32,
+            datatype: 7,
+            count: 1,
+        })
+        .collect();
+    let m = PointCloudMsg {
+        stamp_ns: stamp,
+        height: 1,
+        width: n,
+        fields,
+        is_bigendian: false,
+        point_step: 12,
+        row_step: 12 * n,
+        data,
+    };
+    ros::encode_point_cloud(&m, "bubble_camera")
 }
 
 /// The error of writing the MCAP file at `path`.

@@ -270,6 +270,43 @@ pub fn fit(
             want_h: intrinsics.height,
         });
     }
+    let rays = measured_rays(reference, intrinsics, t_sensor_camera);
+    if rays.len() < 50 {
+        return Err(MembraneFitError::TooFewPixels(rays.len()));
+    }
+    let fixed = start.to_vec();
+    let free = free_parameters(config);
+    // The algebraic start; parameters held fixed keep their values.
+    let v = match algebraic(&rays) {
+        Ok(a) => std::array::from_fn(|i| if free.contains(&i) { a[i] } else { fixed[i] }),
+        Err(_) => fixed,
+    };
+    let refined = refine(&rays, &free, v, config);
+    let res = &refined.res;
+    let used: Vec<f64> = res.iter().flatten().copied().collect();
+    if used.len() < 50 {
+        return Err(MembraneFitError::NotADome("missed by most rays"));
+    }
+    let rms = (used.iter().map(|r| r * r).sum::<f64>() / used.len() as f64).sqrt();
+    let max = used.iter().map(|r| r.abs()).fold(0.0, f64::max);
+    // Standard errors: sigma^2 (J^T J)^-1 with sigma the residual's robust spread.
+    let std = standard_errors(&refined.normal, &free, robust_sigma(res));
+    Ok(MembraneFit {
+        params: MembraneParams::from_vec(&refined.v),
+        std_error: MembraneParams::from_vec(&std),
+        residual_rms_m: rms,
+        residual_max_m: max,
+        pixels: used.len(),
+        iterations: refined.iterations,
+    })
+}
+
+/// The rays of the pixels of `reference` that hold a depth, in the sensor frame (rotated by `t_sensor_camera`).
+fn measured_rays(
+    reference: &Image,
+    intrinsics: &Intrinsics,
+    t_sensor_camera: &DAffine3,
+) -> Vec<Ray> {
     let rot = t_sensor_camera.matrix3;
     let mut rays = Vec::with_capacity(reference.data.len());
     for row in 0..reference.height {
@@ -283,46 +320,67 @@ pub fn fit(
             }
         }
     }
-    if rays.len() < 50 {
-        return Err(MembraneFitError::TooFewPixels(rays.len()));
-    }
-    let fixed = start.to_vec();
-    let free: Vec<usize> = (0..6)
+    rays
+}
+
+/// The indices (into [`MembraneParams::to_vec`]'s layout) of the parameters `config` lets the fit change: the
+/// inflation always, the footprint and the camera position where asked.
+fn free_parameters(config: &MembraneFitConfig) -> Vec<usize> {
+    (0..6)
         .filter(|&i| match i {
             0 | 1 => config.footprint,
             2 => true,
             _ => config.camera_position,
         })
-        .collect();
-    // The algebraic start; parameters held fixed keep their values.
-    let mut v = match algebraic(&rays) {
-        Ok(a) => std::array::from_fn(|i| if free.contains(&i) { a[i] } else { fixed[i] }),
-        Err(_) => fixed,
-    };
-    let residuals = |v: &[f64; 6]| -> Vec<Option<f64>> {
-        rays.iter()
-            .map(|r| depth_along(v, r.d).map(|t| r.t - t))
-            .collect()
-    };
-    let robust_sigma = |res: &[Option<f64>]| {
-        let mut abs: Vec<f64> = res.iter().flatten().map(|r| r.abs()).collect();
-        (1.4826 * median(&mut abs)).max(1e-7)
-    };
-    let cost = |res: &[Option<f64>], k: f64| -> (f64, usize) {
-        let mut c = 0.0;
-        let mut n = 0;
-        for r in res.iter().flatten() {
-            let a = r.abs();
-            c += if a <= k {
-                0.5 * a * a
-            } else {
-                k * (a - 0.5 * k)
-            };
-            n += 1;
-        }
-        (c, n)
-    };
-    let mut res = residuals(&v);
+        .collect()
+}
+
+/// Measured minus predicted depth along each ray for the parameters `v` (`None` where the ray misses the membrane).
+fn residuals(rays: &[Ray], v: &[f64; 6]) -> Vec<Option<f64>> {
+    rays.iter()
+        .map(|r| depth_along(v, r.d).map(|t| r.t - t))
+        .collect()
+}
+
+/// The residuals' robust spread: 1.4826 times their median absolute value (at least 1e-7 m).
+fn robust_sigma(res: &[Option<f64>]) -> f64 {
+    let mut abs: Vec<f64> = res.iter().flatten().map(|r| r.abs()).collect();
+    (1.4826 * median(&mut abs)).max(1e-7)
+}
+
+/// The Huber cost of the residuals with threshold `k`, and how many rays it counts (those meeting the membrane).
+fn huber_cost(res: &[Option<f64>], k: f64) -> (f64, usize) {
+    let mut c = 0.0;
+    let mut n = 0;
+    for r in res.iter().flatten() {
+        let a = r.abs();
+        c += if a <= k {
+            0.5 * a * a
+        } else {
+            k * (a - 0.5 * k)
+        };
+        n += 1;
+    }
+    (c, n)
+}
+
+/// Where the robust refinement ended.
+struct Refined {
+    /// The parameters ([`MembraneParams::to_vec`]'s layout).
+    v: [f64; 6],
+    /// Their residuals ([`residuals`]).
+    res: Vec<Option<f64>>,
+    /// The Huber-weighted normal matrix J^T W J of the free parameters, from the last iteration.
+    normal: Vec<Vec<f64>>,
+    /// Iterations run.
+    iterations: usize,
+}
+
+/// The geometric refinement from `v`: Gauss-Newton on the depth residuals with Huber weights, damped
+/// (Levenberg-Marquardt) until the Huber cost falls, over the `free` parameters; stops when a step no longer moves
+/// them or after `config.iterations`.
+fn refine(rays: &[Ray], free: &[usize], mut v: [f64; 6], config: &MembraneFitConfig) -> Refined {
+    let mut res = residuals(rays, &v);
     let mut iterations = 0;
     let mut lambda = 1e-3;
     let n = free.len();
@@ -330,57 +388,21 @@ pub fn fit(
     for _ in 0..config.iterations {
         iterations += 1;
         let k = config.huber_k * robust_sigma(&res);
-        let (c0, n0) = cost(&res, k);
-        // Jacobian of the predicted depth by central differences (the residual is measured - predicted).
-        let mut jac = vec![vec![0.0f64; n]; rays.len()];
-        for (j, &p) in free.iter().enumerate() {
-            let step = 1e-6 * v[p].abs().max(1e-2);
-            let (mut hi, mut lo) = (v, v);
-            hi[p] += step;
-            lo[p] -= step;
-            for (i, r) in rays.iter().enumerate() {
-                if let (Some(a), Some(b)) = (depth_along(&hi, r.d), depth_along(&lo, r.d)) {
-                    jac[i][j] = (a - b) / (2.0 * step);
-                }
-            }
-        }
-        let mut g = vec![0.0f64; n];
-        for row in normal.iter_mut() {
-            row.fill(0.0);
-        }
-        for (i, r) in res.iter().enumerate() {
-            let Some(r) = *r else { continue };
-            let w = if r.abs() <= k { 1.0 } else { k / r.abs() };
-            for a in 0..n {
-                g[a] += w * jac[i][a] * r;
-                for b in 0..n {
-                    normal[a][b] += w * jac[i][a] * jac[i][b];
-                }
-            }
-        }
+        let (c0, n0) = huber_cost(&res, k);
+        let g = weighted_normal_equations(rays, free, &v, &res, k, &mut normal);
         // Levenberg-Marquardt: damp until the Huber cost falls.
         let mut improved = false;
         for _ in 0..10 {
-            let mut m = [[0.0f64; 6]; 6];
-            let mut rhs = [0.0f64; 6];
-            for (a, row) in m.iter_mut().enumerate() {
-                row[a] = 1.0;
-            }
-            for a in 0..n {
-                rhs[a] = g[a];
-                for b in 0..n {
-                    m[a][b] = normal[a][b];
-                }
-                m[a][a] += lambda * normal[a][a].max(1e-30);
-            }
-            let Some(step) = solve(m, rhs) else { break };
+            let Some(step) = damped_step(&normal, &g, lambda) else {
+                break;
+            };
             let mut trial = v;
             for (j, &p) in free.iter().enumerate() {
                 trial[p] += step[j];
             }
             let valid = trial[..3].iter().all(|&x| x > 0.0);
-            let trial_res = residuals(&trial);
-            let (c1, n1) = cost(&trial_res, k);
+            let trial_res = residuals(rays, &trial);
+            let (c1, n1) = huber_cost(&trial_res, k);
             if valid && n1 + n1 / 100 >= n0 && c1 <= c0 {
                 let moved = free
                     .iter()
@@ -399,14 +421,78 @@ pub fn fit(
             break;
         }
     }
-    let used: Vec<f64> = res.iter().flatten().copied().collect();
-    if used.len() < 50 {
-        return Err(MembraneFitError::NotADome("missed by most rays"));
+    Refined {
+        v,
+        res,
+        normal,
+        iterations,
     }
-    let rms = (used.iter().map(|r| r * r).sum::<f64>() / used.len() as f64).sqrt();
-    let max = used.iter().map(|r| r.abs()).fold(0.0, f64::max);
-    // Standard errors: sigma^2 (J^T J)^-1 with sigma the residual's robust spread.
-    let sigma = robust_sigma(&res);
+}
+
+/// The Huber-weighted (threshold `k`) normal equations at `v` over the `free` parameters: `normal` is overwritten
+/// with J^T W J, and J^T W r is returned, J the predicted depth's Jacobian by central differences.
+fn weighted_normal_equations(
+    rays: &[Ray],
+    free: &[usize],
+    v: &[f64; 6],
+    res: &[Option<f64>],
+    k: f64,
+    normal: &mut [Vec<f64>],
+) -> Vec<f64> {
+    let n = free.len();
+    // Jacobian of the predicted depth by central differences (the residual is measured - predicted).
+    let mut jac = vec![vec![0.0f64; n]; rays.len()];
+    for (j, &p) in free.iter().enumerate() {
+        let step = 1e-6 * v[p].abs().max(1e-2);
+        let (mut hi, mut lo) = (*v, *v);
+        hi[p] += step;
+        lo[p] -= step;
+        for (i, r) in rays.iter().enumerate() {
+            if let (Some(a), Some(b)) = (depth_along(&hi, r.d), depth_along(&lo, r.d)) {
+                jac[i][j] = (a - b) / (2.0 * step);
+            }
+        }
+    }
+    let mut g = vec![0.0f64; n];
+    for row in normal.iter_mut() {
+        row.fill(0.0);
+    }
+    for (i, r) in res.iter().enumerate() {
+        let Some(r) = *r else { continue };
+        let w = if r.abs() <= k { 1.0 } else { k / r.abs() };
+        for a in 0..n {
+            g[a] += w * jac[i][a] * r;
+            for b in 0..n {
+                normal[a][b] += w * jac[i][a] * jac[i][b];
+            }
+        }
+    }
+    g
+}
+
+/// The Levenberg-Marquardt step of the free parameters (the first `g.len()` entries): `normal` with its diagonal
+/// raised by `lambda` times itself, solved for `g`; `None` when singular.
+fn damped_step(normal: &[Vec<f64>], g: &[f64], lambda: f64) -> Option<[f64; 6]> {
+    let n = g.len();
+    let mut m = [[0.0f64; 6]; 6];
+    let mut rhs = [0.0f64; 6];
+    for (a, row) in m.iter_mut().enumerate() {
+        row[a] = 1.0;
+    }
+    for a in 0..n {
+        rhs[a] = g[a];
+        for b in 0..n {
+            m[a][b] = normal[a][b];
+        }
+        m[a][a] += lambda * normal[a][a].max(1e-30);
+    }
+    solve(m, rhs)
+}
+
+/// Each free parameter's standard error, sigma times the square root of its diagonal entry of `normal`'s inverse
+/// (0 for parameters held fixed, or where `normal` is singular).
+fn standard_errors(normal: &[Vec<f64>], free: &[usize], sigma: f64) -> [f64; 6] {
+    let n = free.len();
     let mut std = [0.0f64; 6];
     for (j, &p) in free.iter().enumerate() {
         let mut m = [[0.0f64; 6]; 6];
@@ -424,14 +510,7 @@ pub fn fit(
             std[p] = sigma * col[j].max(0.0).sqrt();
         }
     }
-    Ok(MembraneFit {
-        params: MembraneParams::from_vec(&v),
-        std_error: MembraneParams::from_vec(&std),
-        residual_rms_m: rms,
-        residual_max_m: max,
-        pixels: used.len(),
-        iterations,
-    })
+    std
 }
 
 #[cfg(test)]

@@ -11,9 +11,10 @@ use kdam::BarExt;
 use serde_json::{json, Value};
 use tactile_derender::dataset::{Dataset, SplitName};
 use tactile_derender::image::Image;
+use tactile_derender::io::output::Claimed;
 use tactile_derender::metrics::eval_log::EvalLog;
 use tactile_derender::metrics::evaluate::{
-    EvalConfig, EvalPair, Generator, GroundTruthGenerator, MethodSummary, PairSource,
+    EvalConfig, EvalPair, EvalReport, Generator, GroundTruthGenerator, MethodSummary, PairSource,
 };
 use tactile_derender::metrics::model_generator::ModelGenerator;
 use tactile_derender::metrics::paper_table::{paper_tables, PaperEntry};
@@ -207,26 +208,12 @@ pub fn run(mut a: EvalArgs) -> Result<()> {
         .as_deref()
         .ok_or_else(|| anyhow!("--data DIR is needed (or --tables-from FILE)"))?;
     tactile_derender::io::lock::check_not_written(data)?;
-    // One writer per output, refused before any work; the report folder must take files before the evaluation runs,
-    // not after it.
     let inputs = [data, Path::new(&a.model)];
     let force = a.force.force;
-    let records = a
-        .records
-        .as_deref()
-        .map(|p| crate::outputs::file("--records", p, force, &inputs, &EvalLog::written_by_tnd))
-        .transpose()?;
+    let (records, _folders) = claim_outputs(&a, &inputs)?;
     // Records go to the real file: a symbolic link stays a link.
     if let Some(r) = &records {
         a.records = Some(r.path().to_path_buf());
-    }
-    let _folders = [("--report", &a.report), ("--save-samples", &a.save_samples)]
-        .into_iter()
-        .filter_map(|(flag, p)| Some((flag, p.as_deref()?)))
-        .map(|(flag, p)| crate::outputs::folder(flag, p, force, &inputs))
-        .collect::<Result<Vec<_>>>()?;
-    if let Some(dir) = &a.report {
-        check_writable_folder(dir)?;
     }
     let (gen, mapping) = generator(&a.model, &a.sampler, &a.guidance, &a.device)?;
     let dataset = Dataset::open(data)?;
@@ -258,108 +245,16 @@ pub fn run(mut a: EvalArgs) -> Result<()> {
             eprintln!("{}: split {split} has no pairs; skipped", data.display());
             continue;
         }
-        let bar = Mutex::new(super::progress::bar(
-            &format!("eval {split}"),
-            " pairs",
-            source.len(),
-        ));
-        // A recording or saving error stops the run at once (rather than after every pair is scored).
-        let mut log_error = None;
-        let stop = std::cell::Cell::new(false);
-        let mut progress = |done, _| {
-            if let Ok(mut b) = bar.lock() {
-                let _ = b.update_to(done);
-            }
-            !stop.get()
-        };
-        let mut observe = |i, pair: &EvalPair, samples: &[Image]| {
-            if log_error.is_some() {
-                return;
-            }
-            if let Some(dir) = &a.save_samples {
-                log_error = save_samples(dir, pair, samples)
-                    .err()
-                    .map(|e| anyhow!(tactile_derender::error::render(&e)));
-            }
-            if let (Some(log), Some(sample), None) = (&mut pair_log, samples.first(), &log_error) {
-                log_error = log.pair(source.context(), i, pair, sample).err();
-            }
-            stop.set(log_error.is_some());
-        };
-        let report = match &mut log {
-            Some(log) => {
-                let resumed = log.scored(split.as_str(), a.skip..a.skip + source.len());
-                if resumed == source.len() {
-                    eprintln!(
-                        "{}: all {resumed} pairs of {split} scored by an earlier run",
-                        log.path().display()
-                    );
-                } else if resumed > 0 {
-                    eprintln!(
-                        "{}: {resumed} of the {} pairs of {split} scored by an earlier run; scoring the others",
-                        log.path().display(),
-                        source.len()
-                    );
-                }
-                evaluator
-                    .evaluate_logged(
-                        &source,
-                        gen.as_ref(),
-                        a.seed,
-                        log,
-                        split.as_str(),
-                        a.skip,
-                        &mut progress,
-                        &mut observe,
-                    )
-                    .map_err(anyhow::Error::from)
-            }
-            None => evaluator
-                .evaluate_observed(&source, gen.as_ref(), a.seed, &mut progress, &mut observe)
-                .map_err(anyhow::Error::from),
-        };
-        if let Some(e) = log_error {
-            return Err(e);
-        }
-        let report = report?;
-        if let Some(log) = &mut pair_log {
-            log.estimates(source.context(), &report)?;
-            log.next_split(source.len());
-        }
-        if let Ok(mut b) = bar.lock() {
-            super::progress::finish(&mut b);
-        }
-        let table = markdown_table(split.as_str(), &report);
-        let breakdown = breakdown_tables(&report);
-        // Like every command: the result as JSON on stdout; the readable table beside it on stderr.
-        println!(
-            "{}",
-            json!({"split": split.as_str(), "generator": report.generator, "pairs": report.pairs,
-                   "model": report.model, "model_multi": report.model_multi,
-                   "model_combined": report.model_combined,
-                   "baseline": report.baseline, "baseline_checked": report.baseline_checked,
-                   "breakdown": report.breakdown,
-                   "failed": report.failed})
-        );
-        if !a.json {
-            eprintln!("{table}");
-            if a.breakdown {
-                eprintln!("{breakdown}");
-            }
-        }
-        markdown.push_str(&table);
-        markdown.push_str(&breakdown);
-        paper.extend(paper_entries(
-            &report.generator,
-            split.as_str(),
-            report.model.clone(),
-            report.model_multi.clone(),
-            report.baseline.clone(),
-        ));
-        for f in &report.failed {
-            eprintln!("failed: {} ({}): {}", f.name, f.object, f.reason);
-        }
-        failed += report.failed.len();
+        let report = score_split(
+            &a,
+            split,
+            &source,
+            &evaluator,
+            gen.as_ref(),
+            log.as_mut(),
+            pair_log.as_mut(),
+        )?;
+        failed += show_split(&a, split, &report, &mut markdown, &mut paper);
         if let Some(dir) = &a.report {
             uncertainty_plots(
                 dir,
@@ -384,19 +279,7 @@ pub fn run(mut a: EvalArgs) -> Result<()> {
         eprintln!("records: {}", log.path().display());
     }
     if let Some(dir) = &a.report {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| anyhow!("{}: cannot create: {e}", dir.display()))?;
-        let mut text = format!(
-            "# Evaluation\n\nGenerator `{}`, dataset `{}`, seed {}. Metric definitions: docs/evaluation.md.\n\n",
-            gen.name(),
-            data.display(),
-            a.seed
-        );
-        text.push_str(&markdown);
-        let path = dir.join("report.md");
-        tactile_derender::io::write_atomic(&path, text.as_bytes())
-            .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
-        eprintln!("report: {}", path.display());
+        write_report(dir, &gen.name(), data, a.seed, &markdown)?;
     }
     if let Some(path) = crate::rerun_out::finish(rrd)? {
         eprintln!("rerun: {}", path.display());
@@ -404,6 +287,177 @@ pub fn run(mut a: EvalArgs) -> Result<()> {
     if failed > 0 {
         bail!("{failed} pair(s) could not be scored (listed above and in --records); the tables cover the others");
     }
+    Ok(())
+}
+
+/// One writer per output, refused before any work (`inputs` are the command's inputs, never written): the
+/// `--records` file, then the `--report` and `--save-samples` folders; the report folder must take files before the
+/// evaluation runs, not after it. The claims hold while they live.
+fn claim_outputs(a: &EvalArgs, inputs: &[&Path]) -> Result<(Option<Claimed>, Vec<Claimed>)> {
+    let force = a.force.force;
+    let records = a
+        .records
+        .as_deref()
+        .map(|p| crate::outputs::file("--records", p, force, inputs, &EvalLog::written_by_tnd))
+        .transpose()?;
+    let folders = [("--report", &a.report), ("--save-samples", &a.save_samples)]
+        .into_iter()
+        .filter_map(|(flag, p)| Some((flag, p.as_deref()?)))
+        .map(|(flag, p)| crate::outputs::folder(flag, p, force, inputs))
+        .collect::<Result<Vec<_>>>()?;
+    if let Some(dir) = &a.report {
+        check_writable_folder(dir)?;
+    }
+    Ok((records, folders))
+}
+
+/// Score the pairs of `source` (split `split`) with a progress bar: into `log` where records are kept (resuming the
+/// pairs it already holds), each pair's samples saved (`--save-samples`) and logged to `pair_log` (`--rerun`) as it
+/// is scored. A recording or saving error stops the run at once (rather than after every pair is scored).
+fn score_split(
+    a: &EvalArgs,
+    split: SplitName,
+    source: &DatasetSource<'_>,
+    evaluator: &Evaluator,
+    gen: &dyn Generator,
+    log: Option<&mut EvalLog>,
+    mut pair_log: Option<&mut PairLog<'_>>,
+) -> Result<EvalReport> {
+    let bar = Mutex::new(super::progress::bar(
+        &format!("eval {split}"),
+        " pairs",
+        source.len(),
+    ));
+    let mut log_error = None;
+    let stop = std::cell::Cell::new(false);
+    let mut progress = |done, _| {
+        if let Ok(mut b) = bar.lock() {
+            let _ = b.update_to(done);
+        }
+        !stop.get()
+    };
+    let mut observe = |i, pair: &EvalPair, samples: &[Image]| {
+        if log_error.is_some() {
+            return;
+        }
+        if let Some(dir) = &a.save_samples {
+            log_error = save_samples(dir, pair, samples)
+                .err()
+                .map(|e| anyhow!(tactile_derender::error::render(&e)));
+        }
+        if let (Some(log), Some(sample), None) = (&mut pair_log, samples.first(), &log_error) {
+            log_error = log.pair(source.context(), i, pair, sample).err();
+        }
+        stop.set(log_error.is_some());
+    };
+    let report = match log {
+        Some(log) => {
+            announce_resumed(log, split, a.skip, source.len());
+            evaluator
+                .evaluate_logged(
+                    source,
+                    gen,
+                    a.seed,
+                    log,
+                    split.as_str(),
+                    a.skip,
+                    &mut progress,
+                    &mut observe,
+                )
+                .map_err(anyhow::Error::from)
+        }
+        None => evaluator
+            .evaluate_observed(source, gen, a.seed, &mut progress, &mut observe)
+            .map_err(anyhow::Error::from),
+    };
+    if let Some(e) = log_error {
+        return Err(e);
+    }
+    let report = report?;
+    if let Some(log) = &mut pair_log {
+        log.estimates(source.context(), &report)?;
+        log.next_split(source.len());
+    }
+    if let Ok(mut b) = bar.lock() {
+        super::progress::finish(&mut b);
+    }
+    Ok(report)
+}
+
+/// Say how many of the `len` pairs of `split` (from pair `skip` on) `log` already holds from an earlier run.
+fn announce_resumed(log: &EvalLog, split: SplitName, skip: usize, len: usize) {
+    let resumed = log.scored(split.as_str(), skip..skip + len);
+    if resumed == len {
+        eprintln!(
+            "{}: all {resumed} pairs of {split} scored by an earlier run",
+            log.path().display()
+        );
+    } else if resumed > 0 {
+        eprintln!(
+            "{}: {resumed} of the {} pairs of {split} scored by an earlier run; scoring the others",
+            log.path().display(),
+            len
+        );
+    }
+}
+
+/// Show one split's scores: like every command, the result as JSON on stdout and the readable tables beside it on
+/// stderr (unless `--json`; the breakdown with `--breakdown`), the pairs that could not be scored; the tables added
+/// to `markdown` and the rows to `paper`. Returns how many pairs failed.
+fn show_split(
+    a: &EvalArgs,
+    split: SplitName,
+    report: &EvalReport,
+    markdown: &mut String,
+    paper: &mut Vec<PaperEntry>,
+) -> usize {
+    let table = markdown_table(split.as_str(), report);
+    let breakdown = breakdown_tables(report);
+    println!(
+        "{}",
+        json!({"split": split.as_str(), "generator": report.generator, "pairs": report.pairs,
+               "model": report.model, "model_multi": report.model_multi,
+               "model_combined": report.model_combined,
+               "baseline": report.baseline, "baseline_checked": report.baseline_checked,
+               "breakdown": report.breakdown,
+               "failed": report.failed})
+    );
+    if !a.json {
+        eprintln!("{table}");
+        if a.breakdown {
+            eprintln!("{breakdown}");
+        }
+    }
+    markdown.push_str(&table);
+    markdown.push_str(&breakdown);
+    paper.extend(paper_entries(
+        &report.generator,
+        split.as_str(),
+        report.model.clone(),
+        report.model_multi.clone(),
+        report.baseline.clone(),
+    ));
+    for f in &report.failed {
+        eprintln!("failed: {} ({}): {}", f.name, f.object, f.reason);
+    }
+    report.failed.len()
+}
+
+/// `report.md` in `dir` (created if needed): a header naming the generator, the dataset `data` and the seed, then
+/// `markdown` (every split's tables and uncertainty plots).
+fn write_report(dir: &Path, generator: &str, data: &Path, seed: u64, markdown: &str) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| anyhow!("{}: cannot create: {e}", dir.display()))?;
+    let mut text = format!(
+        "# Evaluation\n\nGenerator `{}`, dataset `{}`, seed {}. Metric definitions: docs/evaluation.md.\n\n",
+        generator,
+        data.display(),
+        seed
+    );
+    text.push_str(markdown);
+    let path = dir.join("report.md");
+    tactile_derender::io::write_atomic(&path, text.as_bytes())
+        .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
+    eprintln!("report: {}", path.display());
     Ok(())
 }
 

@@ -96,129 +96,16 @@ pub enum ObjectsCommand {
 
 pub fn run(a: ObjectsArgs) -> Result<()> {
     match a.command {
-        ObjectsCommand::List { objects } => {
-            let set = ObjectSet::open(&objects)?;
-            for e in set.entries() {
-                // Welded, as `tnd objects check` reports it (an STL stores each triangle's corners apart).
-                let report = set.mesh(&e.name)?.welded_for_topology().report();
-                let mut v = serde_json::to_value(e)?;
-                if let Some(obj) = v.as_object_mut() {
-                    obj.insert("triangles".into(), report.triangles.into());
-                    obj.insert("closed".into(), report.closed.into());
-                }
-                println!("{v}");
-            }
-        }
-        ObjectsCommand::Export { dir, force } => {
-            let _out = crate::outputs::folder("dir", &dir, force.force, &[])?;
-            let set = ObjectSet::builtin();
-            set.export(&dir)?;
-            println!(
-                "{}",
-                serde_json::json!({"exported": set.entries().len(), "dir": crate::path_json(&dir)})
-            );
-        }
-        ObjectsCommand::Check { mesh, units } => {
-            let c = inspect::check(
-                &mesh,
-                &LoadOptions {
-                    units,
-                    fit_to_size: None,
-                },
-            )?;
-            for note in &c.notes {
-                eprintln!("{}: {note}", mesh.display());
-            }
-            println!("{}", serde_json::to_string(&c)?);
-        }
+        ObjectsCommand::List { objects } => list(&objects),
+        ObjectsCommand::Export { dir, force } => export(&dir, force.force),
+        ObjectsCommand::Check { mesh, units } => check(&mesh, units),
         ObjectsCommand::Import {
             dir,
             units,
             fit,
             split,
             force,
-        } => {
-            let split = match split.as_str() {
-                "seen" => Split::Seen,
-                "unseen" => Split::Unseen,
-                other => bail!("--split must be seen or unseen, got '{other}'"),
-            };
-            let most = tactile_derender::mesh::MAX_FIT_SIZE_M;
-            if let Some(f) = fit.filter(|f| !(f.is_finite() && *f > 0.0 && *f <= most)) {
-                bail!("--fit must be a size in metres in (0, {most}], got {f}");
-            }
-            let _lock = tactile_derender::io::lock::OutputLock::acquire(&dir)?;
-            let path = dir.join(MANIFEST_FILE);
-            if path.exists() && !force {
-                bail!(
-                    "{}: already exists; pass --force to replace it",
-                    path.display()
-                );
-            }
-            let options = ImportOptions {
-                units,
-                fit_m: fit,
-                split,
-            };
-            let (manifest, imported, failed) = inspect::import_dir(&dir, &options)?;
-            for (file, e) in &failed {
-                eprintln!(
-                    "skipped {}: {}",
-                    file.display(),
-                    tactile_derender::error::render(e)
-                );
-            }
-            let below = inspect::not_imported(&dir);
-            let mut hints = Vec::new();
-            if let Some(sub) = &below.busiest_subfolder {
-                hints.push(format!(
-                    "{} mesh file(s) lie in subfolders, which are not searched (import one as its own set, e.g. \
-                     tnd objects import {})",
-                    below.in_subfolders,
-                    sub.display()
-                ));
-            }
-            if below.collada > 0 {
-                hints.push(format!(
-                    "{} COLLADA (.dae) file(s) cannot be read: convert them to .glb, .obj or .stl (e.g. assimp \
-                     export, or Blender)",
-                    below.collada
-                ));
-            }
-            let hint = hints.join("; ");
-            if imported.is_empty() {
-                let sep = if hint.is_empty() { "" } else { "; " };
-                bail!(
-                    "{}: no readable mesh files (.obj, .stl, .ply, .gltf, .glb){sep}{hint}",
-                    dir.display()
-                );
-            }
-            if !hint.is_empty() {
-                eprintln!("{}: note: {hint}", dir.display());
-            }
-            for m in &imported {
-                for note in &m.check.notes {
-                    eprintln!("{}: {note}", m.entry.name);
-                }
-                println!(
-                    "{}",
-                    serde_json::json!({"name": m.entry.name, "scale_to_m": m.entry.scale_to_m,
-                        "symmetry_guess": m.entry.symmetry, "check": m.check})
-                );
-            }
-            let mut json = serde_json::to_string_pretty(&manifest)?;
-            json.push('\n');
-            tactile_derender::io::write_atomic(&path, json.as_bytes())
-                .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
-            // Read back what was written: the same validation `--objects DIR` will do.
-            ObjectSet::load_dir(&dir)?;
-            eprintln!(
-                "{}: {} objects ({} skipped); check the symmetry guesses",
-                path.display(),
-                imported.len(),
-                failed.len()
-            );
-        }
+        } => import(&dir, units, fit, &split, force),
         ObjectsCommand::Generate {
             dir,
             count,
@@ -228,45 +115,203 @@ pub fn run(a: ObjectsArgs) -> Result<()> {
             kinds,
             include,
             force,
-        } => {
-            let inputs: Vec<&Path> = include.iter().map(|(p, _)| p.as_path()).collect();
-            let _out = crate::outputs::folder("dir", &dir, force.force, &inputs)?;
-            let config = ProceduralConfig {
+        } => generate(
+            &dir,
+            ProceduralConfig {
                 count,
                 seed,
                 extent_m: [extent[0], extent[1]],
                 kinds: kinds.0,
-            };
-            let sets = include
-                .iter()
-                .map(|(path, share)| Ok((ObjectSet::load_dir(path)?, *share)))
-                .collect::<Result<Vec<_>>>()?;
-            let parts: Vec<(&ObjectSet, f64)> = sets.iter().map(|(set, s)| (set, *s)).collect();
-            let set = ObjectSet::procedural_with(&config, builtin_share, &parts)?;
-            set.export(&dir)?;
-            let mut included = Vec::new();
-            for (set, share) in &sets {
-                let unseen = set.entries_in(Split::Unseen).count();
-                if unseen > 0 {
-                    eprintln!(
-                        "{}: {unseen} of its {} objects are unseen: they go to the unseen_objects split, never \
-                         trained on (re-import with --split seen to train on them)",
-                        set.spec(),
-                        set.entries().len()
-                    );
-                }
-                included.push(serde_json::json!({
-                    "dir": set.spec(), "objects": set.entries().len(), "unseen": unseen, "share": share
-                }));
-            }
-            println!(
-                "{}",
-                serde_json::json!({
-                    "generated": count, "objects": set.entries().len(), "dir": crate::path_json(&dir), "included": included
-                })
+            },
+            builtin_share,
+            &include,
+            force.force,
+        ),
+    }
+}
+
+/// `tnd objects list`: each object of the set `objects` as a JSON line, with its welded mesh's triangles and
+/// closedness.
+fn list(objects: &str) -> Result<()> {
+    let set = ObjectSet::open(objects)?;
+    for e in set.entries() {
+        // Welded, as `tnd objects check` reports it (an STL stores each triangle's corners apart).
+        let report = set.mesh(&e.name)?.welded_for_topology().report();
+        let mut v = serde_json::to_value(e)?;
+        if let Some(obj) = v.as_object_mut() {
+            obj.insert("triangles".into(), report.triangles.into());
+            obj.insert("closed".into(), report.closed.into());
+        }
+        println!("{v}");
+    }
+    Ok(())
+}
+
+/// `tnd objects export`: the built-in set written to `dir`.
+fn export(dir: &Path, force: bool) -> Result<()> {
+    let _out = crate::outputs::folder("dir", dir, force, &[])?;
+    let set = ObjectSet::builtin();
+    set.export(dir)?;
+    println!(
+        "{}",
+        serde_json::json!({"exported": set.entries().len(), "dir": crate::path_json(dir)})
+    );
+    Ok(())
+}
+
+/// `tnd objects check`: what the mesh file holds, notes on stderr and the report as JSON.
+fn check(mesh: &Path, units: Units) -> Result<()> {
+    let c = inspect::check(
+        mesh,
+        &LoadOptions {
+            units,
+            fit_to_size: None,
+        },
+    )?;
+    for note in &c.notes {
+        eprintln!("{}: {note}", mesh.display());
+    }
+    println!("{}", serde_json::to_string(&c)?);
+    Ok(())
+}
+
+/// `tnd objects import`: the folder `dir` of meshes made an object set (its objects.json written and read back),
+/// each imported mesh as a JSON line.
+fn import(
+    dir: &Path,
+    units: Option<Units>,
+    fit: Option<f64>,
+    split: &str,
+    force: bool,
+) -> Result<()> {
+    let split = match split {
+        "seen" => Split::Seen,
+        "unseen" => Split::Unseen,
+        other => bail!("--split must be seen or unseen, got '{other}'"),
+    };
+    let most = tactile_derender::mesh::MAX_FIT_SIZE_M;
+    if let Some(f) = fit.filter(|f| !(f.is_finite() && *f > 0.0 && *f <= most)) {
+        bail!("--fit must be a size in metres in (0, {most}], got {f}");
+    }
+    let _lock = tactile_derender::io::lock::OutputLock::acquire(dir)?;
+    let path = dir.join(MANIFEST_FILE);
+    if path.exists() && !force {
+        bail!(
+            "{}: already exists; pass --force to replace it",
+            path.display()
+        );
+    }
+    let options = ImportOptions {
+        units,
+        fit_m: fit,
+        split,
+    };
+    let (manifest, imported, failed) = inspect::import_dir(dir, &options)?;
+    for (file, e) in &failed {
+        eprintln!(
+            "skipped {}: {}",
+            file.display(),
+            tactile_derender::error::render(e)
+        );
+    }
+    let hint = not_imported_hint(dir);
+    if imported.is_empty() {
+        let sep = if hint.is_empty() { "" } else { "; " };
+        bail!(
+            "{}: no readable mesh files (.obj, .stl, .ply, .gltf, .glb){sep}{hint}",
+            dir.display()
+        );
+    }
+    if !hint.is_empty() {
+        eprintln!("{}: note: {hint}", dir.display());
+    }
+    for m in &imported {
+        for note in &m.check.notes {
+            eprintln!("{}: {note}", m.entry.name);
+        }
+        println!(
+            "{}",
+            serde_json::json!({"name": m.entry.name, "scale_to_m": m.entry.scale_to_m,
+                "symmetry_guess": m.entry.symmetry, "check": m.check})
+        );
+    }
+    let mut json = serde_json::to_string_pretty(&manifest)?;
+    json.push('\n');
+    tactile_derender::io::write_atomic(&path, json.as_bytes())
+        .map_err(|e| anyhow!("{}: cannot write: {e}", path.display()))?;
+    // Read back what was written: the same validation `--objects DIR` will do.
+    ObjectSet::load_dir(dir)?;
+    eprintln!(
+        "{}: {} objects ({} skipped); check the symmetry guesses",
+        path.display(),
+        imported.len(),
+        failed.len()
+    );
+    Ok(())
+}
+
+/// What `tnd objects import` left out of `dir` that the user may have meant to import (meshes in subfolders,
+/// COLLADA files), as one line of hints joined by "; " (empty when nothing was left out).
+fn not_imported_hint(dir: &Path) -> String {
+    let below = inspect::not_imported(dir);
+    let mut hints = Vec::new();
+    if let Some(sub) = &below.busiest_subfolder {
+        hints.push(format!(
+            "{} mesh file(s) lie in subfolders, which are not searched (import one as its own set, e.g. \
+             tnd objects import {})",
+            below.in_subfolders,
+            sub.display()
+        ));
+    }
+    if below.collada > 0 {
+        hints.push(format!(
+            "{} COLLADA (.dae) file(s) cannot be read: convert them to .glb, .obj or .stl (e.g. assimp \
+             export, or Blender)",
+            below.collada
+        ));
+    }
+    hints.join("; ")
+}
+
+/// `tnd objects generate`: the procedural set of `config` (with the built-in catalogue at `builtin_share` and the
+/// `include`d sets at theirs) exported to `dir`, a warning for each included set's unseen objects.
+fn generate(
+    dir: &Path,
+    config: ProceduralConfig,
+    builtin_share: f64,
+    include: &[(PathBuf, f64)],
+    force: bool,
+) -> Result<()> {
+    let inputs: Vec<&Path> = include.iter().map(|(p, _)| p.as_path()).collect();
+    let _out = crate::outputs::folder("dir", dir, force, &inputs)?;
+    let sets = include
+        .iter()
+        .map(|(path, share)| Ok((ObjectSet::load_dir(path)?, *share)))
+        .collect::<Result<Vec<_>>>()?;
+    let parts: Vec<(&ObjectSet, f64)> = sets.iter().map(|(set, s)| (set, *s)).collect();
+    let set = ObjectSet::procedural_with(&config, builtin_share, &parts)?;
+    set.export(dir)?;
+    let mut included = Vec::new();
+    for (set, share) in &sets {
+        let unseen = set.entries_in(Split::Unseen).count();
+        if unseen > 0 {
+            eprintln!(
+                "{}: {unseen} of its {} objects are unseen: they go to the unseen_objects split, never \
+                 trained on (re-import with --split seen to train on them)",
+                set.spec(),
+                set.entries().len()
             );
         }
+        included.push(serde_json::json!({
+            "dir": set.spec(), "objects": set.entries().len(), "unseen": unseen, "share": share
+        }));
     }
+    println!(
+        "{}",
+        serde_json::json!({
+            "generated": config.count, "objects": set.entries().len(), "dir": crate::path_json(dir), "included": included
+        })
+    );
     Ok(())
 }
 
