@@ -11,6 +11,7 @@ use std::sync::Arc;
 use anyhow::{anyhow, Result};
 use egui::{TextureHandle, TextureOptions};
 use serde::{Deserialize, Serialize};
+use tactile_derender::pipeline::track::TrackingConfig;
 use tactile_derender::recording::source::DEFAULT_MAX_POSE_GAP_S;
 use tactile_derender::recording::{
     self, ProcessedRecording, ReadConfig, Recording, StreamInfo, StreamKind,
@@ -33,6 +34,28 @@ pub struct RecordingSettings {
     pub read: ReadConfig,
     /// The frame under the timeline cursor.
     pub frame: usize,
+    /// How the track goes through the recording: the same settings as `tnd recording track` (`--every`, and
+    /// `--per-frame`, `--carried-samples`, ... of [`TrackSettings::tracking`]).
+    pub track: TrackSettings,
+}
+
+/// The Recording tab's track settings (in the session).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TrackSettings {
+    /// Track every n-th frame (1: every frame), as `tnd recording track --every`.
+    pub every: usize,
+    /// Which frames are tracked and what each hands to the next.
+    pub tracking: TrackingConfig,
+}
+
+impl Default for TrackSettings {
+    fn default() -> Self {
+        Self {
+            every: 1,
+            tracking: TrackingConfig::default(),
+        }
+    }
 }
 
 /// A loaded recording.

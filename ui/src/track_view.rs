@@ -58,15 +58,18 @@ pub struct TrackRequest {
     pub sim: SimConfig,
     /// The pose engine's settings (the session's).
     pub pose: PoseConfig,
-    /// Which frames, and what each hands to the next (`tnd recording track`'s defaults).
+    /// Which frames, and what each hands to the next (the session's, `tnd recording track`'s options).
     pub tracking: TrackingConfig,
+    /// Every n-th frame (`tnd recording track --every`).
+    pub every: usize,
 }
 
 impl TrackRequest {
-    /// The frames to track: those with contact and enough pixels with a return
+    /// The frames to track: every n-th of those with contact and enough pixels with a return
     /// ([`tactile_derender::recording::ProcessedRecording::unusable`], as `tnd recording track`).
     pub fn frames(&self) -> Vec<usize> {
-        self.tracking.frames(&self.recording, 1, &mut |_, _| {})
+        self.tracking
+            .frames(&self.recording, self.every, &mut |_, _| {})
     }
 }
 

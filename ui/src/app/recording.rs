@@ -13,7 +13,6 @@ use crate::command::Command;
 use crate::recording_view::{spawn_load, RecordingMsg, RecordingSettings};
 use crate::sensor_calibration::{CalibrationRequest, CalibrationResult};
 use crate::track_view::{TrackMsg, TrackRequest};
-use tactile_derender::pipeline::track::TrackingConfig;
 
 impl WorkbenchApp {
     /// (Re)load the recording of the saved settings on a background thread.
@@ -212,6 +211,11 @@ impl WorkbenchApp {
             .as_ref()
             .ok_or_else(|| anyhow!("open a recording first"))?;
         self.state.derender.config.validate(None)?;
+        let track = &self.state.recording.track;
+        if track.every == 0 {
+            return Err(anyhow!("track every n-th frame: n must be at least 1"));
+        }
+        track.tracking.validate()?;
         let w = self
             .worker
             .as_ref()
@@ -230,7 +234,8 @@ impl WorkbenchApp {
             derender: self.state.derender.config.clone(),
             sim: self.state.sim.clone(),
             pose: self.state.pose.clone(),
-            tracking: TrackingConfig::default(),
+            tracking: self.state.recording.track.tracking.clone(),
+            every: self.state.recording.track.every,
         };
         let frames = req.frames().len();
         if frames == 0 {

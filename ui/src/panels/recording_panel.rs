@@ -256,6 +256,33 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     }
 }
 
+/// The track's own settings beside its button: every n-th frame, and whether each frame carries the previous one's
+/// estimate forward (`tnd recording track --every` and `--per-frame`).
+fn track_settings(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+    let mut s = app.state.recording.clone();
+    ui.label("every");
+    ui.add(
+        egui::DragValue::new(&mut s.track.every)
+            .range(1..=1000)
+            .suffix(" frame(s)"),
+    )
+    .on_hover_text("track every n-th frame (tnd recording track --every)");
+    let mut carry = !s.track.tracking.per_frame;
+    if ui
+        .checkbox(&mut carry, "carry estimates forward")
+        .on_hover_text(
+            "each frame starts from the previous frame's estimate with fewer samples and its posterior as the prior \
+             (off: every frame from scratch, as tnd recording track --per-frame)",
+        )
+        .changed()
+    {
+        s.track.tracking.per_frame = !carry;
+    }
+    if s != app.state.recording {
+        cmds.push(Command::SetRecording(s));
+    }
+}
+
 fn open_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     ui.horizontal(|ui| {
         if let Some(path) = path_submit(
@@ -442,6 +469,9 @@ fn track_section(
             .clicked()
         {
             cmds.push(Command::TrackRecording);
+        }
+        if !t.running {
+            track_settings(app, ui, cmds);
         }
         if !t.rows.is_empty()
             && !t.running
