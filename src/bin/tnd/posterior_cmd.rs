@@ -12,7 +12,7 @@ use serde_json::json;
 use tactile_derender::io::figure::{write_figure, FigureConfig};
 use tactile_derender::metrics::breakdown::{bin_label, CONTACT_BINS};
 use tactile_derender::metrics::coverage::{
-    fit_posterior, reliability, Coverage, Reliability, Scored, WRONG_MM,
+    fit_posterior, reliability, Coverage, Fit, Reliability, Scored, WRONG_MM,
 };
 use tactile_derender::metrics::eval_log::EvalLog;
 use tactile_derender::metrics::evaluate::{MethodResult, PairRecord, REGION_DRAWS};
@@ -59,31 +59,8 @@ const METHODS: [(&str, Row); 4] = [
 ];
 
 pub fn run(a: PosteriorArgs) -> Result<()> {
-    let methods: Vec<_> = METHODS
-        .iter()
-        .filter(|(name, _)| a.method == "all" || a.method == *name)
-        .collect();
-    if methods.is_empty() {
-        bail!(
-            "--method {}: one of combined, model, multi, baseline_checked or all",
-            a.method
-        );
-    }
-    // Each records file once (the same file under two names counts once too), and none an eval is still writing.
-    let mut seen: Vec<(PathBuf, PathBuf)> = Vec::new();
-    for path in &a.records {
-        let real = tactile_derender::io::output::resolve(path)
-            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-        if let Some(first) = seen.iter().find(|(r, _)| *r == real).map(|(_, p)| p) {
-            bail!(
-                "--records {} is {} again: each records file is given once",
-                path.display(),
-                first.display()
-            );
-        }
-        tactile_derender::io::lock::check_not_written(path)?;
-        seen.push((real, path.clone()));
-    }
+    let methods = chosen_methods(&a.method)?;
+    check_records_once(&a.records)?;
     let mut inputs: Vec<&Path> = a.records.iter().map(PathBuf::as_path).collect();
     inputs.extend(a.config.as_deref());
     let fitted_file = |p: &Path| PosteriorConfig::read(p).is_ok();
@@ -106,23 +83,10 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
     for path in &a.records {
         records.extend(EvalLog::read(path)?.1);
     }
-    let scored = |get: Row| -> Vec<Scored<'_>> {
-        records
-            .iter()
-            .filter_map(|r| {
-                let m = get(r)?;
-                Some(Scored {
-                    posterior: m.posterior.as_ref()?,
-                    truth: r.truth,
-                    symmetry: r.symmetry,
-                    position_mm: m.pose?.position_mm,
-                    theta_rad: m.pose?.theta_rad,
-                    contact_pixels: r.contact_pixels,
-                })
-            })
-            .collect()
-    };
-    let all: Vec<Scored<'_>> = methods.iter().flat_map(|(_, g)| scored(*g)).collect();
+    let all: Vec<Scored<'_>> = methods
+        .iter()
+        .flat_map(|(_, g)| scored(&records, *g))
+        .collect();
     if all.is_empty() {
         bail!(
             "no pair of {} has a posterior of the chosen rows (records of tnd eval with the signature check, from this \
@@ -135,37 +99,7 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
         .as_ref()
         .map(|_| fit_posterior(&all, &config.clone().unwrap_or_default()));
     let used = fitted.as_ref().map(|f| &f.config).or(config.as_ref());
-    let mut table = String::from(
-        "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong | mean NLL | median σ / error, position [mm] | median σ / error, θ [deg] |\n|---|---|---|---|---|---|---|---|---|---|\n",
-    );
-    let mut drawn: Vec<(String, Reliability)> = Vec::new();
-    for (name, get) in &methods {
-        let rows = scored(*get);
-        let mut groups: Vec<(String, Vec<Scored<'_>>)> = vec![("all".into(), rows.clone())];
-        for &(lo, hi) in &CONTACT_BINS {
-            let mine: Vec<Scored<'_>> = rows
-                .iter()
-                .filter(|s| (lo..hi).contains(&s.contact_pixels))
-                .cloned()
-                .collect();
-            if !mine.is_empty() {
-                groups.push((bin_label((lo, hi)), mine));
-            }
-        }
-        for (group, mine) in groups {
-            let Some((c, r)) = reliability(&mine, used, REGION_DRAWS) else {
-                continue;
-            };
-            println!(
-                "{}",
-                json!({"rows": name, "contact": group, "coverage": c, "wrong_mm": WRONG_MM, "reliability": r})
-            );
-            table.push_str(&row(name, &group, &c, &r));
-            if figures.is_some() && *name == methods[0].0 {
-                drawn.push((group, r));
-            }
-        }
-    }
+    let (table, drawn) = score_groups(&methods, &records, used, figures.is_some());
     if !a.json {
         eprintln!(
             "\nThe truth inside the posterior's regions ({}; confidently wrong: > {WRONG_MM} mm off, outside the 95 % region)\n\n{table}",
@@ -177,43 +111,150 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
         );
     }
     if let Some(dir) = &figures {
-        let title = format!(
-            "pose posterior: {} rows, {}",
-            methods[0].0,
-            match (&fitted, &a.config) {
-                (Some(_), _) => "fitted to these records".to_string(),
-                (None, Some(p)) => format!("calibration {}", p.display()),
-                (None, None) => "as recorded".into(),
-            }
-        );
-        let [svg, png] = write_figure(
-            dir.path(),
-            "reliability",
-            &FigureConfig {
-                width_px: 3000,
-                height_px: 1000,
-            },
-            &ReliabilityFigure {
-                title: &title,
-                groups: &drawn,
-            },
-        )?;
-        println!(
-            "{}",
-            json!({"figures": [crate::path_json(&svg), crate::path_json(&png)]})
-        );
+        let calibration = match (&fitted, &a.config) {
+            (Some(_), _) => "fitted to these records".to_string(),
+            (None, Some(p)) => format!("calibration {}", p.display()),
+            (None, None) => "as recorded".into(),
+        };
+        draw_reliability(dir.path(), methods[0].0, &calibration, &drawn)?;
     }
     if let (Some(f), Some(path)) = (&fitted, &a.fit) {
-        tactile_derender::io::write_atomic(
-            path,
-            serde_json::to_string_pretty(&f.config)?.as_bytes(),
-        )
-        .with_context(|| format!("{}: cannot write", path.display()))?;
-        println!(
-            "{}",
-            json!({"fit": crate::path_json(path), "config": f.config, "mean_nll": f.mean_nll, "pairs": all.len()})
-        );
+        write_fit(f, path, all.len())?;
     }
+    Ok(())
+}
+
+/// The rows `--method` names (all four for "all"), or an error listing the names.
+fn chosen_methods(method: &str) -> Result<Vec<&'static (&'static str, Row)>> {
+    let methods: Vec<_> = METHODS
+        .iter()
+        .filter(|(name, _)| method == "all" || method == *name)
+        .collect();
+    if methods.is_empty() {
+        bail!("--method {method}: one of combined, model, multi, baseline_checked or all");
+    }
+    Ok(methods)
+}
+
+/// Each records file once (the same file under two names counts once too), and none an eval is still writing.
+fn check_records_once(records: &[PathBuf]) -> Result<()> {
+    let mut seen: Vec<(PathBuf, PathBuf)> = Vec::new();
+    for path in records {
+        let real = tactile_derender::io::output::resolve(path)
+            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        if let Some(first) = seen.iter().find(|(r, _)| *r == real).map(|(_, p)| p) {
+            bail!(
+                "--records {} is {} again: each records file is given once",
+                path.display(),
+                first.display()
+            );
+        }
+        tactile_derender::io::lock::check_not_written(path)?;
+        seen.push((real, path.clone()));
+    }
+    Ok(())
+}
+
+/// The pairs whose `get` row has a posterior and a pose, ready to score against their truth.
+fn scored(records: &[PairRecord], get: Row) -> Vec<Scored<'_>> {
+    records
+        .iter()
+        .filter_map(|r| {
+            let m = get(r)?;
+            Some(Scored {
+                posterior: m.posterior.as_ref()?,
+                truth: r.truth,
+                symmetry: r.symmetry,
+                position_mm: m.pose?.position_mm,
+                theta_rad: m.pose?.theta_rad,
+                contact_pixels: r.contact_pixels,
+            })
+        })
+        .collect()
+}
+
+/// Score each chosen row over all its pairs and per contact-size bin under the calibration `used`: print one JSON
+/// line per group and answer the markdown table, with the first row's reliabilities to draw when `drawing`.
+fn score_groups(
+    methods: &[&(&str, Row)],
+    records: &[PairRecord],
+    used: Option<&PosteriorConfig>,
+    drawing: bool,
+) -> (String, Vec<(String, Reliability)>) {
+    let mut table = String::from(
+        "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong | mean NLL | median σ / error, position [mm] | median σ / error, θ [deg] |\n|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut drawn: Vec<(String, Reliability)> = Vec::new();
+    for (name, get) in methods {
+        for (group, mine) in contact_groups(scored(records, *get)) {
+            let Some((c, r)) = reliability(&mine, used, REGION_DRAWS) else {
+                continue;
+            };
+            println!(
+                "{}",
+                json!({"rows": name, "contact": group, "coverage": c, "wrong_mm": WRONG_MM, "reliability": r})
+            );
+            table.push_str(&row(name, &group, &c, &r));
+            if drawing && *name == methods[0].0 {
+                drawn.push((group, r));
+            }
+        }
+    }
+    (table, drawn)
+}
+
+/// "all" with every row, then each contact-size bin with its rows (bins without any left out).
+fn contact_groups(rows: Vec<Scored<'_>>) -> Vec<(String, Vec<Scored<'_>>)> {
+    let mut groups: Vec<(String, Vec<Scored<'_>>)> = vec![("all".into(), rows.clone())];
+    for &(lo, hi) in &CONTACT_BINS {
+        let mine: Vec<Scored<'_>> = rows
+            .iter()
+            .filter(|s| (lo..hi).contains(&s.contact_pixels))
+            .cloned()
+            .collect();
+        if !mine.is_empty() {
+            groups.push((bin_label((lo, hi)), mine));
+        }
+    }
+    groups
+}
+
+/// Draw the reliability diagram of `drawn` (the `method` rows, under `calibration`) into `dir` and print the files
+/// as a JSON line.
+fn draw_reliability(
+    dir: &Path,
+    method: &str,
+    calibration: &str,
+    drawn: &[(String, Reliability)],
+) -> Result<()> {
+    let title = format!("pose posterior: {method} rows, {calibration}");
+    let [svg, png] = write_figure(
+        dir,
+        "reliability",
+        &FigureConfig {
+            width_px: 3000,
+            height_px: 1000,
+        },
+        &ReliabilityFigure {
+            title: &title,
+            groups: drawn,
+        },
+    )?;
+    println!(
+        "{}",
+        json!({"figures": [crate::path_json(&svg), crate::path_json(&png)]})
+    );
+    Ok(())
+}
+
+/// Write the fitted calibration to `path` (JSON for `--posterior FILE`) and print it with its fit over `pairs` pairs.
+fn write_fit(f: &Fit, path: &Path, pairs: usize) -> Result<()> {
+    tactile_derender::io::write_atomic(path, serde_json::to_string_pretty(&f.config)?.as_bytes())
+        .with_context(|| format!("{}: cannot write", path.display()))?;
+    println!(
+        "{}",
+        json!({"fit": crate::path_json(path), "config": f.config, "mean_nll": f.mean_nll, "pairs": pairs})
+    );
     Ok(())
 }
 

@@ -5,13 +5,16 @@ use std::path::PathBuf;
 
 use anyhow::{anyhow, Result};
 use tactile_derender::io::{npy, preview};
+use tactile_derender::sim::SimConfig;
 
 use super::WorkbenchApp;
 use crate::command::Command;
 use crate::images::ImageKind;
 use crate::measured;
 use crate::session;
-use crate::state::{DerenderInput, ModelSettings, ObjectSource, State, Tab};
+use crate::state::{
+    CalibrationSettings, DerenderInput, ModelSettings, ObjectSource, SceneState, State, Tab,
+};
 use crate::worker::DialogPurpose;
 
 impl WorkbenchApp {
@@ -32,83 +35,20 @@ impl WorkbenchApp {
 
     fn apply_now(&mut self, cmd: Command) {
         match cmd {
-            Command::SetScene(scene) => {
-                if scene != self.state.scene {
-                    self.state.scene = scene;
-                    self.request_simulation();
-                }
-            }
-            Command::SetSim(sim) => {
-                if sim != self.state.sim {
-                    // A recording's imprints are cropped and resampled with the camera: a new camera re-reads it.
-                    let camera_changed = sim.camera != self.state.sim.camera;
-                    self.state.sim = sim;
-                    self.request_simulation();
-                    if camera_changed && self.state.recording.path.is_some() {
-                        self.load_recording();
-                    }
-                }
-            }
-            Command::SetSeed(seed) => {
-                if seed != self.state.seed {
-                    self.state.seed = seed;
-                    self.request_simulation();
-                }
-            }
-            Command::SetCalibration(c) => {
-                let pair_changed = (c.measured_split, c.measured_index)
-                    != (
-                        self.state.calibration.measured_split,
-                        self.state.calibration.measured_index,
-                    );
-                self.state.calibration = c;
-                let dataset = self.measured.as_ref().filter(|m| m.scene.is_some());
-                if let (true, Some(m)) = (pair_changed, dataset) {
-                    let path = m.path.clone();
-                    self.apply(Command::LoadMeasured(path));
-                }
-            }
+            // Scene, sensor and calibration settings.
+            Command::SetScene(scene) => self.set_scene(scene),
+            Command::SetSim(sim) => self.set_sim(sim),
+            Command::SetSeed(seed) => self.set_seed(seed),
+            Command::SetCalibration(c) => self.set_calibration(c),
             Command::SetView(v) => self.state.view = v,
-            Command::NewSession => {
-                self.replace_state(State::default());
-                self.session_path = None;
-                self.inputs.session_path.clear();
-                self.notice = Some("new session: the default scene".into());
-            }
-            Command::OpenSession(path) => match session::read(&path) {
-                Ok(state) => {
-                    self.replace_state(state);
-                    self.inputs.session_path = path.display().to_string();
-                    self.notice = Some(format!("opened {}", path.display()));
-                    self.remember_session(&path);
-                    self.session_path = Some(path);
-                }
-                Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
-            },
-            Command::SaveSession(path) => match session::write(&path, &self.state) {
-                Ok(()) => {
-                    self.inputs.session_path = path.display().to_string();
-                    self.notice = Some(format!("saved {}", path.display()));
-                    self.remember_session(&path);
-                    self.session_path = Some(path);
-                }
-                Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
-            },
+            // Sessions, dialogs and dropped files.
+            Command::NewSession => self.new_session(),
+            Command::OpenSession(path) => self.open_session(path),
+            Command::SaveSession(path) => self.save_session(path),
             Command::Browse(purpose) => self.browse(purpose),
-            Command::LoadMeasured(path) => {
-                let c = &self.state.calibration;
-                match measured::load(&path, c.measured_split, c.measured_index) {
-                    Ok(m) => {
-                        self.inputs.measured_path = path.display().to_string();
-                        self.state.calibration.measured = Some(path);
-                        self.measured = Some(m);
-                    }
-                    Err(e) => self.error(format!(
-                        "measured imprint: {}",
-                        tactile_derender::error::render_anyhow(&e)
-                    )),
-                }
-            }
+            Command::OpenDropped(path) => self.open_dropped(path),
+            // The measured imprint and the inflation calibration.
+            Command::LoadMeasured(path) => self.load_measured(path),
             Command::UseMeasuredScene => {
                 if let Err(e) = self.use_measured_scene() {
                     self.error(format!(
@@ -117,22 +57,10 @@ impl WorkbenchApp {
                     ));
                 }
             }
-            Command::ClearMeasured => {
-                self.state.calibration.measured = None;
-                self.measured = None;
-                self.inputs.measured_path.clear();
-            }
+            Command::ClearMeasured => self.clear_measured(),
             Command::RunCalibration => self.run_calibration(),
-            Command::CancelCalibration => {
-                if let Some(w) = &mut self.worker {
-                    w.cancel_calibration();
-                }
-            }
-            Command::PickInflation(h) => {
-                let mut sim = self.state.sim.clone();
-                sim.elastomer.inflation = h;
-                self.apply(Command::SetSim(sim));
-            }
+            Command::CancelCalibration => self.cancel_calibration(),
+            Command::PickInflation(h) => self.pick_inflation(h),
             Command::Export { image, png } => {
                 if let Err(e) = self.export(image, png) {
                     self.error(format!(
@@ -142,6 +70,7 @@ impl WorkbenchApp {
                 }
             }
             Command::DismissErrors => self.errors.clear(),
+            // Dataset, De-render and Pose tabs.
             Command::OpenDataset(path) => self.open_dataset(path),
             Command::SetDataset(d) => self.set_dataset(d),
             Command::SendPairToDerender => {
@@ -171,14 +100,8 @@ impl WorkbenchApp {
             Command::HighlightSample(k) => self.analysis.pose.highlight = k,
             Command::SetPose(pose) => self.state.pose = pose,
             Command::ZoomImage(target) => self.analysis.zoom = target,
-            Command::OpenRecording(path) => {
-                self.state.recording = crate::recording_view::RecordingSettings {
-                    path: Some(path),
-                    ..Default::default()
-                };
-                self.state.view.tab = Tab::Recording;
-                self.load_recording();
-            }
+            // Recording tab.
+            Command::OpenRecording(path) => self.open_recording(path),
             Command::SetRecording(settings) => self.set_recording(settings),
             Command::CancelRecording => self.cancel_recording(),
             Command::DerenderFrame { pose } => {
@@ -203,27 +126,170 @@ impl WorkbenchApp {
                 Ok(path) => self.notice = Some(format!("track saved as {}", path.display())),
                 Err(e) => self.error(format!("track: {e}")),
             },
-            Command::Undo => {
-                let now = crate::history::Snapshot::of(&self.state);
-                match self.history.undo(now) {
-                    Some(s) => self.restore(s, "undone"),
-                    None => self.notice = Some("nothing to undo".into()),
-                }
+            // History.
+            Command::Undo => self.undo(),
+            Command::Redo => self.redo(),
+        }
+    }
+
+    // Scene, sensor and calibration settings.
+
+    /// Take a new scene and re-simulate (nothing when it is the same).
+    fn set_scene(&mut self, scene: SceneState) {
+        if scene != self.state.scene {
+            self.state.scene = scene;
+            self.request_simulation();
+        }
+    }
+
+    /// Take new sensor settings and re-simulate; a new camera re-reads the open recording.
+    fn set_sim(&mut self, sim: SimConfig) {
+        if sim != self.state.sim {
+            // A recording's imprints are cropped and resampled with the camera: a new camera re-reads it.
+            let camera_changed = sim.camera != self.state.sim.camera;
+            self.state.sim = sim;
+            self.request_simulation();
+            if camera_changed && self.state.recording.path.is_some() {
+                self.load_recording();
             }
-            Command::Redo => {
-                let now = crate::history::Snapshot::of(&self.state);
-                match self.history.redo(now) {
-                    Some(s) => self.restore(s, "redone"),
-                    None => self.notice = Some("nothing to redo".into()),
-                }
+        }
+    }
+
+    /// Take a new seed and re-simulate (nothing when it is the same).
+    fn set_seed(&mut self, seed: u64) {
+        if seed != self.state.seed {
+            self.state.seed = seed;
+            self.request_simulation();
+        }
+    }
+
+    /// Take new calibration settings; another dataset pair reloads the measured imprint.
+    fn set_calibration(&mut self, c: CalibrationSettings) {
+        let pair_changed = (c.measured_split, c.measured_index)
+            != (
+                self.state.calibration.measured_split,
+                self.state.calibration.measured_index,
+            );
+        self.state.calibration = c;
+        let dataset = self.measured.as_ref().filter(|m| m.scene.is_some());
+        if let (true, Some(m)) = (pair_changed, dataset) {
+            let path = m.path.clone();
+            self.apply(Command::LoadMeasured(path));
+        }
+    }
+
+    // Sessions and dropped files.
+
+    /// Start over with the default session.
+    fn new_session(&mut self) {
+        self.replace_state(State::default());
+        self.session_path = None;
+        self.inputs.session_path.clear();
+        self.notice = Some("new session: the default scene".into());
+    }
+
+    /// Read a session file and make it the state.
+    fn open_session(&mut self, path: PathBuf) {
+        match session::read(&path) {
+            Ok(state) => {
+                self.replace_state(state);
+                self.inputs.session_path = path.display().to_string();
+                self.notice = Some(format!("opened {}", path.display()));
+                self.remember_session(&path);
+                self.session_path = Some(path);
             }
-            Command::OpenDropped(path) => {
-                let de_render = self.state.view.tab == crate::state::Tab::Derender;
-                match crate::shortcuts::purpose_of(&path, de_render) {
-                    Some(purpose) => self.dialog_answer(purpose, Some(path)),
-                    None => self.error(crate::shortcuts::unknown(&path)),
-                }
+            Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
+        }
+    }
+
+    /// Write the state to a session file.
+    fn save_session(&mut self, path: PathBuf) {
+        match session::write(&path, &self.state) {
+            Ok(()) => {
+                self.inputs.session_path = path.display().to_string();
+                self.notice = Some(format!("saved {}", path.display()));
+                self.remember_session(&path);
+                self.session_path = Some(path);
             }
+            Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
+        }
+    }
+
+    /// Open a file dropped on the window as what its kind says (a session, mesh, recording, ...).
+    fn open_dropped(&mut self, path: PathBuf) {
+        let de_render = self.state.view.tab == crate::state::Tab::Derender;
+        match crate::shortcuts::purpose_of(&path, de_render) {
+            Some(purpose) => self.dialog_answer(purpose, Some(path)),
+            None => self.error(crate::shortcuts::unknown(&path)),
+        }
+    }
+
+    // The measured imprint and the inflation calibration.
+
+    /// Load the measured imprint (a `.npy` file or a dataset pair) the calibration compares with.
+    fn load_measured(&mut self, path: PathBuf) {
+        let c = &self.state.calibration;
+        match measured::load(&path, c.measured_split, c.measured_index) {
+            Ok(m) => {
+                self.inputs.measured_path = path.display().to_string();
+                self.state.calibration.measured = Some(path);
+                self.measured = Some(m);
+            }
+            Err(e) => self.error(format!(
+                "measured imprint: {}",
+                tactile_derender::error::render_anyhow(&e)
+            )),
+        }
+    }
+
+    /// Forget the measured imprint.
+    fn clear_measured(&mut self) {
+        self.state.calibration.measured = None;
+        self.measured = None;
+        self.inputs.measured_path.clear();
+    }
+
+    /// Stop the inflation sweep.
+    fn cancel_calibration(&mut self) {
+        if let Some(w) = &mut self.worker {
+            w.cancel_calibration();
+        }
+    }
+
+    /// Set the membrane's inflation to `h` (metres), as a sensor edit.
+    fn pick_inflation(&mut self, h: f64) {
+        let mut sim = self.state.sim.clone();
+        sim.elastomer.inflation = h;
+        self.apply(Command::SetSim(sim));
+    }
+
+    // Recording tab and history.
+
+    /// Open a recording with default settings on the Recording tab.
+    fn open_recording(&mut self, path: PathBuf) {
+        self.state.recording = crate::recording_view::RecordingSettings {
+            path: Some(path),
+            ..Default::default()
+        };
+        self.state.view.tab = Tab::Recording;
+        self.load_recording();
+    }
+
+    /// Step back one scene, sensor or elastomer edit.
+    fn undo(&mut self) {
+        let now = crate::history::Snapshot::of(&self.state);
+        match self.history.undo(now) {
+            Some(s) => self.restore(s, "undone"),
+            None => self.notice = Some("nothing to undo".into()),
+        }
+    }
+
+    /// Step forward one undone edit.
+    fn redo(&mut self) {
+        let now = crate::history::Snapshot::of(&self.state);
+        match self.history.redo(now) {
+            Some(s) => self.restore(s, "redone"),
+            None => self.notice = Some("nothing to redo".into()),
         }
     }
 

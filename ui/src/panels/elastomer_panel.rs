@@ -4,16 +4,45 @@
 use std::path::PathBuf;
 
 use tactile_derender::dataset::SplitName;
+use tactile_derender::sensor::ElastomerConfig;
 use tactile_derender::sim::calibration::best_by_iou;
 
 use super::widgets::{mm_slider, path_field, units_combo};
 use crate::app::WorkbenchApp;
 use crate::command::Command;
+use crate::measured::Measured;
+use crate::state::CalibrationSettings;
 use crate::worker::DialogPurpose;
 
 pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let mut sim = app.state.sim.clone();
-    let e = &mut sim.elastomer;
+    dome_settings(ui, &mut sim.elastomer);
+    membrane_mesh(ui, &mut sim.elastomer, &mut app.inputs.elastomer_path, cmds);
+    if sim != app.state.sim {
+        cmds.push(Command::SetSim(sim));
+    }
+
+    ui.add_space(6.0);
+    ui.strong("Inflation calibration");
+    let mut cal = app.state.calibration.clone();
+    sweep_range_row(ui, &mut cal);
+    measured_source(ui, &mut cal, &mut app.inputs.measured_path, cmds);
+    measured_actions(ui, &app.inputs.measured_path, app.measured.as_ref(), cmds);
+    mm_slider(
+        ui,
+        &mut cal.threshold,
+        0.0..=10.0,
+        "contact threshold (mm)",
+        "imprint depth above which a measured pixel counts as contact for the IoU, millimetres",
+    );
+    if cal != app.state.calibration {
+        cmds.push(Command::SetCalibration(cal));
+    }
+    sweep_run_row(app, ui, cmds);
+}
+
+/// The parametric dome's footprint, inflation and tessellation (greyed out while a membrane mesh is used).
+fn dome_settings(ui: &mut egui::Ui, e: &mut ElastomerConfig) {
     let parametric = e.mesh_file.is_none();
     ui.add_enabled_ui(parametric, |ui| {
         mm_slider(ui, &mut e.footprint_x, 40.0..=200.0, "footprint x (mm)", "length of the membrane's elliptical footprint along sensor x, millimetres (Soft Bubble: 120)");
@@ -35,6 +64,17 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             .on_hover_text("segments around the membrane's rim");
         });
     });
+}
+
+/// A membrane mesh file instead of the dome: its units, browse, the typed path, and the buttons that switch between
+/// the mesh and the parametric dome.
+fn membrane_mesh(
+    ui: &mut egui::Ui,
+    e: &mut ElastomerConfig,
+    typed_path: &mut String,
+    cmds: &mut Vec<Command>,
+) {
+    let parametric = e.mesh_file.is_none();
     ui.horizontal(|ui| {
         ui.label("or membrane mesh")
             .on_hover_text("a mesh file (OBJ, STL, PLY, glTF/GLB) in the sensor frame");
@@ -43,9 +83,9 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             cmds.push(Command::Browse(DialogPurpose::OpenElastomerMesh));
         }
     });
-    path_field(ui, "Membrane", &mut app.inputs.elastomer_path, "bubble.stl");
+    path_field(ui, "Membrane", typed_path, "bubble.stl");
     ui.horizontal(|ui| {
-        let typed = app.inputs.elastomer_path.trim().to_string();
+        let typed = typed_path.trim().to_string();
         if ui
             .add_enabled(!typed.is_empty(), egui::Button::new("Use membrane mesh"))
             .clicked()
@@ -59,13 +99,10 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             e.mesh_file = None;
         }
     });
-    if sim != app.state.sim {
-        cmds.push(Command::SetSim(sim));
-    }
+}
 
-    ui.add_space(6.0);
-    ui.strong("Inflation calibration");
-    let mut cal = app.state.calibration.clone();
+/// The sweep's lowest and highest inflation (millimetres on screen, metres in `cal`) and its number of steps.
+fn sweep_range_row(ui: &mut egui::Ui, cal: &mut CalibrationSettings) {
     ui.horizontal(|ui| {
         let mut lo = cal.lo * 1e3;
         let mut hi = cal.hi * 1e3;
@@ -100,19 +137,23 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         )
         .on_hover_text("number of inflation values simulated between the two");
     });
+}
+
+/// Where the measured imprint comes from: browse, the typed path, and for a dataset folder the split and pair.
+fn measured_source(
+    ui: &mut egui::Ui,
+    cal: &mut CalibrationSettings,
+    typed_path: &mut String,
+    cmds: &mut Vec<Command>,
+) {
     ui.horizontal(|ui| {
         ui.label("measured imprint (.npy or dataset)");
         if ui.button("Browse…").clicked() {
             cmds.push(Command::Browse(DialogPurpose::OpenMeasured));
         }
     });
-    path_field(
-        ui,
-        "Imprint",
-        &mut app.inputs.measured_path,
-        "imprint.npy or data/synth",
-    );
-    let typed_dir = std::path::Path::new(app.inputs.measured_path.trim()).is_dir();
+    path_field(ui, "Imprint", typed_path, "imprint.npy or data/synth");
+    let typed_dir = std::path::Path::new(typed_path.trim()).is_dir();
     if typed_dir {
         ui.horizontal(|ui| {
             egui::ComboBox::new("measured_split", "split")
@@ -132,8 +173,17 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
                 );
         });
     }
+}
+
+/// Load or clear the measured imprint, what is loaded, and (for a dataset pair) taking over its scene.
+fn measured_actions(
+    ui: &mut egui::Ui,
+    typed_path: &str,
+    measured: Option<&Measured>,
+    cmds: &mut Vec<Command>,
+) {
     ui.horizontal(|ui| {
-        let typed = app.inputs.measured_path.trim().to_string();
+        let typed = typed_path.trim().to_string();
         if ui
             .add_enabled(!typed.is_empty(), egui::Button::new("Load imprint"))
             .clicked()
@@ -141,13 +191,13 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             cmds.push(Command::LoadMeasured(PathBuf::from(typed)));
         }
         if ui
-            .add_enabled(app.measured.is_some(), egui::Button::new("Clear"))
+            .add_enabled(measured.is_some(), egui::Button::new("Clear"))
             .clicked()
         {
             cmds.push(Command::ClearMeasured);
         }
     });
-    if let Some(m) = &app.measured {
+    if let Some(m) = measured {
         ui.weak(format!("loaded {}", m.description));
         if m.scene.is_some()
             && ui
@@ -158,16 +208,10 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             cmds.push(Command::UseMeasuredScene);
         }
     }
-    mm_slider(
-        ui,
-        &mut cal.threshold,
-        0.0..=10.0,
-        "contact threshold (mm)",
-        "imprint depth above which a measured pixel counts as contact for the IoU, millimetres",
-    );
-    if cal != app.state.calibration {
-        cmds.push(Command::SetCalibration(cal));
-    }
+}
+
+/// Run or cancel the sweep with its progress, and once it has points, a button that takes the best inflation.
+fn sweep_run_row(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     ui.horizontal(|ui| {
         if app.calibration.running {
             if ui.button("Cancel sweep").clicked() {

@@ -257,11 +257,31 @@ fn top_view(ui: &mut egui::Ui, r: &PoseAnalysis, highlight: Option<usize>, heigh
 /// Colour of the posterior's regions in the top view.
 const POSTERIOR_COLOUR: Color32 = Color32::from_rgb(0, 170, 190);
 
+/// The registration of the chosen sample: ambiguity warnings, the posterior, the press and the depth anchoring, the
+/// signature check, the hypotheses with their costs, the true pose, and the errors over all samples.
 fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
     ui.strong(format!(
         "{}: hypotheses of sample {} (best first)",
         r.object, r.registered_sample
     ));
+    ambiguity_warnings(ui, r);
+    super::pose_posterior::posterior_summary(ui, r);
+    press_and_anchor(ui, r);
+    signature_check(ui, r);
+    hypotheses_grid(ui, r);
+    if let Some(t) = &r.truth {
+        ui.label(format!(
+            "true pose: x {:.2} mm, y {:.2} mm, θ {:.1}°",
+            t.x * 1e3,
+            t.y * 1e3,
+            t.theta.to_degrees()
+        ));
+    }
+    registration_errors(ui, r);
+}
+
+/// Warnings when the samples split between poses or the signature fits a rival pose about as well.
+fn ambiguity_warnings(ui: &mut egui::Ui, r: &PoseAnalysis) {
     let modes = r.report.major_modes();
     if modes.len() > 1 {
         let list: Vec<String> = modes.iter().map(|m| m.describe()).collect();
@@ -285,7 +305,10 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
              the sensor's noise decides which one is picked.",
         );
     }
-    super::pose_posterior::posterior_summary(ui, r);
+}
+
+/// The press found from the samples (recordings without a pose) and the sample's contact depths' offset.
+fn press_and_anchor(ui: &mut egui::Ui, r: &PoseAnalysis) {
     if let Some(p) = r.press_found_m {
         ui.label(format!("press {:.2} mm, found from the samples", p * 1e3))
             .on_hover_text(
@@ -305,6 +328,10 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
              registration (a drifted membrane inflation offsets them all alike).",
         );
     }
+}
+
+/// The signature check's estimate, its distance to the truth and which proposal won.
+fn signature_check(ui: &mut egui::Ui, r: &PoseAnalysis) {
     if let Some(c) = r.checked {
         let error = r
             .truth
@@ -334,6 +361,10 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
              contacts the imprint can say more than one sample.",
         );
     }
+}
+
+/// The registered sample's hypotheses, best first: pose and cost, in a scrolled grid.
+fn hypotheses_grid(ui: &mut egui::Ui, r: &PoseAnalysis) {
     egui::ScrollArea::vertical()
         .id_salt("hypotheses")
         .max_height(260.0)
@@ -355,14 +386,10 @@ fn hypotheses(ui: &mut egui::Ui, r: &PoseAnalysis) {
                     }
                 });
         });
-    if let Some(t) = &r.truth {
-        ui.label(format!(
-            "true pose: x {:.2} mm, y {:.2} mm, θ {:.1}°",
-            t.x * 1e3,
-            t.y * 1e3,
-            t.theta.to_degrees()
-        ));
-    }
+}
+
+/// The errors over the registered samples, of the multi-sample estimate and of the baseline, and what failed.
+fn registration_errors(ui: &mut egui::Ui, r: &PoseAnalysis) {
     let rep = &r.report;
     let n = rep.samples.len().max(1) as f64;
     let mean_pos = rep.samples.iter().map(|s| s.position_mm).sum::<f64>() / n;

@@ -4,13 +4,13 @@
 
 use egui_plot::{Line, Plot, PlotPoints, Points, VLine};
 use tactile_derender::pipeline::track::FrameTrack;
-use tactile_derender::recording::{ReferenceChoice, StreamKind};
+use tactile_derender::recording::{ProcessedRecording, ReferenceChoice, StreamKind};
 
 use super::image_card::{self, Scale};
 use super::widgets::path_submit;
 use crate::app::WorkbenchApp;
 use crate::command::Command;
-use crate::recording_view::IMPRINT_RANGE;
+use crate::recording_view::{LoadedRecording, RecordingSettings, RecordingView, IMPRINT_RANGE};
 use crate::worker::DialogPurpose;
 
 pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
@@ -42,7 +42,29 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     let p = loaded.processed.clone();
     let n = p.len();
     let mut s = app.state.recording.clone();
-    let has_pose = loaded.poses.iter().any(Option::is_some);
+    read_settings_row(ui, loaded, &mut s);
+    summary(ui, loaded, app.state.sim.camera.resolution);
+    let times = p.times_s();
+    timeline_row(ui, &mut s, n);
+    let k = s.frame.min(n.saturating_sub(1));
+    frame_line(ui, loaded, &times, k);
+    derender_buttons(ui, cmds);
+    calibration_section(app, ui, cmds);
+    if let Some(frame) = track_section(app, ui, cmds, &times) {
+        s.frame = frame;
+    }
+    if let Some(frame) = contact_plot(ui, &p, &times, k) {
+        s.frame = frame;
+    }
+    frame_images(ui, &mut app.recording, &p, k);
+    if s != app.state.recording {
+        cmds.push(Command::SetRecording(s));
+    }
+}
+
+/// The reading settings in one row: the depth topic, the reference (auto or the frame under the cursor) and the
+/// contact threshold, edited in `s`.
+fn read_settings_row(ui: &mut egui::Ui, loaded: &LoadedRecording, s: &mut RecordingSettings) {
     ui.horizontal(|ui| {
         let depth: Vec<&str> = loaded
             .streams
@@ -52,7 +74,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             .collect();
         ui.label("depth topic");
         egui::ComboBox::from_id_salt("rec_topic")
-            .selected_text(p.stream.as_str())
+            .selected_text(loaded.processed.stream.as_str())
             .show_ui(ui, |ui| {
                 for t in depth {
                     ui.selectable_value(&mut s.read.topic, Some(t.to_string()), t);
@@ -100,12 +122,20 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             s.read.contact_threshold_m = threshold_mm * 1e-3;
         }
     });
+}
+
+/// What was read (frames, sizes, reference frames, object pose) and a warning when the membrane drifted;
+/// `resolution` is the model's (the simulator camera's).
+fn summary(ui: &mut egui::Ui, loaded: &LoadedRecording, resolution: (usize, usize)) {
+    let p = &loaded.processed;
+    let has_pose = loaded.poses.iter().any(Option::is_some);
     ui.weak(format!(
-        "{n} frames of {}x{}, resampled to {}x{}; reference from frame(s) {}; object pose: {}",
+        "{} frames of {}x{}, resampled to {}x{}; reference from frame(s) {}; object pose: {}",
+        p.len(),
         p.source_size[0],
         p.source_size[1],
-        app.state.sim.camera.resolution.0,
-        app.state.sim.camera.resolution.1,
+        resolution.0,
+        resolution.1,
         short_list(&p.reference_frames),
         if has_pose {
             "from the recording's pose topic"
@@ -123,8 +153,10 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             ),
         );
     }
-    // Timeline.
-    let times = p.times_s();
+}
+
+/// The timeline: previous, a slider over the `n` frames and next, moving `s.frame`.
+fn timeline_row(ui: &mut egui::Ui, s: &mut RecordingSettings, n: usize) {
     ui.horizontal(|ui| {
         if ui
             .button("< previous")
@@ -141,7 +173,12 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             s.frame = (s.frame + 1).min(n.saturating_sub(1));
         }
     });
-    let k = s.frame.min(n.saturating_sub(1));
+}
+
+/// One line on frame `k`: its time, contact, pixels without a return and the recorded object pose.
+fn frame_line(ui: &mut egui::Ui, loaded: &LoadedRecording, times: &[f64], k: usize) {
+    let p = &loaded.processed;
+    let n = p.len();
     let seen = p.reference_for(k).count_nonzero();
     let missing = seen.saturating_sub(p.measured_px.get(k).copied().unwrap_or(0));
     ui.label(format!(
@@ -160,6 +197,10 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
                 q.theta.to_degrees()
             ))
     ));
+}
+
+/// The two buttons that de-render (and register) the frame under the cursor.
+fn derender_buttons(ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     ui.horizontal(|ui| {
         if ui
             .button("De-render this frame")
@@ -180,11 +221,15 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             cmds.push(Command::DerenderFrame { pose: true });
         }
     });
-    calibration_section(app, ui, cmds);
-    if let Some(frame) = track_section(app, ui, cmds, &times) {
-        s.frame = frame;
-    }
-    // Contact area over time; a click moves the cursor.
+}
+
+/// The contact area over time with the cursor at frame `k`; a click answers the frame nearest in time.
+fn contact_plot(
+    ui: &mut egui::Ui,
+    p: &ProcessedRecording,
+    times: &[f64],
+    k: usize,
+) -> Option<usize> {
     let area: Vec<[f64; 2]> = times
         .iter()
         .zip(&p.contact_px)
@@ -201,59 +246,57 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
             pl.vline(VLine::new("frame", cursor));
             pl.pointer_coordinate()
         });
-    if plot.response.clicked() {
-        if let Some(at) = plot.inner {
-            if let Some(best) =
-                (0..n).min_by(|&a, &b| (times[a] - at.x).abs().total_cmp(&(times[b] - at.x).abs()))
-            {
-                s.frame = best;
-            }
-        }
+    if !plot.response.clicked() {
+        return None;
     }
+    let at = plot.inner?;
+    (0..p.len()).min_by(|&a, &b| (times[a] - at.x).abs().total_cmp(&(times[b] - at.x).abs()))
+}
+
+/// Frame `k`'s imprint, signature and reference side by side.
+fn frame_images(ui: &mut egui::Ui, view: &mut RecordingView, p: &ProcessedRecording, k: usize) {
     let side = ((ui.available_width() - 3.0 * 90.0) / 3.0).clamp(96.0, 420.0);
     let ctx = ui.ctx().clone();
-    if let Some(tex) = app.recording.textures_for(&ctx, k) {
-        let depth = tex.depth_range;
-        ui.horizontal(|ui| {
-            let imprint = Scale {
-                range: IMPRINT_RANGE,
-                millimetres: true,
-                zero_is_missing: false,
-            };
-            let depth_scale = Scale {
-                range: depth,
-                millimetres: true,
-                zero_is_missing: true,
-            };
-            image_card::card(
-                ui,
-                "imprint Y = R - S",
-                tex.imprint.id(),
-                &p.imprints[k],
-                &imprint,
-                side,
-            );
-            image_card::card(
-                ui,
-                "signature S",
-                tex.signature.id(),
-                &p.signatures[k],
-                &depth_scale,
-                side,
-            );
-            image_card::card(
-                ui,
-                "reference R",
-                tex.reference.id(),
-                &p.reference,
-                &depth_scale,
-                side,
-            );
-        });
-    }
-    if s != app.state.recording {
-        cmds.push(Command::SetRecording(s));
-    }
+    let Some(tex) = view.textures_for(&ctx, k) else {
+        return;
+    };
+    let depth = tex.depth_range;
+    ui.horizontal(|ui| {
+        let imprint = Scale {
+            range: IMPRINT_RANGE,
+            millimetres: true,
+            zero_is_missing: false,
+        };
+        let depth_scale = Scale {
+            range: depth,
+            millimetres: true,
+            zero_is_missing: true,
+        };
+        image_card::card(
+            ui,
+            "imprint Y = R - S",
+            tex.imprint.id(),
+            &p.imprints[k],
+            &imprint,
+            side,
+        );
+        image_card::card(
+            ui,
+            "signature S",
+            tex.signature.id(),
+            &p.signatures[k],
+            &depth_scale,
+            side,
+        );
+        image_card::card(
+            ui,
+            "reference R",
+            tex.reference.id(),
+            &p.reference,
+            &depth_scale,
+            side,
+        );
+    });
 }
 
 /// The track's own settings beside its button: every n-th frame, and whether each frame carries the previous one's
