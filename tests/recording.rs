@@ -576,6 +576,15 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
     assert_eq!(summary["no_estimate"], 0, "{summary}");
     let median = summary["position_err_mm"]["median"].as_f64().unwrap();
     assert!(median < 1.0, "{summary}");
+    // Every scored frame has the recorded pose's region in its posterior; the shares inside grow with the level.
+    let inside = &summary["truth_inside"];
+    assert_eq!(
+        inside["frames"].as_u64(),
+        Some(with_contact as u64),
+        "{summary}"
+    );
+    let share = |p: &str| inside[p].as_f64().unwrap();
+    assert!(share("0.5") <= share("0.9") && share("0.9") <= share("0.95") && share("0.95") <= 1.0);
     let csv = std::fs::read_to_string(dir.path().join("track/track.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), with_contact + 1);

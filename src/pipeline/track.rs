@@ -74,10 +74,18 @@ pub struct FrameTrack {
     /// The frame carried the previous frame's estimate forward ([`Tracker`]: fewer samples, registrations from
     /// its poses, the press searched near its press); `false`: estimated from scratch.
     pub carried: bool,
+    /// The probability mass of the posterior's smallest region holding the recorded pose
+    /// ([`crate::pose::posterior::PosePosterior::region_mass`], as `tnd eval`'s `truth_region`): the recorded pose is
+    /// inside the track's p region when this is ≤ p. `None` without a recorded pose or a posterior, and for rows read
+    /// back from a track and scored against other poses than before (the posterior is not in the CSV).
+    pub truth_region: Option<f64>,
+    /// The frame's pose posterior while the row is in memory (for [`Self::score`]; not in the CSV).
+    #[serde(skip)]
+    pub posterior: Option<crate::pose::posterior::PosePosterior>,
 }
 
 /// Columns of [`FrameTrack::csv_row`].
-const CSV_COLUMNS: [&str; 37] = [
+const CSV_COLUMNS: [&str; 38] = [
     "frame",
     "stamp_ns",
     "contact_px",
@@ -115,12 +123,15 @@ const CSV_COLUMNS: [&str; 37] = [
     "cov_ytheta",
     "cov_thetatheta",
     "carried",
+    "truth_region",
 ];
 
 /// Columns of a track written before the posterior's (read back with none).
 const CSV_COLUMNS_V1: usize = 28;
 /// Columns of a track written before tracks carried estimates (every row from scratch).
 const CSV_COLUMNS_V2: usize = 36;
+/// Columns of a track written before the truth's region (read back with none).
+const CSV_COLUMNS_V3: usize = 37;
 
 impl FrameTrack {
     /// A frame with nothing estimated yet.
@@ -147,6 +158,8 @@ impl FrameTrack {
             estimate_weight: None,
             covariance: None,
             carried: false,
+            truth_region: None,
+            posterior: None,
         }
     }
 
@@ -204,6 +217,7 @@ impl FrameTrack {
                 None => ",,,,,".into(),
             },
             u8::from(self.carried).to_string(),
+            num(self.truth_region),
         ]
         .join(",")
     }
@@ -219,6 +233,9 @@ impl FrameTrack {
             }
             if cells.len() == CSV_COLUMNS_V2 {
                 cells.push("0");
+            }
+            if cells.len() == CSV_COLUMNS_V3 {
+                cells.push("");
             }
             if cells.len() != CSV_COLUMNS.len() {
                 return Err(format!(
@@ -281,6 +298,8 @@ impl FrameTrack {
                     "1" => true,
                     c => return Err(format!("carried '{c}' is neither 0 nor 1")),
                 },
+                truth_region: num(37)?,
+                posterior: None,
             })
         })
     }
@@ -288,7 +307,16 @@ impl FrameTrack {
     /// Score the estimates against the recorded pose and press of the frame (none: no errors), for an object with
     /// `symmetry`.
     pub fn score(&mut self, recorded: Option<(Se2, Option<f64>)>, symmetry: &Symmetry) {
-        self.recorded = recorded.map(|r| r.0);
+        let pose = recorded.map(|r| r.0);
+        self.truth_region = match (&self.posterior, pose) {
+            (Some(p), Some(t)) => {
+                p.region_mass(t, symmetry, crate::metrics::evaluate::REGION_DRAWS)
+            }
+            // A row read back from track.csv keeps the region it was written with, against the same pose.
+            (None, Some(t)) if self.recorded == Some(t) => self.truth_region,
+            _ => None,
+        };
+        self.recorded = pose;
         self.recorded_press_m = recorded.and_then(|r| r.1);
         let error = |pose: Option<Se2>| {
             pose.zip(self.recorded).map(|(p, r)| {
@@ -363,6 +391,17 @@ mod tests {
         assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
         row.carried = true;
         assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
+        row.truth_region = Some(0.4375);
+        assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
+        // A row of a track written before the truth's region reads back without one.
+        let v3 = row
+            .csv_row()
+            .split(',')
+            .take(37)
+            .collect::<Vec<_>>()
+            .join(",");
+        assert_eq!(FrameTrack::from_csv_row(&v3).unwrap().truth_region, None);
+        row.truth_region = None;
         // A row of a track written before carried frames reads back as estimated from scratch.
         let v2 = row
             .csv_row()
@@ -383,6 +422,64 @@ mod tests {
             .unwrap_err()
             .message
             .contains("3 columns"));
+    }
+
+    #[test]
+    fn the_truths_region_comes_from_the_frames_posterior_and_survives_the_csv() {
+        use crate::pose::posterior::{PosePosterior, PosteriorMode};
+        let symmetry = Symmetry::default();
+        let sigma: f64 = 0.001;
+        let mode = PosteriorMode {
+            weight: 1.0,
+            mean: [0.0, 0.0, 0.0],
+            cov: [
+                [sigma * sigma, 0.0, 0.0],
+                [0.0, sigma * sigma, 0.0],
+                [0.0, 0.0, 0.01],
+            ],
+            nats: 0.0,
+            hessian: [[0.0; 3]; 3],
+            tails: Default::default(),
+        };
+        let mut row = FrameTrack::new(5, 0, 100, 2);
+        row.estimate = Some(Se2::new(0.0, 0.0, 0.0));
+        row.posterior = Some(PosePosterior {
+            modes: vec![mode],
+            contact_px: 100,
+            predicted_contact_px: None,
+        });
+        // Independent truth: for one Gaussian the region through a pose at Mahalanobis distance d holds
+        // P(chi²₃ ≤ d²); at (1.5 σ, 0, 0) that is erf(1.5/√2) − √(2/π)·1.5·e^(−1.125) = 0.1912.
+        let truth = Se2::new(1.5 * sigma, 0.0, 0.0);
+        row.score(Some((truth, None)), &symmetry);
+        let d: f64 = 1.5;
+        let chi2 =
+            erf(d / 2f64.sqrt()) - (2.0 / std::f64::consts::PI).sqrt() * d * (-d * d / 2.0).exp();
+        let region = row.truth_region.unwrap();
+        assert!((region - chi2).abs() < 0.02, "{region} against {chi2}");
+        // Read back from the CSV (no posterior): the same pose keeps the region, another one has none.
+        let mut read = FrameTrack::from_csv_row(&row.csv_row()).unwrap();
+        read.score(Some((truth, None)), &symmetry);
+        assert_eq!(read.truth_region, Some(region));
+        read.score(Some((Se2::new(0.0, 0.0, 0.0), None)), &symmetry);
+        assert_eq!(read.truth_region, None);
+        row.score(None, &symmetry);
+        assert_eq!(row.truth_region, None);
+    }
+
+    /// erf by Abramowitz and Stegun 7.1.26 (|error| < 1.5e-7): an independent reference for the test above.
+    fn erf(x: f64) -> f64 {
+        let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
+        let poly = t
+            * (0.254_829_592
+                + t * (-0.284_496_736
+                    + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+        let y = 1.0 - poly * (-x * x).exp();
+        if x >= 0.0 {
+            y
+        } else {
+            -y
+        }
     }
 
     #[test]

@@ -376,6 +376,7 @@ fn fill_row(row: &mut FrameTrack, placed: &super::PlacedEstimate, symmetry: &Sym
             .estimate
             .and_then(|e| crate::pose::export::covariance_about(p, e, symmetry));
     }
+    row.posterior = estimate.posterior.clone();
     row.pose_modes = if report.samples.len() >= 2 {
         report.major_modes().len()
     } else {

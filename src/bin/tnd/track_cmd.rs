@@ -450,6 +450,7 @@ pub fn run(a: TrackArgs) -> Result<()> {
         "ambiguous_frames": rows.iter().filter(|r| r.pose_modes > 1).count(),
         "press_m": column(|r| r.press_m),
         "press_err_mm": column(|r| r.press_m.zip(r.recorded_press_m).map(|(p, q)| (p - q).abs() * 1e3)),
+        "truth_inside": truth_inside(&rows),
         "out": a.out.join("track.csv"),
         "calibration": opened.calibration,
     });
@@ -459,4 +460,16 @@ pub fn run(a: TrackArgs) -> Result<()> {
     )?;
     println!("{summary}");
     Ok(())
+}
+
+/// How often the recorded pose lies inside the track's posterior regions: the share of rows with a
+/// `truth_region` at most 0.5, 0.9 and 0.95 (`null` without such rows). A calibrated posterior holds it in about
+/// that share of frames.
+fn truth_inside(rows: &[FrameTrack]) -> Value {
+    let regions: Vec<f64> = rows.iter().filter_map(|r| r.truth_region).collect();
+    if regions.is_empty() {
+        return Value::Null;
+    }
+    let share = |p: f64| regions.iter().filter(|&&m| m <= p).count() as f64 / regions.len() as f64;
+    json!({"frames": regions.len(), "0.5": share(0.5), "0.9": share(0.9), "0.95": share(0.95)})
 }
