@@ -7,7 +7,7 @@ use tactile_derender::sim::calibration::best_by_iou;
 use crate::app::WorkbenchApp;
 use crate::command::Command;
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let cal = &app.calibration;
     ui.horizontal(|ui| {
         if cal.running {

@@ -6,18 +6,25 @@
 use egui::{Color32, Sense, Stroke, Vec2};
 use tactile_derender::dataset::SplitName;
 
-use crate::app::WorkbenchApp;
+use crate::app::{PathInputs, WorkbenchApp};
 use crate::command::Command;
 use crate::panels::image_card::{self, Scale};
 use crate::panels::widgets::path_submit;
 use crate::worker::DialogPurpose;
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+/// The Dataset tab; `inputs.dataset_path` is the typed dataset directory. Takes `&mut WorkbenchApp` because the
+/// thumbnail grid fills the browser's thumbnail cache (and asks its loader for missing ones) while it is drawn.
+pub fn show(
+    app: &mut WorkbenchApp,
+    inputs: &mut PathInputs,
+    ui: &mut egui::Ui,
+    cmds: &mut Vec<Command>,
+) {
     ui.horizontal(|ui| {
         if let Some(path) = path_submit(
             ui,
             "Dataset",
-            &mut app.inputs.dataset_path,
+            &mut inputs.dataset_path,
             "directory made by tnd dataset gen / import",
             "Open dataset",
         ) {
@@ -185,7 +192,7 @@ fn grid(
     clicked
 }
 
-fn selected_view(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+fn selected_view(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let Some(b) = app.analysis.dataset.as_ref() else {
         return;
     };

@@ -4,7 +4,7 @@
 //! per-pixel mean and standard deviation, and L1 / PSNR / SSIM per sample when the ground truth is known.
 
 use crate::analysis_runs::{RunImage, ZoomTarget};
-use crate::app::WorkbenchApp;
+use crate::app::{PathInputs, WorkbenchApp};
 use crate::command::Command;
 use crate::derender;
 use crate::panels::image_card::{self, Scale};
@@ -13,8 +13,14 @@ use crate::state::{DerenderInput, ModelSettings, SamplerName};
 use crate::worker::DialogPurpose;
 use tactile_derender::model::{PredictionType, TimestepSpacing};
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
-    model_row(app, ui, cmds);
+/// The De-render tab; `inputs` holds the typed checkpoint and measurement paths.
+pub fn show(
+    app: &WorkbenchApp,
+    inputs: &mut PathInputs,
+    ui: &mut egui::Ui,
+    cmds: &mut Vec<Command>,
+) {
+    model_row(app, &mut inputs.model_path, ui, cmds);
     let mut d = app.state.derender.clone();
     ui.horizontal(|ui| {
         ui.label("sampler");
@@ -92,7 +98,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         if let Some(path) = path_submit(
             ui,
             "measurement",
-            &mut app.inputs.imprint_path,
+            &mut inputs.imprint_path,
             ".npy imprint (m)",
             "Use measurement",
         ) {
@@ -110,7 +116,12 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     results(app, ui, cmds);
 }
 
-fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+fn model_row(
+    app: &WorkbenchApp,
+    model_path: &mut String,
+    ui: &mut egui::Ui,
+    cmds: &mut Vec<Command>,
+) {
     ui.horizontal(|ui| {
         ui.label("model");
         let bundled = app.state.model.path.is_none();
@@ -135,7 +146,7 @@ fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>)
         if let Some(path) = path_submit(
             ui,
             "checkpoint",
-            &mut app.inputs.model_path,
+            model_path,
             "model .safetensors",
             "Use checkpoint",
         ) {
@@ -170,7 +181,7 @@ fn model_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>)
     ui.weak(format!("using {shown}{loaded}"));
 }
 
-fn run_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+fn run_row(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let view = &app.analysis.derender;
     ui.horizontal(|ui| {
         if view.running {

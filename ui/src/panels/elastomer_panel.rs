@@ -8,16 +8,22 @@ use tactile_derender::sensor::ElastomerConfig;
 use tactile_derender::sim::calibration::best_by_iou;
 
 use super::widgets::{mm_slider, path_field, units_combo};
-use crate::app::WorkbenchApp;
+use crate::app::{PathInputs, WorkbenchApp};
 use crate::command::Command;
 use crate::measured::Measured;
 use crate::state::CalibrationSettings;
 use crate::worker::DialogPurpose;
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+/// The elastomer panel; `inputs` holds the typed membrane mesh and measured imprint paths.
+pub fn show(
+    app: &WorkbenchApp,
+    inputs: &mut PathInputs,
+    ui: &mut egui::Ui,
+    cmds: &mut Vec<Command>,
+) {
     let mut sim = app.state.sim.clone();
     dome_settings(ui, &mut sim.elastomer);
-    membrane_mesh(ui, &mut sim.elastomer, &mut app.inputs.elastomer_path, cmds);
+    membrane_mesh(ui, &mut sim.elastomer, &mut inputs.elastomer_path, cmds);
     if sim != app.state.sim {
         cmds.push(Command::SetSim(sim));
     }
@@ -26,8 +32,8 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     ui.strong("Inflation calibration");
     let mut cal = app.state.calibration.clone();
     sweep_range_row(ui, &mut cal);
-    measured_source(ui, &mut cal, &mut app.inputs.measured_path, cmds);
-    measured_actions(ui, &app.inputs.measured_path, app.measured.as_ref(), cmds);
+    measured_source(ui, &mut cal, &mut inputs.measured_path, cmds);
+    measured_actions(ui, &inputs.measured_path, app.measured.as_ref(), cmds);
     mm_slider(
         ui,
         &mut cal.threshold,

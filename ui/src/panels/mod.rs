@@ -1,9 +1,12 @@
 //! The workbench's panels, one file each (`*_panel.rs`). The layout: a session bar on top, a status bar at the bottom,
 //! the parameter panels (scene, elastomer, sensor) on the left and the central view with one tab per [`Tab`]. Panels
-//! read the app and push [`Command`]s; they change nothing else than the text typed into path fields. The analysis
-//! panels (dataset inspector, de-rendering, pose) are more tabs, added like this:
+//! read the app (`&WorkbenchApp`) and push [`Command`]s; the only thing they write is the text typed into path fields
+//! ([`PathInputs`], lent to them apart from the app). The dataset and recording tabs still take `&mut WorkbenchApp`:
+//! their textures and thumbnails are caches filled while drawing. The analysis panels (dataset inspector,
+//! de-rendering, pose) are more tabs, added like this:
 //!
-//! 1. a [`Tab`] variant and a `*_panel.rs` file whose `show(app, ui, cmds)` draws it (matched below);
+//! 1. a [`Tab`] variant and a `*_panel.rs` file whose `show(app, ui, cmds)` draws it (matched below), with
+//!    `inputs: &mut PathInputs` beside `app` when it has a path field;
 //! 2. its settings (paths, sampler, seeds; e.g. [`crate::state::ModelSettings`]) in [`crate::state::State`] with
 //!    `#[serde(default)]`, so old sessions still open;
 //! 3. one [`Command`] variant per user intent, applied in [`WorkbenchApp::apply`];
@@ -26,13 +29,26 @@ pub mod status_panel;
 pub mod view3d_panel;
 pub mod widgets;
 
-use crate::app::WorkbenchApp;
+use crate::app::{PathInputs, WorkbenchApp};
 use crate::command::Command;
 use crate::state::Tab;
 
-/// Draw every panel of the window.
+/// Draw every panel of the window. The typed-in paths are lent to the panels apart from the app, so that those that
+/// only read the app get `&WorkbenchApp`; they are back in `app.inputs` when this returns.
 pub fn show_all(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
-    egui::Panel::top("session").show(ui, |ui| session_panel::show(app, ui, cmds));
+    let mut inputs = std::mem::take(&mut app.inputs);
+    draw(app, &mut inputs, ui, cmds);
+    app.inputs = inputs;
+}
+
+/// [`show_all`] with the typed-in paths apart from the app (`app.inputs` is empty meanwhile: read `inputs`).
+fn draw(
+    app: &mut WorkbenchApp,
+    inputs: &mut PathInputs,
+    ui: &mut egui::Ui,
+    cmds: &mut Vec<Command>,
+) {
+    egui::Panel::top("session").show(ui, |ui| session_panel::show(app, inputs, ui, cmds));
     egui::Panel::bottom("status").show(ui, |ui| status_panel::show(app, ui, cmds));
     egui::Panel::left("parameters")
         .resizable(true)
@@ -41,10 +57,10 @@ pub fn show_all(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Comman
             egui::ScrollArea::vertical().show(ui, |ui| {
                 egui::CollapsingHeader::new("Scene")
                     .default_open(true)
-                    .show(ui, |ui| scene_panel::show(app, ui, cmds));
+                    .show(ui, |ui| scene_panel::show(app, inputs, ui, cmds));
                 egui::CollapsingHeader::new("Elastomer")
                     .default_open(true)
-                    .show(ui, |ui| elastomer_panel::show(app, ui, cmds));
+                    .show(ui, |ui| elastomer_panel::show(app, inputs, ui, cmds));
                 egui::CollapsingHeader::new("Sensor")
                     .default_open(true)
                     .show(ui, |ui| sensor_panel::show(app, ui, cmds));
@@ -71,10 +87,10 @@ pub fn show_all(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Comman
                 view3d_panel::show(app, ui, cmds);
             }
             Tab::Calibration => calibration_panel::show(app, ui, cmds),
-            Tab::Dataset => dataset_panel::show(app, ui, cmds),
-            Tab::Derender => derender_panel::show(app, ui, cmds),
+            Tab::Dataset => dataset_panel::show(app, inputs, ui, cmds),
+            Tab::Derender => derender_panel::show(app, inputs, ui, cmds),
             Tab::Pose => pose_panel::show(app, ui, cmds),
-            Tab::Recording => recording_panel::show(app, ui, cmds),
+            Tab::Recording => recording_panel::show(app, inputs, ui, cmds),
         }
     });
     if let Some(target) = app.analysis.zoom {

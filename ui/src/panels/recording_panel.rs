@@ -8,13 +8,21 @@ use tactile_derender::recording::{ProcessedRecording, ReferenceChoice, StreamKin
 
 use super::image_card::{self, Scale};
 use super::widgets::path_submit;
-use crate::app::WorkbenchApp;
+use crate::app::{PathInputs, WorkbenchApp};
 use crate::command::Command;
 use crate::recording_view::{LoadedRecording, RecordingSettings, RecordingView, IMPRINT_RANGE};
+use crate::sensor_calibration::SensorCalibrationView;
 use crate::worker::DialogPurpose;
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
-    open_row(app, ui, cmds);
+/// The Recording tab; `inputs.recording_path` is the typed recording. Takes `&mut WorkbenchApp` because the frame's
+/// and the sensor calibration's textures are made lazily, when first drawn.
+pub fn show(
+    app: &mut WorkbenchApp,
+    inputs: &mut PathInputs,
+    ui: &mut egui::Ui,
+    cmds: &mut Vec<Command>,
+) {
+    open_row(&mut inputs.recording_path, ui, cmds);
     if app.recording.loading {
         ui.horizontal(|ui| {
             if progress_row(
@@ -49,7 +57,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     let k = s.frame.min(n.saturating_sub(1));
     frame_line(ui, loaded, &times, k);
     derender_buttons(ui, cmds);
-    calibration_section(app, ui, cmds);
+    calibration_section(&mut app.recording.sensor_calibration, ui, cmds);
     if let Some(frame) = track_section(app, ui, cmds, &times) {
         s.frame = frame;
     }
@@ -326,12 +334,12 @@ fn track_settings(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>
     }
 }
 
-fn open_row(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+fn open_row(recording_path: &mut String, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     ui.horizontal(|ui| {
         if let Some(path) = path_submit(
             ui,
             "recording",
-            &mut app.inputs.recording_path,
+            recording_path,
             ".mcap file or frame folder",
             "Open recording",
         ) {
@@ -378,8 +386,11 @@ fn progress_row(
 }
 
 /// The sensor calibration: one button, its progress, and the fit (what changed, the residual, three images).
-fn calibration_section(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
-    let view = &app.recording.sensor_calibration;
+fn calibration_section(
+    view: &mut SensorCalibrationView,
+    ui: &mut egui::Ui,
+    cmds: &mut Vec<Command>,
+) {
     ui.horizontal(|ui| {
         if view.running {
             if progress_row(ui, "calibrating", " frames", view.progress, "Cancel calibration") {
@@ -398,7 +409,6 @@ fn calibration_section(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec
         }
     });
     let ctx = ui.ctx().clone();
-    let view = &mut app.recording.sensor_calibration;
     let Some(result) = &view.result else {
         return;
     };

@@ -6,12 +6,18 @@ use std::path::PathBuf;
 use tactile_derender::objects::ObjectSet;
 
 use super::widgets::{deg_slider, mm_slider, path_field, units_combo};
-use crate::app::WorkbenchApp;
+use crate::app::{PathInputs, WorkbenchApp};
 use crate::command::Command;
 use crate::state::ObjectSource;
 use crate::worker::DialogPurpose;
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+/// The scene panel; `inputs` holds the typed mesh path and its units.
+pub fn show(
+    app: &WorkbenchApp,
+    inputs: &mut PathInputs,
+    ui: &mut egui::Ui,
+    cmds: &mut Vec<Command>,
+) {
     let mut scene = app.state.scene.clone();
 
     let library_name = match &scene.object {
@@ -39,22 +45,22 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
 
     ui.horizontal(|ui| {
         ui.label("or mesh file");
-        units_combo(ui, "object_units", &mut app.inputs.object_units);
+        units_combo(ui, "object_units", &mut inputs.object_units);
         if ui.button("Browse…").clicked() {
             cmds.push(Command::Browse(DialogPurpose::OpenObjectMesh));
         }
     });
     ui.horizontal(|ui| {
-        path_field(ui, "Mesh", &mut app.inputs.object_path, "part.stl");
+        path_field(ui, "Mesh", &mut inputs.object_path, "part.stl");
     });
-    let typed = app.inputs.object_path.trim().to_string();
+    let typed = inputs.object_path.trim().to_string();
     if ui
         .add_enabled(!typed.is_empty(), egui::Button::new("Load mesh file"))
         .clicked()
     {
         scene.object = ObjectSource::File {
             path: PathBuf::from(&typed),
-            units: app.inputs.object_units,
+            units: inputs.object_units,
         };
     }
     if let ObjectSource::File { path, units } = &scene.object {

@@ -5,7 +5,7 @@ use super::widgets::mm_slider;
 use crate::app::WorkbenchApp;
 use crate::command::Command;
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let mut sim = app.state.sim.clone();
     let cam = &mut sim.camera;
     ui.horizontal(|ui| {

@@ -3,11 +3,17 @@
 
 use std::path::PathBuf;
 
-use crate::app::WorkbenchApp;
+use crate::app::{PathInputs, WorkbenchApp};
 use crate::command::Command;
 use crate::worker::DialogPurpose;
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+/// The session bar; `inputs.session_path` is the typed session file.
+pub fn show(
+    app: &WorkbenchApp,
+    inputs: &mut PathInputs,
+    ui: &mut egui::Ui,
+    cmds: &mut Vec<Command>,
+) {
     ui.horizontal(|ui| {
         ui.strong("tactile-derender workbench");
         ui.separator();
@@ -79,12 +85,12 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
         ui.separator();
         let label = ui.label("Session file");
         ui.add(
-            egui::TextEdit::singleline(&mut app.inputs.session_path)
+            egui::TextEdit::singleline(&mut inputs.session_path)
                 .hint_text("sessions/example.json")
                 .desired_width(260.0),
         )
         .labelled_by(label.id);
-        let typed = app.inputs.session_path.trim().to_string();
+        let typed = inputs.session_path.trim().to_string();
         if ui
             .add_enabled(!typed.is_empty(), egui::Button::new("Open"))
             .on_hover_text("open the session file typed on the left")

@@ -15,7 +15,7 @@ const LABEL_W: f32 = 58.0;
 /// Height of a card's title and button rows, points.
 const CARD_TEXT_H: f32 = 48.0;
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     toolbar(app, ui, cmds);
     let Some(result) = &app.sim else {
         ui.label(if app.sim_failed_for_latest() {
@@ -54,7 +54,7 @@ pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) 
     }
 }
 
-fn toolbar(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+fn toolbar(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let mut view = app.state.view.clone();
     ui.horizontal(|ui| {
         ui.label("colour range");

@@ -4,7 +4,7 @@
 use crate::app::WorkbenchApp;
 use crate::command::Command;
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     for e in &app.errors {
         ui.colored_label(app.status_color(), format!("Error: {e}"));
     }

@@ -8,7 +8,7 @@ use crate::command::Command;
 use crate::state::{MembraneStyle, OrbitCamera};
 use crate::view3d::{camera, cpu, gpu, DrawFlags};
 
-pub fn show(app: &mut WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
+pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
     let mut view = app.state.view.clone();
     ui.horizontal(|ui| {
         ui.strong("3D view");
