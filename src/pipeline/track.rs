@@ -308,14 +308,13 @@ impl FrameTrack {
     /// `symmetry`.
     pub fn score(&mut self, recorded: Option<(Se2, Option<f64>)>, symmetry: &Symmetry) {
         let pose = recorded.map(|r| r.0);
-        self.truth_region = match (&self.posterior, pose) {
-            (Some(p), Some(t)) => {
+        // Against the pose it was scored with, a row keeps its region (a row read back from track.csv has no
+        // posterior to compute it again, and a row in memory need not: the integral is 4 000 draws).
+        if pose != self.recorded || self.truth_region.is_none() {
+            self.truth_region = self.posterior.as_ref().zip(pose).and_then(|(p, t)| {
                 p.region_mass(t, symmetry, crate::metrics::evaluate::REGION_DRAWS)
-            }
-            // A row read back from track.csv keeps the region it was written with, against the same pose.
-            (None, Some(t)) if self.recorded == Some(t) => self.truth_region,
-            _ => None,
-        };
+            });
+        }
         self.recorded = pose;
         self.recorded_press_m = recorded.and_then(|r| r.1);
         let error = |pose: Option<Se2>| {
@@ -393,28 +392,25 @@ mod tests {
         assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
         row.truth_region = Some(0.4375);
         assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
+        // A row as an earlier version wrote it: the first `columns` cells.
+        let written_before = |row: &FrameTrack, columns: usize| {
+            row.csv_row()
+                .split(',')
+                .take(columns)
+                .collect::<Vec<_>>()
+                .join(",")
+        };
         // A row of a track written before the truth's region reads back without one.
-        let v3 = row
-            .csv_row()
-            .split(',')
-            .take(37)
-            .collect::<Vec<_>>()
-            .join(",");
+        let v3 = written_before(&row, 37);
         assert_eq!(FrameTrack::from_csv_row(&v3).unwrap().truth_region, None);
         row.truth_region = None;
         // A row of a track written before carried frames reads back as estimated from scratch.
-        let v2 = row
-            .csv_row()
-            .split(',')
-            .take(36)
-            .collect::<Vec<_>>()
-            .join(",");
+        let v2 = written_before(&row, 36);
         let read = FrameTrack::from_csv_row(&v2).unwrap();
         assert!(!read.carried);
         assert_eq!(read.covariance, row.covariance);
         // A row of a track written before the posterior's columns reads back without one.
-        let full = row.csv_row();
-        let old = full.split(',').take(28).collect::<Vec<_>>().join(",");
+        let old = written_before(&row, 28);
         let read = FrameTrack::from_csv_row(&old).unwrap();
         assert_eq!((read.posterior_modes, read.covariance), (0, None));
         assert_eq!(read.estimate, row.estimate);
