@@ -251,3 +251,32 @@ fn the_press_is_found_from_the_contact_and_the_noisy_signature() {
         assert_eq!(fixed.unwrap(), Some(0.006));
     }
 }
+
+#[test]
+fn the_frames_noise_is_measured_from_its_signature_robustly() {
+    // Independent truth: the σ the simulator drew the signature's noise with, one draw per pixel.
+    let truth = Se2::new(0.002, -0.001, 0.3);
+    for sigma in [0.5e-3, 1.38e-3, 3e-3] {
+        let s = setup("cross_w12_s50", truth, 0.006, sigma);
+        let config = SignatureCheckConfig::default();
+        let c = check(&s, &s.out.signature, &config);
+        let at_truth = c.residual_noise(truth).unwrap();
+        assert!(
+            (at_truth / sigma - 1.0).abs() < 0.08,
+            "σ {sigma}: measured {at_truth}"
+        );
+        // A pose 2 mm off mispredicts the contact's pixels; the median absolute deviation ignores them.
+        let off = c
+            .residual_noise(Se2::new(truth.x + 0.002, truth.y, truth.theta))
+            .unwrap();
+        assert!(
+            (off / sigma - 1.0).abs() < 0.25,
+            "σ {sigma}: 2 mm off {off}"
+        );
+    }
+    // Too few measured pixels to say: none.
+    let s = setup("cross_w12_s50", truth, 0.006, 1e-3);
+    let config = SignatureCheckConfig::default();
+    let blank = Image::filled(s.out.signature.width, s.out.signature.height, 0.0);
+    assert!(check(&s, &blank, &config).residual_noise(truth).is_none());
+}

@@ -218,24 +218,33 @@ pub struct Fit {
 }
 
 /// The calibration fitted to `scored` (module docs): `base`'s other settings kept, its fitted ones the first start;
-/// where the records keep the contact the best mode predicts, fitted with each contact count and the better kept.
+/// where the records keep the contact the best mode predicts, fitted with each contact count, and where they keep
+/// the frames' noise, with and without [`PosteriorConfig::frame_noise`]; the best fit kept.
 pub fn fit_posterior(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
-    // Where the records keep the contact the best mode predicts, both contact counts are tried.
-    let counts = if scored
+    // What the records allow is tried both ways; the rest as `base` has it.
+    let both_if = |kept: bool, given: bool| if kept { vec![false, true] } else { vec![given] };
+    let counts = both_if(
+        scored
+            .iter()
+            .any(|s| s.posterior.predicted_contact_px.is_some()),
+        base.contact_from_prediction,
+    );
+    let noises = both_if(
+        scored.iter().any(|s| s.posterior.noise.is_some()),
+        base.frame_noise,
+    );
+    let variants: Vec<(bool, bool)> = counts
         .iter()
-        .any(|s| s.posterior.predicted_contact_px.is_some())
-    {
-        vec![false, true]
-    } else {
-        vec![base.contact_from_prediction]
-    };
-    let fits: Vec<Fit> = counts
+        .flat_map(|&c| noises.iter().map(move |&n| (c, n)))
+        .collect();
+    let fits: Vec<Fit> = variants
         .into_iter()
-        .map(|predicted| {
+        .map(|(predicted, frame_noise)| {
             fit_one(
                 scored,
                 &PosteriorConfig {
                     contact_from_prediction: predicted,
+                    frame_noise,
                     ..base.clone()
                 },
             )
@@ -266,13 +275,18 @@ fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
         x[2] = ln_floor;
         starts.push(x);
     }
-    let step = [
+    let mut step = vec![
         1.0, 1.0, 1.0, 1.0, 0.3, 1.0, 0.5, 1.0, 1.0, 1.0, 0.5, 0.7, 0.3, 0.5, 0.3, 1.0,
     ];
+    // The noise floor only where the frames' noise weighs the evidence.
+    if base.frame_noise {
+        step.push(1.0);
+    }
     let mut best: Option<(Vec<f64>, f64)> = None;
     for x in starts {
         let (x, _) = nelder_mead(&objective, &x, &step, 600);
-        let (x, v) = nelder_mead(&objective, &x, &step.map(|s| s / 2.0), 400);
+        let half: Vec<f64> = step.iter().map(|s| s / 2.0).collect();
+        let (x, v) = nelder_mead(&objective, &x, &half, 400);
         if best.as_ref().is_none_or(|(_, b)| v < *b) {
             best = Some((x, v));
         }
@@ -294,7 +308,7 @@ fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
 
 /// The fitted settings as free coordinates (logs of scales, logits and slopes as they are).
 fn encode(c: &PosteriorConfig) -> Vec<f64> {
-    vec![
+    let mut x = vec![
         c.temperature.ln(),
         c.covariance_temperature.ln(),
         c.floor_position_m.max(1e-6).ln(),
@@ -311,7 +325,11 @@ fn encode(c: &PosteriorConfig) -> Vec<f64> {
         c.tail_core_scale.max(1e-3).ln(),
         c.far_exponent,
         c.far_ambiguity,
-    ]
+    ];
+    if c.frame_noise {
+        x.push(c.noise_floor_m.max(1e-5).ln());
+    }
+    x
 }
 
 /// The inverse of [`encode`] onto `base`, each setting clamped to a plausible range (the fit cannot wander off to
@@ -335,6 +353,9 @@ fn decode(x: &[f64], base: &PosteriorConfig) -> PosteriorConfig {
         tail_core_scale: exp(x[13], 1.0, 30.0),
         far_exponent: x[14].clamp(-1.0, 2.0),
         far_ambiguity: x[15].clamp(-10.0, 10.0),
+        noise_floor_m: x
+            .get(16)
+            .map_or(base.noise_floor_m, |&v| exp(v, 1e-5, 0.005)),
         ..base.clone()
     }
 }

@@ -319,6 +319,7 @@ mod tests {
             }],
             contact_px: 100,
             predicted_contact_px: None,
+            noise: None,
         };
         let fig = FitFigure {
             object: "box",

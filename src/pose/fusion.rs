@@ -105,12 +105,14 @@ mod tests {
             modes: vec![mode(0.55, flipped, 0.001, 0.05), mode(0.45, a, 0.001, 0.05)],
             contact_px: 100,
             predicted_contact_px: None,
+            noise: None,
         };
         let before = Se2::new(0.0005, 0.0, 0.32);
         let previous = PosePosterior {
             modes: vec![mode(1.0, before, 0.001, 0.05)],
             contact_px: 100,
             predicted_contact_px: None,
+            noise: None,
         };
         let fused = fuse(&current, &previous, &symmetry);
         assert_eq!(fused.modes[0].pose(), a);
@@ -143,6 +145,7 @@ mod tests {
             modes: vec![mode(1.0, before, s_m, s_rad)],
             contact_px: 30,
             predicted_contact_px: None,
+            noise: None,
         };
         let strong = PosePosterior {
             modes: vec![
@@ -151,6 +154,7 @@ mod tests {
             ],
             contact_px: 100,
             predicted_contact_px: None,
+            noise: None,
         };
         let fused = fuse(&strong, &broad, &symmetry);
         assert_eq!(fused.modes[0].pose(), flipped);
@@ -191,6 +195,7 @@ mod tests {
             modes: vec![previous],
             contact_px: 100,
             predicted_contact_px: None,
+            noise: None,
         };
         let current = PosePosterior {
             modes: vec![
@@ -199,6 +204,7 @@ mod tests {
             ],
             contact_px: 100,
             predicted_contact_px: None,
+            noise: None,
         };
         let fused = fuse(&current, &previous, &symmetry);
         let flat = REINIT_SHARE / (REINIT_EXTENT_M * REINIT_EXTENT_M * std::f64::consts::TAU);

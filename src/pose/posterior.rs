@@ -6,7 +6,10 @@
 //! * **weight** ∝ exp(−Δ / τ): Δ is how much worse (nats, the sensor's Gaussian noise with independent pixels) the
 //!   mode explains the signature than the best one, τ the [`PosteriorConfig::temperature`]. Neighbouring pixels of a
 //!   tactile signature are far from independent (the shadow cloak, the membrane, the model's own errors), so the
-//!   raw likelihood is overconfident by orders of magnitude; τ tempers it and is fitted on validation data.
+//!   raw likelihood is overconfident by orders of magnitude; τ tempers it and is fitted on validation data. With
+//!   [`PosteriorConfig::frame_noise`] the nats (and Hessians) are first rescaled from the sensor model's noise σ₀ to
+//!   the frame's own, σ₀² / (σ_f² + σ_floor²): a frame averaged down from a native image is several times less
+//!   noisy than one simulated at the model's size, and its signature says more.
 //! * **covariance** of its *core*: the Laplace approximation τ_c·H⁻¹ with H the Hessian of the negative
 //!   log-likelihood at the mode (central differences of the check's cost), τ_c the
 //!   [`PosteriorConfig::covariance_temperature`], its flat directions capped at [`PosteriorConfig::max_sigma_m`], plus
@@ -155,6 +158,20 @@ pub struct PosePosterior {
     /// from before it was kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub predicted_contact_px: Option<usize>,
+    /// The noise the modes' nats and Hessians assume and the frame's own ([`PosteriorConfig::frame_noise`]); `None`
+    /// in records from before it was measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<FrameNoise>,
+}
+
+/// The depth noise of one measured signature, at the resolution the check compares it in (metres).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameNoise {
+    /// σ the modes' nats and Hessians were computed with (the sensor model's noise, one pixel).
+    pub assumed_m: f64,
+    /// σ of the measured signature about the best mode's prediction, robust (1.4826 × the median absolute
+    /// deviation): the sensor's noise as this frame shows it, with what the model does not explain.
+    pub measured_m: f64,
 }
 
 /// `estimate − reference` in the coordinates the object's symmetry leaves identifiable: the position difference with
@@ -209,18 +226,21 @@ impl PosePosterior {
         symmetry: &Symmetry,
         config: &PosteriorConfig,
     ) -> Self {
-        Self::from_evidence_with(evidence, contact_px, None, symmetry, config)
+        Self::from_evidence_with(evidence, contact_px, None, None, symmetry, config)
     }
 
     /// [`Self::from_evidence`] with the contact the best mode predicts beside the measured one (see
-    /// [`Self::predicted_contact_px`]); `config` chooses which the floors and tails scale by.
+    /// [`Self::predicted_contact_px`]; `config` chooses which the floors and tails scale by) and the frame's noise
+    /// (which [`PosteriorConfig::frame_noise`] weighs the evidence by).
     pub fn from_evidence_with(
         evidence: &[ModeEvidence],
         contact_px: usize,
         predicted_contact_px: Option<usize>,
+        noise: Option<FrameNoise>,
         symmetry: &Symmetry,
         config: &PosteriorConfig,
     ) -> Self {
+        let k = config.evidence_scale(noise.as_ref());
         let mut order: Vec<&ModeEvidence> =
             evidence.iter().filter(|e| e.nats.is_finite()).collect();
         order.sort_by(|a, b| a.nats.total_cmp(&b.nats));
@@ -245,7 +265,7 @@ impl PosePosterior {
         let far_scale = (config.floor_contact_px / contact).powf(config.far_exponent);
         let raw: Vec<f64> = kept
             .iter()
-            .map(|e| (-(e.nats - best) / config.temperature).exp())
+            .map(|e| (-k * (e.nats - best) / config.temperature).exp())
             .collect();
         let total: f64 = raw.iter().sum();
         let top_weight = raw.first().map_or(1.0, |w| w / total);
@@ -276,7 +296,8 @@ impl PosePosterior {
             .zip(&raw)
             .filter(|(_, &w)| w / total >= config.min_weight)
             .map(|(e, &w)| {
-                let cov = laplace_covariance(&e.hessian, floor_scale, config);
+                let cov =
+                    laplace_covariance(&e.hessian.map(|r| r.map(|v| k * v)), floor_scale, config);
                 PosteriorMode {
                     weight: w,
                     mean: [e.pose.x, e.pose.y, wrap_angle(e.pose.theta)],
@@ -293,6 +314,7 @@ impl PosePosterior {
             modes,
             contact_px,
             predicted_contact_px,
+            noise,
         }
     }
 
@@ -311,6 +333,7 @@ impl PosePosterior {
             &evidence,
             self.contact_px,
             self.predicted_contact_px,
+            self.noise,
             symmetry,
             config,
         )

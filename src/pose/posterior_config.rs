@@ -33,6 +33,15 @@ pub struct PosteriorConfig {
     /// Scale the floors and tails by the contact the best mode predicts instead of the one counted on the measured
     /// signature (which the sensor's noise inflates); falls back to the measured count where no prediction was kept.
     pub contact_from_prediction: bool,
+    /// Weigh the check's evidence by the frame's own noise ([`super::posterior::FrameNoise`]): nats and Hessians
+    /// times σ₀² / (σ_f² + `noise_floor_m`²), σ₀ the noise they were computed with, σ_f the frame's; off, or where a
+    /// record has no measured noise, σ_f = σ₀. Absent from a calibration file: off (its numbers were fitted to the
+    /// evidence as recorded, before this setting existed; `tnd posterior --fit` writes it).
+    #[serde(default = "calibrated_without_frame_noise")]
+    pub frame_noise: bool,
+    /// Standard deviation added in quadrature to the frame's noise (what the model and the membrane get wrong, which
+    /// no averaging removes), metres.
+    pub noise_floor_m: f64,
     /// Modes lighter than this are left out (and the rest renormalised).
     pub min_weight: f64,
     /// Most modes kept (the lowest Δ first); each costs a Hessian (18 predicted signatures).
@@ -71,6 +80,11 @@ pub struct PosteriorConfig {
     pub far_ambiguity: f64,
 }
 
+/// [`PosteriorConfig::frame_noise`] of a calibration written before it existed.
+fn calibrated_without_frame_noise() -> bool {
+    false
+}
+
 impl Default for PosteriorConfig {
     /// Fitted (`tnd posterior --fit`, rounded to three digits) to 556 pairs of the bundled model's records on the
     /// 42 real validation meshes: nominal single frames, press recordings with and without a time-of-flight camera's
@@ -78,30 +92,32 @@ impl Default for PosteriorConfig {
     /// scored).
     fn default() -> Self {
         Self {
-            temperature: 2.54,
-            covariance_temperature: 0.988,
-            floor_position_m: 3.61e-5,
-            floor_theta_rad: 5.25e-3,
+            temperature: 4.55,
+            covariance_temperature: 0.897,
+            floor_position_m: 5.52e-5,
+            floor_theta_rad: 6.13e-3,
             floor_contact_px: 300.0,
-            floor_exponent: 0.660,
+            floor_exponent: 0.611,
             contact_threshold_m: 0.003,
             contact_from_prediction: false,
+            frame_noise: true,
+            noise_floor_m: 7.05e-4,
             min_weight: 1e-3,
             max_modes: 10,
             step_m: 5e-4,
             lever_m: 0.02,
             max_sigma_m: 0.03,
-            tail_logit: -0.445,
-            tail_contact_slope: -0.389,
-            tail_position_m: 1.92e-4,
-            tail_theta_rad: 0.0531,
-            tail_exponent: 0.541,
-            tail_core_scale: 3.15,
-            far_logit: -3.16,
-            far_contact_slope: -0.456,
-            far_position_m: 4.78e-3,
-            far_exponent: 0.166,
-            far_ambiguity: 1.56,
+            tail_logit: -0.355,
+            tail_contact_slope: -0.415,
+            tail_position_m: 3.87e-5,
+            tail_theta_rad: 0.0387,
+            tail_exponent: 0.641,
+            tail_core_scale: 3.99,
+            far_logit: -3.26,
+            far_contact_slope: -0.482,
+            far_position_m: 4.79e-3,
+            far_exponent: 0.178,
+            far_ambiguity: 2.02,
         }
     }
 }
@@ -118,6 +134,25 @@ impl PosteriorConfig {
             tail_logit: -50.0,
             far_logit: -50.0,
             ..Self::default()
+        }
+    }
+
+    /// The factor [`Self::frame_noise`] multiplies the evidence by for a frame with `noise` (1 when off).
+    pub fn evidence_scale(&self, noise: Option<&super::posterior::FrameNoise>) -> f64 {
+        let Some(n) = noise.filter(|_| self.frame_noise) else {
+            return 1.0;
+        };
+        let assumed = n.assumed_m * n.assumed_m;
+        let frame = if n.measured_m.is_finite() && n.measured_m > 0.0 {
+            n.measured_m * n.measured_m
+        } else {
+            assumed
+        };
+        let k = assumed / (frame + self.noise_floor_m * self.noise_floor_m);
+        if k.is_finite() && k > 0.0 {
+            k
+        } else {
+            1.0
         }
     }
 
@@ -157,6 +192,7 @@ impl PosteriorConfig {
                 ("tail_theta_rad", self.tail_theta_rad),
                 ("far_position_m", self.far_position_m),
                 ("tail_core_scale", self.tail_core_scale),
+                ("noise_floor_m", self.noise_floor_m),
             ],
         )?;
         for (name, value) in [
@@ -225,6 +261,12 @@ impl PosteriorConfig {
                 "beyond any sensor's reach",
             ),
             ("lever_m", self.lever_m, 1.0, "beyond any sensor's reach"),
+            (
+                "noise_floor_m",
+                self.noise_floor_m,
+                0.1,
+                "deeper than the sensor",
+            ),
             ("step_m", self.step_m, 0.01, "wider than a contact"),
             (
                 "contact_threshold_m",

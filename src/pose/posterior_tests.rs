@@ -96,7 +96,8 @@ fn the_predicted_contact_scales_the_floors_when_chosen() {
     }];
     let none = Symmetry::default();
     let floor = |p: &PosePosterior| p.modes[0].cov[0][0].sqrt();
-    let measured = PosePosterior::from_evidence_with(&evidence, 300, Some(75), &none, &config);
+    let measured =
+        PosePosterior::from_evidence_with(&evidence, 300, Some(75), None, &none, &config);
     assert!((floor(&measured) - 0.001).abs() < 1e-5);
     let chosen = PosteriorConfig {
         contact_from_prediction: true,
@@ -110,6 +111,84 @@ fn the_predicted_contact_scales_the_floors_when_chosen() {
     );
     let fallback = PosePosterior::from_evidence(&evidence, 300, &none, &chosen);
     assert!((floor(&fallback) - 0.001).abs() < 1e-5);
+}
+
+#[test]
+fn a_frame_half_as_noisy_weighs_its_evidence_as_four_times_the_nats() {
+    // Invariant: with the frame's noise σ₀/2 and no floor, the evidence counts 4x — the same posterior as nats and
+    // Hessians four times as large under the assumed noise; off (or without a measured noise), as recorded.
+    use crate::pose::posterior::FrameNoise;
+    let config = PosteriorConfig {
+        frame_noise: true,
+        noise_floor_m: 0.0,
+        temperature: 3.0,
+        covariance_temperature: 2.0,
+        ..PosteriorConfig::default()
+    };
+    let evidence = |k: f64| {
+        [
+            ModeEvidence {
+                pose: Se2::new(0.0, 0.0, 0.1),
+                nats: 0.0,
+                hessian: diag(4e8 * k, 2e8 * k, 3e4 * k),
+            },
+            ModeEvidence {
+                pose: Se2::new(0.004, 0.0, 1.2),
+                nats: 1.5 * k,
+                hessian: diag(1e8 * k, 1e8 * k, 1e4 * k),
+            },
+        ]
+    };
+    let none = Symmetry::default();
+    let noise = FrameNoise {
+        assumed_m: 1.38e-3,
+        measured_m: 0.69e-3,
+    };
+    let quieter =
+        PosePosterior::from_evidence_with(&evidence(1.0), 200, None, Some(noise), &none, &config);
+    let as_nats =
+        PosePosterior::from_evidence_with(&evidence(4.0), 200, None, None, &none, &config);
+    assert_eq!(quieter.modes.len(), 2);
+    for (a, b) in quieter.modes.iter().zip(&as_nats.modes) {
+        assert!(
+            (a.weight - b.weight).abs() < 1e-12,
+            "{} against {}",
+            a.weight,
+            b.weight
+        );
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((a.cov[i][j] - b.cov[i][j]).abs() <= 1e-9 * b.cov[i][i].abs().max(1e-30));
+            }
+        }
+    }
+    // The floor adds to the frame's noise in quadrature: σ_f = σ₀/2 with a floor of √3·σ₀/2 is σ₀ again.
+    let floored = PosteriorConfig {
+        noise_floor_m: 3f64.sqrt() * 0.69e-3,
+        ..config.clone()
+    };
+    assert!((floored.evidence_scale(Some(&noise)) - 1.0).abs() < 1e-9);
+    let off = PosteriorConfig {
+        frame_noise: false,
+        ..config.clone()
+    };
+    let recalibrated = quieter.recalibrated(&none, &off);
+    let plain = PosePosterior::from_evidence_with(&evidence(1.0), 200, None, None, &none, &off);
+    assert_eq!(recalibrated.modes, plain.modes);
+    assert_eq!(recalibrated.noise, Some(noise));
+}
+
+#[test]
+fn a_calibration_from_before_the_frames_noise_keeps_the_evidence_as_recorded() {
+    // A file without `frame_noise` was fitted to the evidence as recorded: reading it must not rescale that evidence
+    // with the bundled calibration's switch; the bundled one, written out, reads back as it is.
+    let old: PosteriorConfig = serde_json::from_str(r#"{"temperature": 2.54}"#).unwrap();
+    assert!(!old.frame_noise && old.temperature == 2.54);
+    let bundled = PosteriorConfig::default();
+    assert!(bundled.frame_noise);
+    let back: PosteriorConfig =
+        serde_json::from_str(&serde_json::to_string(&bundled).unwrap()).unwrap();
+    assert_eq!(back, bundled);
 }
 
 #[test]
@@ -129,6 +208,7 @@ fn region_mass_of_one_gaussian_follows_the_chi_square_law() {
         modes: vec![mode],
         contact_px: 300,
         predicted_contact_px: None,
+        noise: None,
     };
     let none = Symmetry::default();
     for d in [0.5f64, 1.5, 2.5] {

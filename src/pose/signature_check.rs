@@ -14,7 +14,7 @@ use glam::DAffine3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::posterior::{same_pose, Mat3, ModeEvidence, PosePosterior, PosteriorConfig};
+use super::posterior::{same_pose, FrameNoise, Mat3, ModeEvidence, PosePosterior, PosteriorConfig};
 use super::register::wrap_angle;
 use super::sdf_register::RobustLoss;
 use super::PoseError;
@@ -200,6 +200,9 @@ pub struct Rival {
     /// says the signature cannot tell the two apart, tens that it can.
     pub nats: f64,
 }
+
+/// Fewest measured pixels [`SignatureCheck::residual_noise`] estimates a frame's noise from.
+pub const MIN_NOISE_PIXELS: usize = 64;
 
 /// A rival explaining the signature within this many nats of the pick (a likelihood ratio under e⁴ ≈ 55) makes the
 /// estimate ambiguous: which of the two it is, the sensor's noise decides.
@@ -481,13 +484,48 @@ impl SignatureCheck<'_> {
             })
             .count();
         let predicted_contact_px = distinct.first().map(|&(pose, _)| self.contact_px_at(pose));
+        let noise = distinct
+            .first()
+            .and_then(|&(pose, _)| self.residual_noise(pose))
+            .map(|measured_m| FrameNoise {
+                assumed_m: self.model.noise_std,
+                measured_m,
+            });
         Ok(PosePosterior::from_evidence_with(
             &evidence,
             contact_px,
             predicted_contact_px,
+            noise,
             symmetry,
             config,
         ))
+    }
+
+    /// The measured signature's noise about [`Self::predict`] at `pose`, metres: 1.4826 × the median absolute
+    /// deviation of S − Ŝ over the measured pixels (robust to the pixels the prediction gets wrong, so it is the
+    /// noise of the frame as the check sees it, not the contact's misfit); `None` with fewer than
+    /// [`MIN_NOISE_PIXELS`] measured pixels.
+    pub fn residual_noise(&self, pose: Se2) -> Option<f64> {
+        let predicted = self.predict(pose);
+        let mut r: Vec<f64> = self
+            .signature
+            .data
+            .iter()
+            .zip(&predicted.data)
+            .zip(&self.membrane.data)
+            .filter(|((&s, _), &e)| s > 0.0 && s.is_finite() && e > 0.0)
+            .map(|((&s, &p), _)| f64::from(s - p))
+            .collect();
+        if r.len() < MIN_NOISE_PIXELS {
+            return None;
+        }
+        let median = |v: &mut Vec<f64>| {
+            let mid = v.len() / 2;
+            *v.select_nth_unstable_by(mid, f64::total_cmp).1
+        };
+        let centre = median(&mut r);
+        let mut deviation: Vec<f64> = r.iter().map(|v| (v - centre).abs()).collect();
+        Some(1.4826 * median(&mut deviation))
     }
 
     /// The contact pixels with the object at `pose`: where it reaches in front of the membrane (the contact mask
