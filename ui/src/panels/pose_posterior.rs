@@ -64,12 +64,23 @@ pub fn posterior_summary(ui: &mut egui::Ui, r: &PoseAnalysis) {
     } else {
         ui.label(text)
     };
-    label.on_hover_text(
+    let noise = post
+        .noise
+        .map(|n| {
+            format!(
+                " This frame's noise about the best mode: {:.2} mm (the sensor model assumes {:.2} mm a pixel), which the \
+                 calibration's frame_noise weighs the evidence by.",
+                n.measured_m * 1e3,
+                n.assumed_m * 1e3
+            )
+        })
+        .unwrap_or_default();
+    label.on_hover_text(format!(
         "What the measured signature supports: each pose the signature check refined is a mode, weighted by how well \
          it explains the signature (tempered for correlated pixels), with a sharp core from the curvature of that \
          fit, a wider tail for a contact the sample got somewhat wrong and a far share for a pose no hypothesis came \
          near; the shares grow on small contacts. Fitted to validation data by the log density of the truth \
          (docs/uncertainty.md). σ is about the estimate, other modes' cores and tails included — what pose.json's \
-         pose_with_covariance carries.",
-    );
+         pose_with_covariance carries.{noise}",
+    ));
 }
