@@ -21,6 +21,7 @@ use super::PoseError;
 use super::{MODE_POSITION_MM, MODE_THETA_DEG};
 use crate::image::Image;
 use crate::mesh::RayCaster;
+use crate::recording::process::median_of;
 use crate::sensor::{Intrinsics, Se2};
 use crate::sim::render::render_depth;
 use crate::sim::shadows::tactile_signature;
@@ -519,13 +520,9 @@ impl SignatureCheck<'_> {
         if r.len() < MIN_NOISE_PIXELS {
             return None;
         }
-        let median = |v: &mut Vec<f64>| {
-            let mid = v.len() / 2;
-            *v.select_nth_unstable_by(mid, f64::total_cmp).1
-        };
-        let centre = median(&mut r);
+        let centre = median_of(&mut r);
         let mut deviation: Vec<f64> = r.iter().map(|v| (v - centre).abs()).collect();
-        Some(1.4826 * median(&mut deviation))
+        Some(1.4826 * median_of(&mut deviation))
     }
 
     /// The contact pixels with the object at `pose`: where it reaches in front of the membrane (the contact mask

@@ -338,7 +338,7 @@ fn box_max(y: &Image, radius: usize) -> f64 {
 }
 
 /// Median of `x` (reordered); 0 for an empty slice.
-fn median_of(x: &mut [f64]) -> f64 {
+pub(crate) fn median_of(x: &mut [f64]) -> f64 {
     if x.is_empty() {
         return 0.0;
     }

@@ -193,10 +193,7 @@ impl WorkbenchApp {
         match session::read(&path) {
             Ok(state) => {
                 self.replace_state(state);
-                self.inputs.session_path = path.display().to_string();
-                self.notice = Some(format!("opened {}", path.display()));
-                self.remember_session(&path);
-                self.session_path = Some(path);
+                self.session_is(path, "opened");
             }
             Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
         }
@@ -205,14 +202,18 @@ impl WorkbenchApp {
     /// Write the state to a session file.
     fn save_session(&mut self, path: PathBuf) {
         match session::write(&path, &self.state) {
-            Ok(()) => {
-                self.inputs.session_path = path.display().to_string();
-                self.notice = Some(format!("saved {}", path.display()));
-                self.remember_session(&path);
-                self.session_path = Some(path);
-            }
+            Ok(()) => self.session_is(path, "saved"),
             Err(e) => self.error(tactile_derender::error::render_anyhow(&e)),
         }
+    }
+
+    /// `path` is now the session's file, just `done` ("opened", "saved"): in the path field, the notice, the recent
+    /// sessions.
+    fn session_is(&mut self, path: PathBuf, done: &str) {
+        self.inputs.session_path = path.display().to_string();
+        self.notice = Some(format!("{done} {}", path.display()));
+        self.remember_session(&path);
+        self.session_path = Some(path);
     }
 
     /// Open a file dropped on the window as what its kind says (a session, mesh, recording, ...).
