@@ -37,7 +37,7 @@ pub const MODE_POSITION_MM: f64 = 2.0;
 /// See [`MODE_POSITION_MM`].
 pub const MODE_THETA_DEG: f64 = 15.0;
 pub use sdf::{ExactSdf, ObjectSdf};
-pub use sdf_grid::{SdfGrid, SdfGridConfig};
+pub use sdf_grid::{ExactOnGrid, SdfGrid, SdfGridConfig};
 pub use sdf_register::{RobustLoss, SdfRegistration, SdfRegistrationConfig};
 
 /// Errors of the pose stage; each says what to change.

@@ -73,10 +73,14 @@ impl ExactSdf {
         self.winding.is_some()
     }
 
-    /// Whether `p` (object frame) is inside, with `parry_inside` the pseudo-normal verdict of its projection.
-    fn inside(&self, p_obj: DVec3, parry_inside: bool) -> bool {
+    /// Whether `p` (object frame) is inside, with `parry_inside` the pseudo-normal verdict of its projection, `d`
+    /// its distance to the surface and `hint` a verdict that may spare the winding number (see
+    /// [`SignHint`]).
+    fn inside(&self, p_obj: DVec3, parry_inside: bool, d: f64, hint: SignHint<'_>) -> bool {
         match &self.winding {
-            Some(w) => w.inside(p_obj),
+            Some(w) => hint
+                .and_then(|h| h(p_obj, d))
+                .unwrap_or_else(|| w.inside(p_obj)),
             None => parry_inside,
         }
     }
@@ -106,24 +110,26 @@ impl ExactSdf {
     }
 }
 
-impl ObjectSdf for ExactSdf {
-    fn value(&self, p_obj: DVec3) -> f64 {
+impl ExactSdf {
+    /// [`ObjectSdf::value`], with `hint` asked for the sign before the winding number (soups only).
+    pub(crate) fn value_hinted(&self, p_obj: DVec3, hint: SignHint<'_>) -> f64 {
         let p = p_obj.as_vec3();
         let proj = self.trimesh.project_local_point(p, false);
         let d = f64::from((p - proj.point).length());
-        if self.inside(p_obj, proj.is_inside) {
+        if self.inside(p_obj, proj.is_inside, d, hint) {
             -d
         } else {
             d
         }
     }
 
-    fn value_grad(&self, p_obj: DVec3) -> (f64, DVec3) {
+    /// [`ObjectSdf::value_grad`], with `hint` asked for the sign before the winding number (soups only).
+    pub(crate) fn value_grad_hinted(&self, p_obj: DVec3, hint: SignHint<'_>) -> (f64, DVec3) {
         let p = p_obj.as_vec3();
         let (proj, (tri, location)) = self.trimesh.project_local_point_and_get_location(p, false);
         let offset = p_obj - proj.point.as_dvec3();
         let d = offset.length();
-        let inside = self.inside(p_obj, proj.is_inside);
+        let inside = self.inside(p_obj, proj.is_inside, d, hint);
         let signed = if inside { -d } else { d };
         if d > Self::NEAR_SURFACE_M {
             return (signed, offset / signed);
@@ -134,6 +140,20 @@ impl ObjectSdf for ExactSdf {
             Some(w) if w.inside(p_obj + n * 1e-4) && !w.inside(p_obj - n * 1e-4) => (signed, -n),
             _ => (signed, n),
         }
+    }
+}
+
+/// A verdict on whether a point is inside, from what is already known about its neighbourhood: given the point and
+/// its distance to the surface, `Some(inside)` when settled, `None` to evaluate the winding number.
+pub(crate) type SignHint<'a> = Option<&'a dyn Fn(DVec3, f64) -> Option<bool>>;
+
+impl ObjectSdf for ExactSdf {
+    fn value(&self, p_obj: DVec3) -> f64 {
+        self.value_hinted(p_obj, None)
+    }
+
+    fn value_grad(&self, p_obj: DVec3) -> (f64, DVec3) {
+        self.value_grad_hinted(p_obj, None)
     }
 }
 

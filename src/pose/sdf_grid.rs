@@ -39,6 +39,10 @@ impl Default for SdfGridConfig {
 /// Nodes per block edge: the unit in which the grid is sampled.
 const BLOCK: usize = 8;
 
+/// Slack of [`SdfGrid::sign_from_nodes`]'s ball test, metres: node values are stored as f32 and the distance to the
+/// surface is projected in f32 (both good to ~10 nm at object sizes).
+const BALL_MARGIN_M: f64 = 1e-6;
+
 /// Signed distances on a regular grid (object frame), trilinearly interpolated.
 pub struct SdfGrid {
     /// Position of node (0, 0, 0), metres.
@@ -150,6 +154,41 @@ impl SdfGrid {
         f64::from(block[((k % BLOCK) * BLOCK + j % BLOCK) * BLOCK + i % BLOCK])
     }
 
+    /// Node (i, j, k) if its block has been sampled (never samples one).
+    fn node_if_sampled(&self, i: usize, j: usize, k: usize) -> Option<f64> {
+        let (bi, bj, bk) = (i / BLOCK, j / BLOCK, k / BLOCK);
+        let b = (bk * self.block_dims[1] + bj) * self.block_dims[0] + bi;
+        let block = self.blocks[b].get()?;
+        Some(f64::from(
+            block[((k % BLOCK) * BLOCK + j % BLOCK) * BLOCK + i % BLOCK],
+        ))
+    }
+
+    /// Whether `p_obj`, `d` metres from the surface, is inside, settled by a sampled corner of its cell: a node `n`
+    /// with signed distance `s` is the centre of a ball of radius |s| that holds no surface, as is `p_obj`'s ball of
+    /// radius `d`; when the balls overlap (|p − n| < d + |s|) the two points are joined without crossing the
+    /// surface, so they are on the same side. `None` when no sampled corner settles it (then the caller evaluates
+    /// the winding number). Exact wherever the solid is bounded by the mesh; across a soup's hole, where the
+    /// winding number's ½ draws the boundary through empty space, a point within a cell of that span may take its
+    /// neighbour's side.
+    pub(crate) fn sign_from_nodes(&self, p_obj: DVec3, d: f64) -> Option<bool> {
+        let f = (p_obj - self.origin) / self.spacing;
+        if !(f.cmpge(DVec3::ZERO).all() && d.is_finite()) {
+            return None;
+        }
+        let (i, j, k) = (f.x as usize, f.y as usize, f.z as usize);
+        if i + 1 >= self.dims[0] || j + 1 >= self.dims[1] || k + 1 >= self.dims[2] {
+            return None;
+        }
+        (0..8usize).find_map(|c| {
+            let (a, b, e) = (i + (c & 1), j + ((c >> 1) & 1), k + (c >> 2));
+            let s = self.node_if_sampled(a, b, e)?;
+            let node = self.origin + DVec3::new(a as f64, b as f64, e as f64) * self.spacing;
+            (s.abs() > BALL_MARGIN_M && (p_obj - node).length() + BALL_MARGIN_M < d + s.abs())
+                .then_some(s < 0.0)
+        })
+    }
+
     /// Trilinear value at a point inside the box (the cost-only path of the solver).
     #[inline]
     fn inside_value(&self, p: DVec3) -> f64 {
@@ -231,6 +270,26 @@ impl ObjectSdf for SdfGrid {
         let d = p_obj - c;
         let len = d.length();
         (len, if len > 0.0 { d / len } else { gq })
+    }
+}
+
+/// The exact signed distance of a grid's object ([`ExactSdf`]), its sign settled by the grid's sampled nodes where
+/// they can ([`SdfGrid::sign_from_nodes`]): a soup's winding number is then evaluated only within about a tenth of a
+/// cell of the surface. Registration's polish on the exact SDF goes through it; on watertight meshes (signed by
+/// pseudo-normals) it is [`ExactSdf`] itself.
+pub struct ExactOnGrid<'a>(pub &'a SdfGrid);
+
+impl ObjectSdf for ExactOnGrid<'_> {
+    fn value(&self, p_obj: DVec3) -> f64 {
+        let grid = self.0;
+        grid.exact
+            .value_hinted(p_obj, Some(&|p, d| grid.sign_from_nodes(p, d)))
+    }
+
+    fn value_grad(&self, p_obj: DVec3) -> (f64, DVec3) {
+        let grid = self.0;
+        grid.exact
+            .value_grad_hinted(p_obj, Some(&|p, d| grid.sign_from_nodes(p, d)))
     }
 }
 
@@ -349,6 +408,53 @@ mod tests {
             );
             let at = grid.origin + DVec3::new(i as f64, j as f64, k as f64) * grid.spacing;
             assert_eq!(grid.node(i, j, k), f64::from(exact.value(at) as f32));
+        }
+    }
+    /// On soups (signed by the winding number), the exact SDF with its sign settled by the grid's nodes equals the
+    /// exact SDF itself at points near and away from the surface, and spares most winding numbers: overlapping
+    /// shells (a sign the pseudo-normals get wrong inside the overlap) and a non-manifold box.
+    #[test]
+    fn the_grid_settles_a_soups_sign_without_changing_it() {
+        let h = DVec3::new(0.02, 0.01, 0.015);
+        let closed = box_mesh(h);
+        let shifted = closed.transformed(&glam::Affine3A::from_translation(glam::Vec3::Y * 0.005));
+        let union = crate::mesh::Mesh::merged(&[closed.clone(), shifted]);
+        let mut dup = closed.triangles().to_vec();
+        dup.push(dup[0]);
+        let non_manifold =
+            crate::mesh::Mesh::from_raw(closed.vertices().to_vec(), dup, "duplicate face").unwrap();
+        for (name, mesh) in [("two shells", union), ("non-manifold", non_manifold)] {
+            let exact = Arc::new(ExactSdf::new(&mesh).unwrap());
+            assert!(exact.uses_winding_number(), "{name}");
+            let grid = SdfGrid::build(exact.clone(), &SdfGridConfig::default()).unwrap();
+            let on_grid = ExactOnGrid(&grid);
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+            let (mut settled, mut near) = (0, 0);
+            for _ in 0..4_000 {
+                let p = DVec3::new(
+                    rng.random_range(-0.03..0.03),
+                    rng.random_range(-0.02..0.025),
+                    rng.random_range(-0.025..0.025),
+                );
+                // Sample the blocks around p first (as the grid pass of a registration does).
+                let _ = grid.value(p);
+                let want = exact.value_grad(p);
+                let (got, got_grad) = on_grid.value_grad(p);
+                assert_eq!(got, want.0, "{name} at {p}");
+                assert!((got_grad - want.1).length() < 1e-12, "{name} at {p}");
+                assert_eq!(on_grid.value(p), exact.value(p), "{name} at {p}");
+                let d = want.0.abs();
+                if d > 1e-4 && d < 0.003 {
+                    near += 1;
+                    settled += usize::from(grid.sign_from_nodes(p, d).is_some());
+                }
+            }
+            // Within 0.1-3 mm of the surface, most signs come from the nodes.
+            assert!(near > 300, "{name}: {near}");
+            assert!(
+                settled as f64 > 0.9 * near as f64,
+                "{name}: {settled} of {near}"
+            );
         }
     }
 }

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use super::register::{wrap_angle, Hypothesis, Registration, RegistrationProblem};
 use super::sdf::{ExactSdf, ObjectSdf};
-use super::sdf_grid::{SdfGrid, SdfGridConfig};
+use super::sdf_grid::{ExactOnGrid, SdfGrid, SdfGridConfig};
 use super::PoseError;
 use crate::mesh::Mesh;
 use crate::sensor::Se2;
@@ -220,9 +220,10 @@ impl SdfRegistration {
         scale: f64,
         jacobian: bool,
     ) -> Normal {
+        let exact = ExactOnGrid(&self.grid);
         let sdf: &dyn ObjectSdf = match field {
             Field::Grid => &self.grid,
-            Field::Exact => &*self.exact,
+            Field::Exact => &exact,
         };
         let (s, c) = pose.theta.sin_cos();
         let mut n = Normal {
