@@ -379,6 +379,26 @@ fn train_starts_resumes_and_refuses_other_inputs() {
     let (ok, err) = train("ds", "3", "1");
     assert!(!ok);
     assert!(err.contains("--batch 2 (now 1)"), "{err}");
+    // Two datasets train as one (one sensor's recordings, imported one by one); the run remembers both.
+    let o = run(&[
+        "train", "-q", "--data", "ds", "ds2", "--out", "both", "--steps", "1", "--batch", "2",
+        "--config", "small",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let inputs: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("both/run_inputs.json")).unwrap(),
+    )
+    .unwrap();
+    let data: Vec<&str> = inputs["data"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert!(
+        data.len() == 2 && data[0].ends_with("ds") && data[1].ends_with("ds2"),
+        "{data:?}"
+    );
 
     // SIGTERM (a scheduler's kill, Ctrl-C's SIGINT alike) stops a long run after its step with a checkpoint to resume
     // from, long before the minute between checkpoints is up.

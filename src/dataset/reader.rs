@@ -226,21 +226,17 @@ impl Dataset {
     /// Shuffled mini-batches of `split` for one epoch: the order is a permutation drawn from `(seed, epoch)`; the last
     /// batch holds the remainder (fewer than `batch` pairs).
     pub fn batches(&self, split: SplitName, batch: usize, seed: u64, epoch: u64) -> Batches<'_> {
-        let mut order: Vec<usize> = (0..self.len(split)).collect();
-        let mut rng =
-            ChaCha8Rng::seed_from_u64(mix64(seed) ^ mix64(epoch.wrapping_add(0x4550_4f43)));
-        order.shuffle(&mut rng);
         Batches {
             dataset: self,
             split,
-            order,
+            order: epoch_order(self.len(split), seed, epoch),
             pos: 0,
             batch: batch.max(1),
         }
     }
 
     /// Imprint and target of one pair (what training needs), appended to `imprint` and `target`.
-    fn read_training(
+    pub(crate) fn read_training(
         &self,
         split: SplitName,
         index: usize,
@@ -298,6 +294,15 @@ impl Dataset {
         *slot = Some(Arc::clone(&loaded));
         Ok(loaded)
     }
+}
+
+/// The order in which one epoch visits `len` pairs: a permutation drawn from `(seed, epoch)` (what
+/// [`Dataset::batches`] and training over several datasets use).
+pub fn epoch_order(len: usize, seed: u64, epoch: u64) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..len).collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(mix64(seed) ^ mix64(epoch.wrapping_add(0x4550_4f43)));
+    order.shuffle(&mut rng);
+    order
 }
 
 fn poisoned(path: &Path) -> DatasetError {

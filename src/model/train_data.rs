@@ -1,28 +1,37 @@
 //! Training pairs from the dataset stage (paper V.A → IV.B): an adapter from [`crate::dataset::Dataset`]'s
-//! shuffled batches to the trainer's [`TrainingData`]. The train split is used for training. The logged validation
+//! shuffled pairs to the trainer's [`TrainingData`]. The train split is used for training (of one dataset, or of
+//! several read as one). The logged validation
 //! loss comes from a fixed batch of a separate validation dataset when one is given ([`DatasetTraining::with_validation`]:
 //! pairs that no test split holds, so that stopping and tuning decisions never look at test pairs); otherwise from
-//! the `unseen_poses` split (or `train` when that is empty), which only monitors. Also the per-pixel loss weights
+//! the (first) dataset's `unseen_poses` split (or `train` when that is empty), which only monitors. Also the per-pixel loss weights
 //! that stress the contact boundary ([`contact_boundary_weights`]).
 
-use crate::dataset::{Batches, Dataset, SplitName};
+use crate::dataset::reader::epoch_order;
+use crate::dataset::{Dataset, SplitName};
 
 use super::train::{TrainBatch, TrainingData};
 use super::ModelError;
 
-/// Batches of the train split, read in the dataset's `(seed, epoch)` order.
+/// Batches of the train split of one dataset, or of several read as one (their train splits concatenated, one
+/// shuffle over all of them: a sensor's recordings imported one by one), in the `(seed, epoch)` order.
 pub struct DatasetTraining<'a> {
-    dataset: &'a Dataset,
+    datasets: Vec<&'a Dataset>,
     /// A separate validation dataset, if any.
     validation: Option<&'a Dataset>,
-    /// The open epoch: (epoch, index of the next batch, iterator).
-    cursor: Option<(u64, usize, Batches<'a>)>,
+    /// The open epoch and its order of (dataset, index within its train split).
+    cursor: Option<(u64, Vec<(usize, usize)>)>,
 }
 
 impl<'a> DatasetTraining<'a> {
     pub fn new(dataset: &'a Dataset) -> Self {
+        Self::concatenated(vec![dataset])
+    }
+
+    /// Train on the train splits of every dataset in `datasets` (same image size; checked by the caller). One
+    /// dataset visits its pairs in the order [`Dataset::batches`] would.
+    pub fn concatenated(datasets: Vec<&'a Dataset>) -> Self {
         Self {
-            dataset,
+            datasets,
             validation: None,
             cursor: None,
         }
@@ -37,6 +46,18 @@ impl<'a> DatasetTraining<'a> {
 
     /// Pairs in the validation batch of a separate validation dataset.
     pub const VALIDATION_PAIRS: usize = 128;
+
+    /// The epoch's order over the concatenated train splits.
+    fn order(&self, seed: u64, epoch: u64) -> Vec<(usize, usize)> {
+        let mut owner = Vec::with_capacity(self.len());
+        for (k, d) in self.datasets.iter().enumerate() {
+            owner.extend((0..d.len(SplitName::Train)).map(|i| (k, i)));
+        }
+        epoch_order(owner.len(), seed, epoch)
+            .into_iter()
+            .map(|g| owner[g])
+            .collect()
+    }
 }
 
 fn convert(b: crate::dataset::Batch) -> TrainBatch {
@@ -51,7 +72,7 @@ fn convert(b: crate::dataset::Batch) -> TrainBatch {
 
 impl TrainingData for DatasetTraining<'_> {
     fn len(&self) -> usize {
-        self.dataset.len(SplitName::Train)
+        self.datasets.iter().map(|d| d.len(SplitName::Train)).sum()
     }
 
     fn batch(
@@ -61,25 +82,36 @@ impl TrainingData for DatasetTraining<'_> {
         batch: usize,
         seed: u64,
     ) -> Result<TrainBatch, ModelError> {
-        let reuse = matches!(&self.cursor, Some((e, i, _)) if *e == epoch && *i == index);
-        if !reuse {
-            // A new epoch, or a resume in the middle of one: skip to `index`.
-            let mut it = self.dataset.batches(SplitName::Train, batch, seed, epoch);
-            for _ in 0..index {
-                it.next().transpose().map_err(ModelError::Dataset)?;
-            }
-            self.cursor = Some((epoch, index, it));
+        if !matches!(&self.cursor, Some((e, _)) if *e == epoch) {
+            self.cursor = Some((epoch, self.order(seed, epoch)));
         }
-        let Some((_, i, it)) = self.cursor.as_mut() else {
+        let Some((_, order)) = self.cursor.as_ref() else {
             return Err(ModelError::Data("internal: no open epoch".into()));
         };
-        let b = it
-            .next()
-            .transpose()
-            .map_err(ModelError::Dataset)?
+        let batch = batch.max(1);
+        let picked = order
+            .get(index.saturating_mul(batch)..)
+            .filter(|rest| !rest.is_empty())
             .ok_or_else(|| ModelError::Data(format!("epoch {epoch} has no batch {index}")))?;
-        *i += 1;
-        Ok(convert(b))
+        let picked = &picked[..batch.min(picked.len())];
+        let Some(first) = self.datasets.first() else {
+            return Err(ModelError::Data("no training dataset".into()));
+        };
+        let (width, height) = first.resolution();
+        let mut imprint = Vec::with_capacity(picked.len() * width * height);
+        let mut target = Vec::with_capacity(picked.len() * width * height);
+        for &(k, i) in picked {
+            self.datasets[k]
+                .read_training(SplitName::Train, i, &mut imprint, &mut target)
+                .map_err(ModelError::Dataset)?;
+        }
+        Ok(TrainBatch {
+            n: picked.len(),
+            width,
+            height,
+            imprint,
+            target,
+        })
     }
 
     fn validation(&mut self, batch: usize) -> Result<Option<TrainBatch>, ModelError> {
@@ -94,12 +126,15 @@ impl TrainingData for DatasetTraining<'_> {
                 .map(|b| b.map(convert))
                 .map_err(ModelError::Dataset);
         }
-        let split = if self.dataset.len(SplitName::UnseenPoses) > 0 {
+        let Some(first) = self.datasets.first() else {
+            return Ok(None);
+        };
+        let split = if first.len(SplitName::UnseenPoses) > 0 {
             SplitName::UnseenPoses
         } else {
             SplitName::Train
         };
-        self.dataset
+        first
             .batches(split, batch, 0, 0)
             .next()
             .transpose()

@@ -42,9 +42,10 @@ fn stop_on_signals() {
 
 #[derive(Args, Debug)]
 pub struct TrainArgs {
-    /// Dataset directory (`tnd dataset gen` / `import`); trains on its train split.
-    #[arg(long)]
-    pub data: PathBuf,
+    /// Dataset directory (`tnd dataset gen` / `import`); trains on its train split. Several (`--data A B` or
+    /// `--data A --data B`: e.g. one sensor's recordings, each imported on its own) train as one dataset.
+    #[arg(long, required = true, num_args = 1..)]
+    pub data: Vec<PathBuf>,
     /// Run directory: train_state.safetensors, model.safetensors, log.jsonl.
     #[arg(long)]
     pub out: PathBuf,
@@ -77,8 +78,13 @@ fn check_run_inputs(a: &TrainArgs) -> Result<()> {
             .display()
             .to_string()
     };
+    // One dataset is stored as its path (as runs before several were possible), several as a list.
+    let data = match a.data.as_slice() {
+        [one] => json!(canonical(one)),
+        many => json!(many.iter().map(|p| canonical(p)).collect::<Vec<_>>()),
+    };
     let now = json!({
-        "data": canonical(&a.data),
+        "data": data,
         "init": a.init.as_deref().map(|p| if p.exists() { canonical(p) } else { p.display().to_string() }),
     });
     let resuming = a.out.join("train_state.safetensors").is_file();
@@ -164,20 +170,27 @@ fn model_config(mut cfg: UNet2DConfig, resolution: (usize, usize)) -> Result<UNe
 /// so that a sensor with shallower or deeper contact does not train a model whose every sample decodes as no contact.
 fn fit_to_data(
     a: &TrainArgs,
-    ds: &Dataset,
+    datasets: &[Dataset],
     cfg: UNet2DConfig,
     states_mapping: bool,
 ) -> Result<UNet2DConfig> {
-    let Some([lo, hi]) = target_range_sample(ds, SplitName::Train, 256)? else {
+    let mut range: Option<[f32; 2]> = None;
+    for ds in datasets {
+        if let Some([lo, hi]) = target_range_sample(ds, SplitName::Train, 256)? {
+            range = Some(range.map_or([lo, hi], |[l, h]| [l.min(lo), h.max(hi)]));
+        }
+    }
+    let Some([lo, hi]) = range else {
         return Ok(cfg);
     };
+    let data = shown_data(a);
     if let Some(init) = &a.init {
         let (_, init_cfg) = tactile_derender::model::checkpoint::locate(init)?;
         if let Some(problem) = init_cfg.tactile_derender.contact_range_problem(lo, hi) {
             bail!(
                 "{}: the model of --init {} does not fit this sensor: {problem}; a fine-tune keeps its model's \
                  mapping, so train for this sensor from scratch (without --init, tnd train fits the mapping to the data)",
-                a.data.display(),
+                data,
                 init.display()
             );
         }
@@ -190,14 +203,14 @@ fn fit_to_data(
         bail!(
             "{}: the --config does not fit this sensor: {problem}; fit its tactile_derender.target and \
              contact_min_depth_m to the sensor, or leave tactile_derender out and tnd train fits them",
-            a.data.display()
+            data
         );
     }
     let fitted = cfg.tactile_derender.fitted_to_contact_range(lo, hi);
     eprintln!(
         "{}: in-contact depths {:.1}–{:.1} mm do not fit the default mapping (contact cut {:.1} mm, deepest {:.1} mm); \
          fitted to this sensor: no contact at −1, {:.1} mm at +1, contact cut {:.1} mm",
-        a.data.display(),
+        data,
         lo * 1e3,
         hi * 1e3,
         cfg.tactile_derender.contact_min_depth_m * 1e3,
@@ -211,21 +224,48 @@ fn fit_to_data(
     })
 }
 
+/// The `--data` folders as one string for messages.
+fn shown_data(a: &TrainArgs) -> String {
+    a.data
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 pub fn run(a: TrainArgs) -> Result<()> {
     // One writer per run folder: a second `tnd train --out` here is refused at once, naming the first's pid.
-    let mut inputs = vec![a.data.as_path()];
+    let mut inputs: Vec<&std::path::Path> = a.data.iter().map(PathBuf::as_path).collect();
     inputs.extend(a.init.as_deref());
     inputs.extend(a.val_data.as_deref());
     let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
-    tactile_derender::io::lock::check_not_written(&a.data)?;
-    if let Some(val) = &a.val_data {
-        tactile_derender::io::lock::check_not_written(val)?;
+    for d in a.data.iter().chain(a.val_data.iter()) {
+        tactile_derender::io::lock::check_not_written(d)?;
     }
     let (given, states_mapping) = given_config(&a)?;
-    let dataset = Dataset::open(&a.data)?;
-    let mut cfg = model_config(given, dataset.resolution())?;
+    let datasets = a
+        .data
+        .iter()
+        .map(Dataset::open)
+        .collect::<Result<Vec<_>, _>>()?;
+    let resolution = datasets[0].resolution();
+    if let Some((path, other)) = a
+        .data
+        .iter()
+        .zip(&datasets)
+        .find(|(_, d)| d.resolution() != resolution)
+    {
+        bail!(
+            "--data {}: images are {:?}, those of {} {:?}; datasets trained together need one image size",
+            path.display(),
+            other.resolution(),
+            a.data[0].display(),
+            resolution
+        );
+    }
+    let mut cfg = model_config(given, resolution)?;
     if !a.out.join("train_state.safetensors").is_file() {
-        cfg = fit_to_data(&a, &dataset, cfg, states_mapping)?;
+        cfg = fit_to_data(&a, &datasets, cfg, states_mapping)?;
     }
     let tc = a.train.clone();
     if let Some(d) = tc.ema {
@@ -239,7 +279,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
     }
     let val_dataset = a.val_data.as_deref().map(Dataset::open).transpose()?;
     if let Some(v) = &val_dataset {
-        if v.resolution() != dataset.resolution() {
+        if v.resolution() != resolution {
             bail!(
                 "--val-data {}: images are {:?}, the training data's {:?}",
                 a.val_data
@@ -247,11 +287,11 @@ pub fn run(a: TrainArgs) -> Result<()> {
                     .unwrap_or(std::path::Path::new(""))
                     .display(),
                 v.resolution(),
-                dataset.resolution()
+                resolution
             );
         }
     }
-    let mut data = DatasetTraining::new(&dataset);
+    let mut data = DatasetTraining::concatenated(datasets.iter().collect());
     if let Some(v) = &val_dataset {
         data = data.with_validation(v);
     }
