@@ -28,6 +28,8 @@ import random
 import subprocess
 import sys
 
+from pooled import Pooled, eval_once
+
 TOF = {"noise_exponent": 2.0, "dropout": 0.02, "edge_missing_px": 2.0, "flying_jump_m": 0.005,
        "fixed_pattern_m": 3e-4}
 
@@ -109,43 +111,31 @@ def main():
                     failures.append(name)
                     print(f"{cond} {name}: import failed: {r.stderr.strip()[-300:]}", file=sys.stderr)
                     continue
-            out = ds + ".eval.json"
-            if not os.path.exists(out):
-                r = run([a.tnd, "eval", "--data", ds, "--split", "unseen_objects", "--json", "--records",
-                         ds + ".records.jsonl"])
-                with open(out, "w") as f:
-                    f.write(r.stdout.strip().splitlines()[-1] + "\n")
-            with open(out) as f:
-                e = json.load(f)
-            for method in ("model", "baseline", "baseline_checked"):
-                m = e.get(method) or {}
-                p = m.get("position_mm") or {}
-                if p.get("n"):
-                    # sum, count, sum of squares (from each dataset's mean and standard deviation)
-                    t = totals.setdefault(method, [0.0, 0, 0.0])
-                    n = p["n"]
-                    t[0] += p["mean"] * n
-                    t[1] += n
-                    t[2] += (n - 1) * (p.get("std") or 0.0) ** 2 + n * p["mean"] ** 2
-        mean = {m: (s / n if n else float("nan")) for m, (s, n, _) in totals.items()}
-        se = {m: (math.sqrt(max(q / n - (s / n) ** 2, 0.0) / max(n - 1, 1)) if n else float("nan"))
-              for m, (s, n, q) in totals.items()}
+            e = eval_once(a.tnd, ds)
+            for method in ("model", "model_combined", "baseline", "baseline_checked"):
+                totals.setdefault(method, Pooled()).add((e.get(method) or {}).get("position_mm"))
+        mean = {m: t.mean() if t.n else None for m, t in totals.items()}
+        se = {m: t.se() if t.n else None for m, t in totals.items()}
         row = {"condition": cond, "recordings": len(names), "imported": len(names) - len(failures),
-               "pairs": totals.get("model", [0, 0, 0])[1], "pipeline_mm": mean.get("model"),
-               "pipeline_se_mm": se.get("model"),
+               # The pipeline is what `tnd pose` reports (eval's model_combined: the first sample's poses and the
+               # imprint's proposals, checked); "sample" the first sample's estimate alone (eval's model). Before
+               # 2026-11-29 this script reported the latter as the pipeline.
+               "pairs": totals["model"].n if "model" in totals else 0,
+               "pipeline_mm": mean.get("model_combined") or mean.get("model"),
+               "pipeline_se_mm": se.get("model_combined") or se.get("model"), "sample_mm": mean.get("model"),
                "baseline_mm": mean.get("baseline"), "baseline_checked_mm": mean.get("baseline_checked")}
         row["pipeline_over_baseline"] = row["pipeline_mm"] / row["baseline_mm"] if row["baseline_mm"] else None
         print(json.dumps(row), flush=True)
         rows.append(row)
     clean = next((r["pipeline_mm"] for r in rows if r["condition"] == "clean"), None)
-    print("\n| condition | imported | pairs | pipeline [mm] | threshold baseline | baseline + check | "
+    print("\n| condition | imported | pairs | pipeline [mm] | sample only | threshold baseline | baseline + check | "
           "pipeline / baseline | pipeline / clean |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         f = lambda v: "-" if v is None or v != v else f"{v:.2f}"
         vs_clean = r["pipeline_mm"] / clean if clean and r["pipeline_mm"] else None
         print(f"| {r['condition']} | {r['imported']} of {r['recordings']} | {r['pairs']} | "
-              f"{f(r['pipeline_mm'])} ± {f(r['pipeline_se_mm'])} | "
+              f"{f(r['pipeline_mm'])} ± {f(r['pipeline_se_mm'])} | {f(r['sample_mm'])} | "
               f"{f(r['baseline_mm'])} | {f(r['baseline_checked_mm'])} | {f(r['pipeline_over_baseline'])}x | "
               f"{f(vs_clean)}x |")
 

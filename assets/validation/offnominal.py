@@ -27,6 +27,8 @@ import random
 import subprocess
 import sys
 
+from pooled import Pooled, eval_once
+
 # name -> flags of the true sensor (the import's "true" mode passes them; the others do not).
 CONDITIONS = {
     "main": ["--inflation", "0.032", "--shadow-px", "28", "--noise-std", "0.0018"],
@@ -119,35 +121,28 @@ def main():
                     if r.returncode != 0:
                         print(f"{cond} {name} {mode}: import failed: {r.stderr.strip()[-300:]}", file=sys.stderr)
                         continue
-                out = ds + ".eval.json"
-                if not os.path.exists(out):
-                    # The records (each pair's estimate and posterior) feed `tnd posterior` (docs/uncertainty.md).
-                    r = run([a.tnd, "eval", "--data", ds, "--split", "unseen_objects", "--json", "--records",
-                             ds + ".records.jsonl"])
-                    with open(out, "w") as f:
-                        f.write(r.stdout.strip().splitlines()[-1] + "\n")
-                with open(out) as f:
-                    e = json.load(f)
-                for method in ("model", "baseline", "baseline_checked"):
-                    m = e.get(method) or {}
-                    p = m.get("position_mm") or {}
-                    if p.get("n"):
-                        t = totals[mode].setdefault(method, [0.0, 0])
-                        t[0] += p["mean"] * p["n"]
-                        t[1] += p["n"]
+                # The records (each pair's estimate and posterior) feed `tnd posterior` (docs/uncertainty.md).
+                e = eval_once(a.tnd, ds)
+                for method in ("model", "model_combined", "baseline", "baseline_checked"):
+                    totals[mode].setdefault(method, Pooled()).add((e.get(method) or {}).get("position_mm"))
         for mode, t in totals.items():
-            mean = {m: (s / n if n else float("nan")) for m, (s, n) in t.items()}
-            row = {"condition": cond, "mode": mode, "pairs": t.get("model", [0, 0])[1],
-                   "pipeline_mm": mean.get("model"), "baseline_mm": mean.get("baseline"),
+            mean = {m: p.mean() for m, p in t.items() if p.n}
+            row = {"condition": cond, "mode": mode, "pairs": t["model"].n if "model" in t else 0,
+                   # The pipeline is what `tnd pose` reports (eval's model_combined); "sample" the first sample's
+                   # estimate alone (eval's model), which this script reported as the pipeline before 2026-11-29.
+                   "pipeline_mm": mean.get("model_combined") or mean.get("model"), "sample_mm": mean.get("model"),
+                   "baseline_mm": mean.get("baseline"),
                    "baseline_checked_mm": mean.get("baseline_checked")}
             row["pipeline_over_baseline"] = row["pipeline_mm"] / row["baseline_mm"] if row["baseline_mm"] else None
             print(json.dumps(row), flush=True)
             rows.append(row)
-    print("\n| condition | import | pairs | pipeline [mm] | threshold baseline | baseline + check | pipeline / baseline |")
-    print("|---|---|---|---|---|---|---|")
+    print("\n| condition | import | pairs | pipeline [mm] | sample only | threshold baseline | baseline + check | "
+          "pipeline / baseline |")
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         f = lambda v: "-" if v is None or v != v else f"{v:.2f}"
-        print(f"| {r['condition']} | {r['mode']} | {r['pairs']} | {f(r['pipeline_mm'])} | {f(r['baseline_mm'])} | "
+        print(f"| {r['condition']} | {r['mode']} | {r['pairs']} | {f(r['pipeline_mm'])} | {f(r['sample_mm'])} | "
+              f"{f(r['baseline_mm'])} | "
               f"{f(r['baseline_checked_mm'])} | {f(r['pipeline_over_baseline'])}x |")
 
 
