@@ -12,6 +12,7 @@ mod architecture;
 mod dataset;
 mod dataset_import;
 mod dataset_objects;
+mod dataset_training;
 mod eval_loop;
 mod eval_metrics;
 mod fuzz_loaders;
