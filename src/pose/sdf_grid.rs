@@ -148,20 +148,23 @@ impl SdfGrid {
 
     #[inline]
     fn node(&self, i: usize, j: usize, k: usize) -> f64 {
-        let (bi, bj, bk) = (i / BLOCK, j / BLOCK, k / BLOCK);
-        let b = (bk * self.block_dims[1] + bj) * self.block_dims[0] + bi;
-        let block = self.blocks[b].get_or_init(|| self.sample_block(bi, bj, bk));
-        f64::from(block[((k % BLOCK) * BLOCK + j % BLOCK) * BLOCK + i % BLOCK])
+        let (b, at) = self.slot(i, j, k);
+        let block =
+            self.blocks[b].get_or_init(|| self.sample_block(i / BLOCK, j / BLOCK, k / BLOCK));
+        f64::from(block[at])
     }
 
     /// Node (i, j, k) if its block has been sampled (never samples one).
     fn node_if_sampled(&self, i: usize, j: usize, k: usize) -> Option<f64> {
-        let (bi, bj, bk) = (i / BLOCK, j / BLOCK, k / BLOCK);
-        let b = (bk * self.block_dims[1] + bj) * self.block_dims[0] + bi;
-        let block = self.blocks[b].get()?;
-        Some(f64::from(
-            block[((k % BLOCK) * BLOCK + j % BLOCK) * BLOCK + i % BLOCK],
-        ))
+        let (b, at) = self.slot(i, j, k);
+        self.blocks[b].get().map(|block| f64::from(block[at]))
+    }
+
+    /// Where node (i, j, k) is kept: its block's index and its place within the block (x fastest).
+    #[inline]
+    fn slot(&self, i: usize, j: usize, k: usize) -> (usize, usize) {
+        let b = ((k / BLOCK) * self.block_dims[1] + j / BLOCK) * self.block_dims[0] + i / BLOCK;
+        (b, ((k % BLOCK) * BLOCK + j % BLOCK) * BLOCK + i % BLOCK)
     }
 
     /// Whether `p_obj`, `d` metres from the surface, is inside, settled by a sampled corner of its cell: a node `n`
