@@ -1,6 +1,6 @@
 //! Real depth-camera frames: pixels without a return (NaN in 32FC1 and in numpy dumps, 0 in 16UC1) are missing data
 //! in every input path — MCAP, frame folders, `tnd pose`'s single frames, dataset import, tracking — and a membrane
-//! that drifts between no-contact stretches gets each contact the reference just before it. Truths: the same presses
+//! that drifts between no-contact stretches gets each contact the references around it blended by its time. Truths: the same presses
 //! recorded without the artefacts (the simulator's own frames), and the artefacts' definitions.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -132,7 +132,7 @@ fn no_returns_stored_as_nan_or_zero_are_missing_and_the_imprint_has_no_holes() {
 }
 
 #[test]
-fn a_drifting_membrane_gives_each_contact_the_reference_before_it() {
+fn a_drifting_membrane_gives_each_contact_the_references_around_it_blended_at_its_time() {
     // Three presses with no-contact stretches before, between and after them; the membrane deflates by 1.5 mm over
     // the recording, steadily. Truth: the same presses on a membrane that does not drift.
     let dir = tempfile::tempdir().unwrap();
@@ -169,23 +169,55 @@ fn a_drifting_membrane_gives_each_contact_the_reference_before_it() {
         ..drifting.clone()
     };
     let membrane_at = write("empty.mcap", &empty);
-    // The deepest frame of the first and of the last press: imprint against the stretch just before it, nearer the
-    // imprint against its own moment's membrane than against one reference for the whole recording (the median of
-    // its no-contact frames).
+    // The deepest frame of the first and of the last press: its imprint against the references of the stretches
+    // before and after it blended at its time, far nearer the imprint against its own moment's membrane than
+    // against the stretch before it alone, or against one reference for the whole recording (the median of its
+    // no-contact frames).
     for (press, deepest) in [(0, 5 + 3), (2, 5 + 2 * 12 + 3)] {
-        assert_eq!(of[deepest], press, "frame {deepest}");
+        let l = of[deepest];
+        assert_eq!((l.before, l.after), (press, press + 1), "frame {deepest}");
+        assert!(l.weight > 0.2 && l.weight < 0.8, "frame {deepest}: {l:?}");
         let s = &drift.signatures[deepest];
-        let truth = tactile_derender::sim::signature::imprint(&membrane_at.signatures[deepest], s);
+        let imprint = tactile_derender::sim::signature::imprint;
+        let truth = imprint(&membrane_at.signatures[deepest], s);
         let local = mean_abs_diff(&drift.imprints[deepest], &truth);
-        let global = mean_abs_diff(
-            &tactile_derender::sim::signature::imprint(&drift.reference, s),
-            &truth,
-        );
+        let before = mean_abs_diff(&imprint(&drift.stretches[press].reference, s), &truth);
+        let global = mean_abs_diff(&imprint(&drift.reference, s), &truth);
         assert!(
-            local < 0.8 * global,
-            "frame {deepest}: local {local}, one reference {global}"
+            local < 0.75 * before && before < global,
+            "frame {deepest}: blended {local}, stretch before {before}, one reference {global}"
         );
     }
+    // Written out as frames, a blended frame names its own reference file, and that file with the frame gives the
+    // frame's imprint as the recording was processed (the single-frame `tnd pose --signature F --reference R`).
+    let rec = Recording::open(&dir.path().join("drift.mcap"), &FolderOptions::default()).unwrap();
+    let stream = rec.depth_stream(None).unwrap().clone();
+    let folder = dir.path().join("frames");
+    let k = 5 + 3;
+    let rows = write_frames(
+        &rec,
+        &stream,
+        &drift,
+        &config.camera.native,
+        &[k],
+        &folder,
+        &mut |_, _| true,
+    )
+    .unwrap();
+    assert_eq!(rows[0].reference_file, format!("reference_for_{k:06}.npy"));
+    let read = |name: &str| {
+        let img = tactile_derender::io::npy::read_image(&folder.join(name)).unwrap();
+        tactile_derender::sensor::resample::to_model(&config.camera, &img).unwrap()
+    };
+    let y = tactile_derender::sim::signature::imprint(
+        &read(&rows[0].reference_file),
+        &read(&tactile_derender::recording::frames_out::frame_name(k)),
+    );
+    assert!(
+        mean_abs_diff(&y, &drift.imprints[k]) < 2e-5,
+        "{}",
+        mean_abs_diff(&y, &drift.imprints[k])
+    );
     // The same frames of the membrane that does not drift need no local reference.
     assert!(still.stretches.iter().all(|s| s.drift_m.abs() < 1e-4));
 }

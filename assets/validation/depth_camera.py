@@ -43,6 +43,7 @@ CONDITIONS = {
     "flying": ({"flying_jump_m": 0.005}, 0.0),
     "drift": ({}, -0.001),
     "tof": (TOF, -0.001),
+    "tof-nodrift": (TOF, 0.0),
     "tof-nan": (TOF, -0.001),
 }
 

@@ -116,7 +116,8 @@ pub struct RecordingImportReport {
     pub reference_frames: Vec<usize>,
     /// The membrane's largest drift between no-contact stretches, metres ([`crate::recording::drift`]).
     pub drift_m: f64,
-    /// Whether each pair's imprint is against the no-contact stretch before it (the drift exceeded the tolerance).
+    /// Whether each pair's imprint is against its own reference from the no-contact stretches around it (the drift
+    /// exceeded the tolerance).
     pub local_references: bool,
     pub skipped_no_contact: usize,
     pub skipped_no_pose: usize,
@@ -373,7 +374,7 @@ fn frame_records(
                 imprint: y.clone(),
                 target: t.target,
                 signature: processed.signatures[i].clone(),
-                reference: processed.reference_for(i).clone(),
+                reference: processed.reference_for(i).into_owned(),
                 mask: t.mask,
             };
             (record, t.press_fit_residual_m)

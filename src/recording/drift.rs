@@ -3,13 +3,15 @@
 //! the first press, between presses, after the last); each stretch's median frame is a reference, and its drift is
 //! how far the membrane's central half moved from the first stretch's (mean depth change, metres; positive: away
 //! from the camera, more inflated). When the stretches disagree by more than [`DRIFT_TOLERANCE_M`], each frame's
-//! imprint is taken against the stretch nearest before it instead of one reference for the whole recording.
+//! imprint is taken against the references of the stretches before and after it, blended by its time
+//! ([`LocalReference`]: a membrane that drifts steadily, as a slow leak or warming does), instead of one reference for
+//! the whole recording.
 
 use serde::Serialize;
 
 use crate::image::Image;
 
-/// Drift between no-contact stretches beyond which each contact gets the reference of the stretch nearest before it,
+/// Drift between no-contact stretches beyond which each contact gets its own reference from the stretches around it,
 /// metres (0.3 mm: a fifth of the signature's noise, and under the 1 mm at which the imprint's contact area starts to
 /// grow by whole rims of pixels at the 3 mm contact threshold).
 pub const DRIFT_TOLERANCE_M: f64 = 3e-4;
@@ -135,12 +137,81 @@ pub fn without_drift(y: &Image, shape: &[f32], measured: impl Fn(usize) -> bool)
     (out, a)
 }
 
-/// The stretch whose reference frame `frame` uses: the last one starting at or before it, else the first.
-pub fn nearest_before(stretches: &[QuietStretch], frame: usize) -> usize {
-    stretches
+/// How one frame's reference is made of the no-contact stretches' references: the membrane is taken to drift
+/// steadily between two stretches, so a frame between them gets their references blended by its time, and a frame
+/// before the first or after the last stretch that stretch's reference.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct LocalReference {
+    /// The stretch at or before the frame (the first one for frames before it).
+    pub before: usize,
+    /// The stretch after the frame (`before` itself past the last stretch).
+    pub after: usize,
+    /// Weight of `after`'s reference, 0..=1: how far the frame's time is from `before`'s reference frames towards
+    /// `after`'s.
+    pub weight: f64,
+}
+
+impl LocalReference {
+    /// The reference this describes, from `stretches` (`None` if it names a stretch that is not there).
+    pub fn blend<'a>(&self, stretches: &'a [QuietStretch]) -> Option<std::borrow::Cow<'a, Image>> {
+        let a = &stretches.get(self.before)?.reference;
+        let b = &stretches.get(self.after)?.reference;
+        if self.after == self.before || self.weight <= 0.0 {
+            return Some(std::borrow::Cow::Borrowed(a));
+        }
+        if self.weight >= 1.0 {
+            return Some(std::borrow::Cow::Borrowed(b));
+        }
+        Some(std::borrow::Cow::Owned(blend(a, b, self.weight)))
+    }
+}
+
+/// `a` and `b` (depth frames, 0 where not measured) blended as `(1 − weight)·a + weight·b`; where one of them did not
+/// measure a pixel, the other's value.
+pub fn blend(a: &Image, b: &Image, weight: f64) -> Image {
+    let w = weight as f32;
+    a.zip_map(b, |x, y| match (x > 0.0, y > 0.0) {
+        (true, true) => x + w * (y - x),
+        (true, false) => x,
+        (false, true) => y,
+        (false, false) => 0.0,
+    })
+}
+
+/// Per frame (time stamps `stamps_ns`), its [`LocalReference`] among `stretches` (in order): the stretches' times
+/// are the mean time of their reference frames.
+pub fn local_references(stretches: &[QuietStretch], stamps_ns: &[u64]) -> Vec<LocalReference> {
+    let t0 = stamps_ns.first().copied().unwrap_or(0);
+    let time = |k: usize| {
+        stamps_ns
+            .get(k)
+            .map_or(0.0, |&t| t.saturating_sub(t0) as f64)
+    };
+    let centres: Vec<f64> = stretches
         .iter()
-        .rposition(|s| s.first <= frame)
-        .unwrap_or(0)
+        .map(|s| {
+            let n = s.reference_frames.len().max(1) as f64;
+            s.reference_frames.iter().map(|&k| time(k)).sum::<f64>() / n
+        })
+        .collect();
+    (0..stamps_ns.len())
+        .map(|k| {
+            let t = time(k);
+            let before = centres.iter().rposition(|&c| c <= t).unwrap_or(0);
+            match centres.get(before + 1) {
+                Some(&next) if centres[before] <= t && next > centres[before] => LocalReference {
+                    before,
+                    after: before + 1,
+                    weight: ((t - centres[before]) / (next - centres[before])).clamp(0.0, 1.0),
+                },
+                _ => LocalReference {
+                    before,
+                    after: before,
+                    weight: 0.0,
+                },
+            }
+        })
+        .collect()
 }
 
 /// The largest drift between any two stretches, metres (0 with one stretch): the spread of their drifts.
@@ -169,7 +240,7 @@ mod tests {
     }
 
     #[test]
-    fn drift_is_the_central_halfs_mean_change_and_contacts_take_the_stretch_before() {
+    fn drift_is_the_central_halfs_mean_change() {
         // A dome: deeper in the middle. Inflated by 1 mm at the middle, 0 at the rim.
         let dome = Image::from_vec(5, 1, vec![0.06, 0.07, 0.08, 0.07, 0.06]).unwrap();
         let mut inflated = dome.clone();
@@ -188,11 +259,6 @@ mod tests {
             reference: dome.clone(),
         };
         let stretches = [s(0, 4), s(10, 14), s(20, 24)];
-        let of: Vec<usize> = [0, 3, 7, 12, 16, 30]
-            .iter()
-            .map(|&k| nearest_before(&stretches, k))
-            .collect();
-        assert_eq!(of, vec![0, 0, 0, 1, 1, 2]);
         assert!((largest_drift(&stretches) - 2e-3).abs() < 1e-12);
         // Two later stretches 0.2 mm either side of the first are 0.4 mm apart.
         let mut apart = [s(0, 4), s(10, 14), s(20, 24)];
@@ -229,5 +295,51 @@ mod tests {
         let (rest, a) = without_drift(&pressed, &shape, |i| shape[i] < OUTER_PROFILE);
         assert!((a - 0.0015).abs() < 1e-6, "{a}");
         assert!((rest.data[10] - 0.004).abs() < 1e-6, "{}", rest.data[10]);
+    }
+
+    #[test]
+    fn a_frame_between_two_stretches_blends_their_references_by_its_time() {
+        // Stretches at frames 0-3 and 10-13 (reference frames 2, 3 and 12, 13: times 2.5 and 12.5 at 1 frame/s);
+        // a membrane 90 mm deep in the first, 89 mm in the second; pixel 1 not measured in the second, pixel 2 in
+        // neither.
+        let stretch = |first: usize, frames: Vec<usize>, depth: f32| QuietStretch {
+            first,
+            last: first + 3,
+            reference_frames: frames,
+            drift_m: 0.0,
+            reference: Image::from_vec(
+                3,
+                1,
+                vec![depth, if first == 0 { depth } else { 0.0 }, 0.0],
+            )
+            .unwrap(),
+        };
+        let stretches = [
+            stretch(0, vec![2, 3], 0.090),
+            stretch(10, vec![12, 13], 0.089),
+        ];
+        let stamps: Vec<u64> = (0..16).map(|k| 1_000 + k * 1_000_000_000).collect();
+        let of = local_references(&stretches, &stamps);
+        let at = |k: usize| (of[k].before, of[k].after, of[k].weight);
+        assert_eq!(
+            at(0),
+            (0, 0, 0.0),
+            "before the first stretch: its reference"
+        );
+        assert_eq!((at(5).0, at(5).1), (0, 1));
+        assert!((at(5).2 - 0.25).abs() < 1e-9, "{:?}", at(5));
+        assert!((at(10).2 - 0.75).abs() < 1e-9);
+        assert_eq!(at(14), (1, 1, 0.0), "after the last stretch: its reference");
+        let r = of[5].blend(&stretches).unwrap();
+        assert!((r.data[0] - 0.08975).abs() < 1e-7, "{}", r.data[0]);
+        assert_eq!(
+            r.data[1], 0.090,
+            "measured in one reference only: that one's value"
+        );
+        assert_eq!(r.data[2], 0.0, "measured in neither: missing");
+        assert_eq!(
+            of[14].blend(&stretches).unwrap().data,
+            stretches[1].reference.data
+        );
     }
 }

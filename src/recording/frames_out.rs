@@ -33,20 +33,30 @@ pub struct FrameFile {
     /// Whether the frame is one the reference was made of (no contact).
     pub reference: bool,
     /// The reference file its imprint is taken against: [`REFERENCE_NPY`], or with a drifting membrane the
-    /// reference of the no-contact stretch before it (`reference_<first frame>.npy`).
+    /// reference of its no-contact stretch (`reference_<first frame>.npy`) or its own blend of the stretches'
+    /// before and after it (`reference_for_<frame>.npy`).
     pub reference_file: String,
 }
 
-/// The reference file of stretch `s` of `processed`, or [`REFERENCE_NPY`].
+/// The reference file of frame `frame` of `processed`: [`REFERENCE_NPY`], or with a drifting membrane the reference
+/// of the no-contact stretch it uses (`reference_<first frame>.npy`), or, between two stretches, its own blend of
+/// theirs (`reference_for_<frame>.npy`, [`super::drift::LocalReference`]).
 fn reference_file(processed: &ProcessedRecording, frame: usize) -> String {
-    match (&processed.reference_of, processed.stretches.is_empty()) {
-        (Some(of), false) => processed
-            .stretches
-            .get(of[frame])
-            .map_or(REFERENCE_NPY.to_string(), |s| {
-                format!("reference_{:06}.npy", s.first)
-            }),
-        _ => REFERENCE_NPY.to_string(),
+    let local = processed.reference_of.as_ref().and_then(|of| of.get(frame));
+    match local {
+        Some(l) if l.after != l.before && l.weight > 0.0 && l.weight < 1.0 => {
+            format!("reference_for_{frame:06}.npy")
+        }
+        Some(l) => {
+            let s = if l.weight >= 1.0 { l.after } else { l.before };
+            processed
+                .stretches
+                .get(s)
+                .map_or(REFERENCE_NPY.to_string(), |s| {
+                    format!("reference_{:06}.npy", s.first)
+                })
+        }
+        None => REFERENCE_NPY.to_string(),
     }
 }
 
@@ -121,24 +131,8 @@ pub fn write_frames(
         }
     }
     let total = frames.len() + reference_sets.iter().map(|(_, f)| f.len()).sum::<usize>();
-    let mut rows = Vec::with_capacity(frames.len());
-    for (n, &k) in frames.iter().enumerate() {
-        let f = rec.depth_frame(stream, k, native)?;
-        let file = write(&frame_name(k), &with_nan(&f.depth))?;
-        rows.push(FrameFile {
-            frame: k,
-            file,
-            stamp_ns: f.stamp_ns,
-            contact_px: processed.contact_px[k],
-            measured_px: f.depth.data.iter().filter(|&&d| d > 0.0).count(),
-            reference: processed.reference_frames.contains(&k),
-            reference_file: reference_file(processed, k),
-        });
-        if !progress(n + 1, total) {
-            return Err(RecordingError::Cancelled);
-        }
-    }
-    let mut done = frames.len();
+    let mut done = 0;
+    let mut medians = Vec::with_capacity(reference_sets.len());
     for (name, set) in &reference_sets {
         let mut refs = Vec::with_capacity(set.len());
         for &k in set {
@@ -148,8 +142,43 @@ pub fn write_frames(
                 return Err(RecordingError::Cancelled);
             }
         }
-        if let Some(r) = median_native(&refs) {
-            write(name, &with_nan(&r))?;
+        let median = median_native(&refs);
+        if let Some(r) = &median {
+            write(name, &with_nan(r))?;
+        }
+        medians.push(median);
+    }
+    let mut rows = Vec::with_capacity(frames.len());
+    for &k in frames {
+        let f = rec.depth_frame(stream, k, native)?;
+        let file = write(&frame_name(k), &with_nan(&f.depth))?;
+        let reference_file = reference_file(processed, k);
+        if reference_file.starts_with("reference_for_") {
+            // The stretches' native references (after the recording's own, first in `medians`) blended as the
+            // frame's model-resolution reference is.
+            let local = processed.reference_of.as_ref().and_then(|of| of.get(k));
+            if let Some(l) = local {
+                let pair = (medians.get(l.before + 1), medians.get(l.after + 1));
+                if let (Some(Some(a)), Some(Some(b))) = pair {
+                    write(
+                        &reference_file,
+                        &with_nan(&super::drift::blend(a, b, l.weight)),
+                    )?;
+                }
+            }
+        }
+        rows.push(FrameFile {
+            frame: k,
+            file,
+            stamp_ns: f.stamp_ns,
+            contact_px: processed.contact_px[k],
+            measured_px: f.depth.data.iter().filter(|&&d| d > 0.0).count(),
+            reference: processed.reference_frames.contains(&k),
+            reference_file,
+        });
+        done += 1;
+        if !progress(done, total) {
+            return Err(RecordingError::Cancelled);
         }
     }
     let mut csv =

@@ -86,9 +86,10 @@ pub struct ProcessedRecording {
     /// The runs of no-contact frames, each with its own reference and drift ([`super::drift`]; empty with a
     /// reference frame given).
     pub stretches: Vec<QuietStretch>,
-    /// Per frame, the stretch whose reference its imprint was taken against; `None` where the stretches agree
-    /// within [`super::drift::DRIFT_TOLERANCE_M`] and every imprint is against [`Self::reference`].
-    pub reference_of: Option<Vec<usize>>,
+    /// Per frame, how its reference is made of the stretches' references (the membrane drifting steadily between
+    /// them); `None` where the stretches agree within [`super::drift::DRIFT_TOLERANCE_M`] and every imprint is
+    /// against [`Self::reference`].
+    pub reference_of: Option<Vec<super::drift::LocalReference>>,
     /// Y = R − S per frame, metres ([`crate::sim::signature::imprint`]: filled in where only S is missing, 0 where R
     /// is).
     pub imprints: Vec<Image>,
@@ -138,13 +139,14 @@ impl ProcessedRecording {
         self.imprints.is_empty()
     }
 
-    /// The reference frame `frame`'s imprint was taken against.
-    pub fn reference_for(&self, frame: usize) -> &Image {
-        self.reference_of
-            .as_ref()
-            .and_then(|of| of.get(frame))
-            .and_then(|&s| self.stretches.get(s))
-            .map_or(&self.reference, |s| &s.reference)
+    /// The reference frame `frame`'s imprint was taken against: [`Self::reference`], or with a drifting membrane
+    /// its stretches' references blended at the frame's time ([`super::drift::LocalReference`]).
+    pub fn reference_for(&self, frame: usize) -> std::borrow::Cow<'_, Image> {
+        let local = self.reference_of.as_ref().and_then(|of| of.get(frame));
+        match local.map(|l| l.blend(&self.stretches)) {
+            Some(Some(r)) => r,
+            _ => std::borrow::Cow::Borrowed(&self.reference),
+        }
     }
 
     /// The membrane's largest drift between no-contact stretches, metres ([`super::drift`]).
@@ -271,11 +273,7 @@ pub fn process(
     let reference = median_image(&refs);
     let reference_of = (stretches.len() >= 2
         && super::drift::largest_drift(&stretches) > super::drift::DRIFT_TOLERANCE_M)
-        .then(|| {
-            (0..n)
-                .map(|k| super::drift::nearest_before(&stretches, k))
-                .collect::<Vec<_>>()
-        });
+        .then(|| super::drift::local_references(&stretches, &stamps_ns));
     let mut processed = ProcessedRecording {
         stream: stream.name.clone(),
         source_size,
@@ -292,9 +290,9 @@ pub fn process(
     let (mut imprints, mut contact_px, mut measured_px) = (Vec::new(), Vec::new(), Vec::new());
     for (k, s) in processed.signatures.iter().enumerate() {
         let r = processed.reference_for(k);
-        let y = imprint(r, s);
+        let y = imprint(&r, s);
         contact_px.push(contact_pixels(&y, config.contact_threshold_m));
-        measured_px.push(measured_pixels(r, s));
+        measured_px.push(measured_pixels(&r, s));
         imprints.push(y);
     }
     processed.imprints = imprints;

@@ -142,7 +142,7 @@ pub fn tell_drift(
     };
     eprintln!(
         "{}{}: the membrane drifted up to {:.2} mm between no-contact stretches{listed}; each frame's imprint is \
-         taken against the stretch just before it",
+         taken against the references before and after it, blended by its time",
         if drift > DRIFT_WARNING_M { "warning: " } else { "" },
         from.display(),
         drift * 1e3,

@@ -156,7 +156,7 @@ fn summary(ui: &mut egui::Ui, loaded: &LoadedRecording, resolution: (usize, usiz
             ui.visuals().warn_fg_color,
             format!(
                 "the membrane drifted up to {:.2} mm between no-contact stretches: each frame's imprint is taken \
-                 against the stretch just before it",
+                 against the references before and after it, blended by its time",
                 p.drift_m() * 1e3
             ),
         );
