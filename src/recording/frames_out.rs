@@ -42,22 +42,24 @@ pub struct FrameFile {
 /// of the no-contact stretch it uses (`reference_<first frame>.npy`), or, between two stretches, its own blend of
 /// theirs (`reference_for_<frame>.npy`, [`super::drift::LocalReference`]).
 fn reference_file(processed: &ProcessedRecording, frame: usize) -> String {
-    let local = processed.reference_of.as_ref().and_then(|of| of.get(frame));
-    match local {
-        Some(l) if l.after != l.before && l.weight > 0.0 && l.weight < 1.0 => {
-            format!("reference_for_{frame:06}.npy")
-        }
-        Some(l) => {
-            let s = if l.weight >= 1.0 { l.after } else { l.before };
-            processed
-                .stretches
-                .get(s)
-                .map_or(REFERENCE_NPY.to_string(), |s| {
-                    format!("reference_{:06}.npy", s.first)
-                })
-        }
+    if blended(processed, frame).is_some() {
+        return format!("reference_for_{frame:06}.npy");
+    }
+    let stretch = processed
+        .reference_of
+        .as_ref()
+        .and_then(|of| of.get(frame))
+        .map(|l| if l.weight >= 1.0 { l.after } else { l.before });
+    match stretch.and_then(|s| processed.stretches.get(s)) {
+        Some(s) => format!("reference_{:06}.npy", s.first),
         None => REFERENCE_NPY.to_string(),
     }
+}
+
+/// Frame `frame`'s blend of two stretches' references, when it is strictly between them.
+fn blended(processed: &ProcessedRecording, frame: usize) -> Option<super::drift::LocalReference> {
+    let l = *processed.reference_of.as_ref()?.get(frame)?;
+    (l.after != l.before && l.weight > 0.0 && l.weight < 1.0).then_some(l)
 }
 
 /// The file name of frame `k`.
@@ -153,18 +155,15 @@ pub fn write_frames(
         let f = rec.depth_frame(stream, k, native)?;
         let file = write(&frame_name(k), &with_nan(&f.depth))?;
         let reference_file = reference_file(processed, k);
-        if reference_file.starts_with("reference_for_") {
+        if let Some(l) = blended(processed, k) {
             // The stretches' native references (after the recording's own, first in `medians`) blended as the
             // frame's model-resolution reference is.
-            let local = processed.reference_of.as_ref().and_then(|of| of.get(k));
-            if let Some(l) = local {
-                let pair = (medians.get(l.before + 1), medians.get(l.after + 1));
-                if let (Some(Some(a)), Some(Some(b))) = pair {
-                    write(
-                        &reference_file,
-                        &with_nan(&super::drift::blend(a, b, l.weight)),
-                    )?;
-                }
+            let pair = (medians.get(l.before + 1), medians.get(l.after + 1));
+            if let (Some(Some(a)), Some(Some(b))) = pair {
+                write(
+                    &reference_file,
+                    &with_nan(&super::drift::blend(a, b, l.weight)),
+                )?;
             }
         }
         rows.push(FrameFile {
