@@ -11,8 +11,10 @@ files (0 where no return).
 
 Poses, presses and seeds come from --seed (never tuned on). Prints one JSON line per condition and a Markdown table:
 pairs, mean position error of the pipeline, of the threshold baseline and of the baseline with the same signature
-check (mm, pooled over every pair; ± one standard error of the pipeline's mean), pipeline / baseline, and pipeline /
-its error on the clean recordings. Each evaluation's per-pair records are kept beside it (`*.records.jsonl`).
+check (mm, pooled over every pair; ± one standard error of the pipeline's mean), pipeline / baseline, pipeline /
+its error on the clean recordings, and — with `clean` first among the conditions — the same on the frames both
+conditions imported (pairs keyed by object and recording frame): the means' ratio, the medians, and the typical
+pair's ratio (geometric mean). Each evaluation's per-pair records are kept beside it (`*.records.jsonl`).
 
 Usage:
   python3 assets/validation/depth_camera.py --tnd target/release/tnd --objects data/real_meshes --out data/depthcam \
@@ -28,7 +30,7 @@ import random
 import subprocess
 import sys
 
-from pooled import Pooled, eval_once
+from pooled import Pooled, eval_once, records_by_frame, same_frames
 
 TOF = {"noise_exponent": 2.0, "dropout": 0.02, "edge_missing_px": 2.0, "flying_jump_m": 0.005,
        "fixed_pattern_m": 3e-4}
@@ -79,6 +81,7 @@ def main():
         rng = random.Random(f"{a.seed}")  # the same presses in every condition
         totals = {}
         failures = []
+        imported = []
         for k, name in enumerate(names):
             x, y = rng.uniform(-0.004, 0.004), rng.uniform(-0.004, 0.004)
             theta, press = rng.uniform(0, 2 * math.pi), rng.uniform(0.004, 0.008)
@@ -113,6 +116,7 @@ def main():
                     print(f"{cond} {name}: import failed: {r.stderr.strip()[-300:]}", file=sys.stderr)
                     continue
             e = eval_once(a.tnd, ds)
+            imported.append(ds)
             for method in ("model", "model_combined", "baseline", "baseline_checked"):
                 totals.setdefault(method, Pooled()).add((e.get(method) or {}).get("position_mm"))
         mean = {m: t.mean() if t.n else None for m, t in totals.items()}
@@ -126,19 +130,29 @@ def main():
                "pipeline_se_mm": se.get("model_combined") or se.get("model"), "sample_mm": mean.get("model"),
                "baseline_mm": mean.get("baseline"), "baseline_checked_mm": mean.get("baseline_checked")}
         row["pipeline_over_baseline"] = row["pipeline_mm"] / row["baseline_mm"] if row["baseline_mm"] else None
-        print(json.dumps(row), flush=True)
+        # The same frames in the clean condition (run first): what the artefacts cost on identical presses.
+        row["_records"] = records_by_frame(imported)
+        clean_records = next((r["_records"] for r in rows if r["condition"] == "clean"), None)
+        row["same_frames"] = same_frames(clean_records, row["_records"]) if clean_records else None
+        print(json.dumps({k: v for k, v in row.items() if not k.startswith("_")}), flush=True)
         rows.append(row)
     clean = next((r["pipeline_mm"] for r in rows if r["condition"] == "clean"), None)
     print("\n| condition | imported | pairs | pipeline [mm] | sample only | threshold baseline | baseline + check | "
-          "pipeline / baseline | pipeline / clean |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "pipeline / baseline | pipeline / clean | same frames: pairs, pipeline / clean, median vs clean, typical pair |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    def same(s):
+        if not s:
+            return "-"
+        return (f"{s['pairs']}, {s['mm']:.2f} / {s['clean_mm']:.2f} ({s['ratio']:.2f}x), {s['median_mm']:.2f} vs "
+                f"{s['clean_median_mm']:.2f}, {s['typical_ratio']:.2f}x")
+
     for r in rows:
         f = lambda v: "-" if v is None or v != v else f"{v:.2f}"
         vs_clean = r["pipeline_mm"] / clean if clean and r["pipeline_mm"] else None
         print(f"| {r['condition']} | {r['imported']} of {r['recordings']} | {r['pairs']} | "
               f"{f(r['pipeline_mm'])} ± {f(r['pipeline_se_mm'])} | {f(r['sample_mm'])} | "
               f"{f(r['baseline_mm'])} | {f(r['baseline_checked_mm'])} | {f(r['pipeline_over_baseline'])}x | "
-              f"{f(vs_clean)}x |")
+              f"{f(vs_clean)}x | {same(r['same_frames'])} |")
 
 
 if __name__ == "__main__":

@@ -47,3 +47,40 @@ class Pooled:
             return float("nan")
         m = self.mean()
         return math.sqrt(max(self.sum_sq / self.n - m * m, 0.0) / max(self.n - 1, 1))
+
+
+def records_by_frame(datasets):
+    """The pairs of imported recordings' `tnd eval` records keyed by (object, recording frame): each dataset
+    `NAME.data` beside its `NAME.data.records.jsonl`, its `frames.csv` mapping a pair's index to the frame. Keyed so,
+    two conditions' pairs are the same frames even where their contact frames differ (pair indices then do not)."""
+    out = {}
+    for ds in datasets:
+        rec, frames = ds + ".records.jsonl", os.path.join(ds, "frames.csv")
+        if not (os.path.exists(rec) and os.path.exists(frames)):
+            continue
+        with open(frames) as f:
+            frame_of = {int(r.split(",")[0]): int(r.split(",")[1]) for r in f.read().splitlines()[1:] if r}
+        name = os.path.basename(ds).rsplit(".data", 1)[0]
+        with open(rec) as f:
+            for line in f:
+                row = json.loads(line)
+                if "record" in row and row["index"] in frame_of:
+                    out[(name, frame_of[row["index"]])] = row["record"]
+    return out
+
+
+def same_frames(base, other):
+    """`other` against `base` (records_by_frame) on the frames both hold: pairs, the pipeline's mean and median
+    position error in each (mm), the ratio of the means, and the geometric mean of the per-pair ratio of
+    (error + 0.05 mm): the typical pair rather than the tails."""
+    def err(r):
+        return ((r.get("model_combined") or {}).get("pose") or {}).get("position_mm")
+    pairs = [(err(base[k]), err(other[k])) for k in base if k in other]
+    pairs = [(a, b) for a, b in pairs if a is not None and b is not None]
+    if not pairs:
+        return None
+    a, b = [p[0] for p in pairs], [p[1] for p in pairs]
+    mid = lambda v: sorted(v)[len(v) // 2] if len(v) % 2 else sum(sorted(v)[len(v) // 2 - 1:len(v) // 2 + 1]) / 2
+    geo = math.exp(sum(math.log((y + 0.05) / (x + 0.05)) for x, y in pairs) / len(pairs))
+    return {"pairs": len(pairs), "clean_mm": sum(a) / len(a), "mm": sum(b) / len(b), "ratio": sum(b) / sum(a),
+            "clean_median_mm": mid(a), "median_mm": mid(b), "typical_ratio": geo}
