@@ -202,6 +202,28 @@ fn imported_recording_has_the_true_presses_and_scores_perfectly_with_the_ground_
     .unwrap();
     assert_eq!(calls, seq.presses.len());
     assert_eq!(report.frames, seq.presses.len());
+    // With a minimum contact above every frame's, the one-line error names the largest contact and what takes it.
+    let mut strict = ic.clone();
+    strict.min_contact_px = 100_000;
+    let err = import_recording(
+        &path,
+        &dir.path().join("none"),
+        &config,
+        &ObjectSet::builtin(),
+        &strict,
+        &mut |_, _| true,
+    )
+    .unwrap_err()
+    .to_string();
+    let peak = (0..seq.presses.len())
+        .max_by(|&a, &b| seq.presses[a].total_cmp(&seq.presses[b]))
+        .unwrap();
+    assert!(
+        err.contains("no frame became a pair")
+            && err.contains(&format!("the largest contact is frame {peak}'s"))
+            && err.contains("--min-contact-px"),
+        "{err}"
+    );
     assert!(report.written.pairs >= 8, "{report:?}");
     assert_eq!(report.press_estimated, report.written.pairs);
     let ds = Dataset::open(&out).unwrap();

@@ -197,12 +197,13 @@ pub fn import_recording(
             path: from.to_path_buf(),
             message: format!(
                 "no frame became a pair: {} frames without contact (< {} px over {} mm), \
-                 {} without a pose, {} with too few pixels that have a return",
+                 {} without a pose, {} with too few pixels that have a return{}",
                 chosen.skipped_no_contact,
                 config.min_contact_px,
                 config.process.contact_threshold_m * 1e3,
                 chosen.skipped_no_pose,
-                chosen.skipped_missing.len()
+                chosen.skipped_missing.len(),
+                largest_contact_hint(&processed.contact_px, config.min_contact_px)
             ),
         });
     }
@@ -320,6 +321,21 @@ impl ChosenFrames {
             }
         }
         chosen
+    }
+}
+
+/// Where frames were skipped for too small a contact: the recording's largest contact (frame and pixels over the
+/// threshold) and the options that would take it in, so that a light press is not a dead end.
+fn largest_contact_hint(contact_px: &[usize], min_contact_px: usize) -> String {
+    match contact_px.iter().enumerate().max_by_key(|&(_, &px)| px) {
+        Some((k, &px)) if px > 0 && px < min_contact_px => format!(
+            "; the largest contact is frame {k}'s {px} px (a light press: lower --contact-threshold or \
+             --min-contact-px to take it in)"
+        ),
+        Some((k, &px)) if px > 0 => format!(
+            "; the largest contact is frame {k}'s {px} px (was it left out by --every or --frames?)"
+        ),
+        _ => String::new(),
     }
 }
 
