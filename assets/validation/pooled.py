@@ -73,8 +73,8 @@ def same_frames(base, other):
     """`other` against `base` (records_by_frame) on the frames both hold: pairs, the pipeline's mean and median
     position error in each (mm), the ratio of the means, and the geometric mean of the per-pair ratio of
     (error + 0.05 mm): the typical pair rather than the tails."""
-    def err(r):
-        return ((r.get("model_combined") or {}).get("pose") or {}).get("position_mm")
+    def err(r):  # the pipeline; records without the signature check have only the sample's estimate
+        return ((r.get("model_combined") or r.get("model") or {}).get("pose") or {}).get("position_mm")
     pairs = [(err(base[k]), err(other[k])) for k in base if k in other]
     pairs = [(a, b) for a, b in pairs if a is not None and b is not None]
     if not pairs:
@@ -82,5 +82,6 @@ def same_frames(base, other):
     a, b = [p[0] for p in pairs], [p[1] for p in pairs]
     mid = lambda v: sorted(v)[len(v) // 2] if len(v) % 2 else sum(sorted(v)[len(v) // 2 - 1:len(v) // 2 + 1]) / 2
     geo = math.exp(sum(math.log((y + 0.05) / (x + 0.05)) for x, y in pairs) / len(pairs))
-    return {"pairs": len(pairs), "clean_mm": sum(a) / len(a), "mm": sum(b) / len(b), "ratio": sum(b) / sum(a),
+    return {"pairs": len(pairs), "clean_mm": sum(a) / len(a), "mm": sum(b) / len(b),
+            "ratio": sum(b) / sum(a) if sum(a) > 0 else float("nan"),
             "clean_median_mm": mid(a), "median_mm": mid(b), "typical_ratio": geo}

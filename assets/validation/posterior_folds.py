@@ -23,7 +23,7 @@ def records(path):
     """The settings line and the record lines of one records file."""
     with open(path) as f:
         lines = [json.loads(line) for line in f if line.strip()]
-    return [l for l in lines if "record" not in l], [l for l in lines if "record" in l]
+    return [l for l in lines if "settings" in l], [l for l in lines if "record" in l]
 
 
 def main():
@@ -55,10 +55,12 @@ def main():
         fit = os.path.join(a.out, f"fold{k}.json")
         if os.path.exists(fit):
             os.remove(fit)
-        subprocess.run([a.tnd, "posterior", "-q", "--method", "combined", "--json", "--force", "--fit", fit,
-                        "--records", *parts["fit"]], check=True, capture_output=True)
+        fitted = subprocess.run([a.tnd, "posterior", "-q", "--method", "combined", "--json", "--force", "--fit",
+                                 fit, "--records", *parts["fit"]], capture_output=True, text=True)
         r = subprocess.run([a.tnd, "posterior", "-q", "--method", "combined", "--json", "--config", fit,
-                            "--records", *parts["check"]], check=True, capture_output=True, text=True)
+                            "--records", *parts["check"]], capture_output=True, text=True)
+        if fitted.returncode != 0 or r.returncode != 0:
+            sys.exit(f"fold {k}: tnd posterior failed: {(fitted.stderr + r.stderr).strip()[-1000:]}")
         for line in r.stdout.splitlines():
             row = json.loads(line)
             n = row["coverage"]["pairs"]
@@ -68,12 +70,15 @@ def main():
             p["pairs"] += n
             p["inside"] = [s + n * v for s, v in zip(p["inside"], row["coverage"]["inside"])]
             p["wrong"] += row["coverage"]["confidently_wrong"]
-            p["nll"] += n * row["reliability"]["mean_nll"]
+            m = row["reliability"]["pairs"]  # the mean NLL is over the pairs with a posterior
+            p["nll_pairs"] = p.get("nll_pairs", 0) + m
+            p["nll"] += m * row["reliability"]["mean_nll"]
     print("| contact | pairs | inside 50 / 90 / 95 % | mean NLL | confidently wrong |", file=sys.stderr)
     print("| --- | --- | --- | --- | --- |", file=sys.stderr)
     for contact, p in pooled.items():
         n = p["pairs"]
-        row = {"contact": contact, "pairs": n, "inside": [v / n for v in p["inside"]], "mean_nll": p["nll"] / n,
+        row = {"contact": contact, "pairs": n, "inside": [v / n for v in p["inside"]],
+               "mean_nll": p["nll"] / max(p.get("nll_pairs", 0), 1),
                "confidently_wrong": p["wrong"]}
         print(json.dumps(row))
         inside = " / ".join(f"{100 * v:.0f}" for v in row["inside"])

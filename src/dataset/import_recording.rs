@@ -203,7 +203,7 @@ pub fn import_recording(
                 config.process.contact_threshold_m * 1e3,
                 chosen.skipped_no_pose,
                 chosen.skipped_missing.len(),
-                largest_contact_hint(&processed.contact_px, config.min_contact_px)
+                largest_contact_hint(&processed, config)
             ),
         });
     }
@@ -326,17 +326,25 @@ impl ChosenFrames {
 
 /// Where frames were skipped for too small a contact: the recording's largest contact (frame and pixels over the
 /// threshold) and the options that would take it in, so that a light press is not a dead end.
-fn largest_contact_hint(contact_px: &[usize], min_contact_px: usize) -> String {
-    match contact_px.iter().enumerate().max_by_key(|&(_, &px)| px) {
-        Some((k, &px)) if px > 0 && px < min_contact_px => format!(
-            "; the largest contact is frame {k}'s {px} px (a light press: lower --contact-threshold or \
-             --min-contact-px to take it in)"
-        ),
-        Some((k, &px)) if px > 0 => format!(
-            "; the largest contact is frame {k}'s {px} px (was it left out by --every or --frames?)"
-        ),
-        _ => String::new(),
-    }
+fn largest_contact_hint(processed: &ProcessedRecording, config: &RecordingImportConfig) -> String {
+    let largest = processed
+        .contact_px
+        .iter()
+        .enumerate()
+        .max_by_key(|&(_, &px)| px);
+    let Some((k, &px)) = largest.filter(|&(_, &px)| px > 0) else {
+        return String::new();
+    };
+    let why = if px < config.min_contact_px {
+        "a light press: lower --contact-threshold or --min-contact-px to take it in".to_string()
+    } else if k % config.every != 0 {
+        format!("left out by --every {}", config.every)
+    } else if let Some(why) = processed.unusable(k) {
+        why
+    } else {
+        "no pose recorded near its time (--poses, --pose-topic)".to_string()
+    };
+    format!("; the largest contact is frame {k}'s {px} px ({why})")
 }
 
 /// Set the tactile-shadow width of the calibration `cal` from the contact frames `todo` of `processed` with their

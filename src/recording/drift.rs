@@ -142,9 +142,10 @@ pub fn without_drift(y: &Image, shape: &[f32], measured: impl Fn(usize) -> bool)
 /// before the first or after the last stretch that stretch's reference.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct LocalReference {
-    /// The stretch at or before the frame (the first one for frames before it).
+    /// The last stretch whose time (the mean time of its reference frames) is at or before the frame's (the first
+    /// stretch for frames before every stretch's time).
     pub before: usize,
-    /// The stretch after the frame (`before` itself past the last stretch).
+    /// The next stretch (`before` itself for frames before the first stretch's time or after the last's).
     pub after: usize,
     /// Weight of `after`'s reference, 0..=1: how far the frame's time is from `before`'s reference frames towards
     /// `after`'s.
@@ -179,13 +180,20 @@ pub fn blend(a: &Image, b: &Image, weight: f64) -> Image {
 }
 
 /// Per frame (time stamps `stamps_ns`), its [`LocalReference`] among `stretches` (in order): the stretches' times
-/// are the mean time of their reference frames.
+/// are the mean time of their reference frames. Stamps that do not increase through the recording (repeated, or
+/// out of order) are not a clock: the frames' numbers are used instead.
 pub fn local_references(stretches: &[QuietStretch], stamps_ns: &[u64]) -> Vec<LocalReference> {
     let t0 = stamps_ns.first().copied().unwrap_or(0);
+    let clock =
+        stamps_ns.windows(2).all(|w| w[0] <= w[1]) && stamps_ns.last().is_some_and(|&t| t > t0);
     let time = |k: usize| {
-        stamps_ns
-            .get(k)
-            .map_or(0.0, |&t| t.saturating_sub(t0) as f64)
+        if clock {
+            stamps_ns
+                .get(k)
+                .map_or(0.0, |&t| t.saturating_sub(t0) as f64)
+        } else {
+            k as f64
+        }
     };
     let centres: Vec<f64> = stretches
         .iter()
@@ -341,5 +349,8 @@ mod tests {
             of[14].blend(&stretches).unwrap().data,
             stretches[1].reference.data
         );
+        // Stamps that are not a clock (all the same) fall back to the frame numbers: the same weights here.
+        let unstamped = local_references(&stretches, &[7; 16]);
+        assert_eq!(unstamped, of);
     }
 }

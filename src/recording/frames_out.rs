@@ -1,8 +1,9 @@
 //! **Frames out**: a recording's depth frames as the files `tnd pose` and numpy take — each frame at the camera's
 //! native resolution as a float32 `.npy` in metres with NaN where the camera had no return (REP 118's convention),
 //! the no-contact reference the recording's processing chose as `reference.npy` (the per-pixel median of its
-//! frames, native; with a drifting membrane also each no-contact stretch's, [`super::drift`]), and `frames.csv` with
-//! each frame's time stamp, contact area, measured pixels and the reference file its imprint is against.
+//! frames, native; with a drifting membrane also each no-contact stretch's, [`super::drift`], and for a frame between
+//! two stretches their blend at its time, `reference_for_<frame>.npy`), and `frames.csv` with each frame's time
+//! stamp, contact area, measured pixels and the reference file its imprint is against.
 
 use std::path::{Path, PathBuf};
 
@@ -154,16 +155,18 @@ pub fn write_frames(
     for &k in frames {
         let f = rec.depth_frame(stream, k, native)?;
         let file = write(&frame_name(k), &with_nan(&f.depth))?;
-        let reference_file = reference_file(processed, k);
+        let mut reference_file = reference_file(processed, k);
         if let Some(l) = blended(processed, k) {
             // The stretches' native references (after the recording's own, first in `medians`) blended as the
-            // frame's model-resolution reference is.
+            // frame's model-resolution reference is; without both, the stretch before it.
             let pair = (medians.get(l.before + 1), medians.get(l.after + 1));
             if let (Some(Some(a)), Some(Some(b))) = pair {
                 write(
                     &reference_file,
                     &with_nan(&super::drift::blend(a, b, l.weight)),
                 )?;
+            } else if let Some(s) = processed.stretches.get(l.before) {
+                reference_file = format!("reference_{:06}.npy", s.first);
             }
         }
         rows.push(FrameFile {
