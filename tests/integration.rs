@@ -17,6 +17,7 @@ mod eval_loop;
 mod eval_metrics;
 mod fuzz_loaders;
 mod grad_accumulation;
+mod light_press;
 mod mesh_io;
 mod missing_returns;
 mod model_cli;

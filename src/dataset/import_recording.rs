@@ -10,7 +10,9 @@
 //! frames with a pose then calibrate the tactile-shadow width ([`super::shadow_fit`]).
 //!
 //! Per frame: the imprint Y = R − S from [`crate::recording::process`]; frames with less contact than
-//! `min_contact_px` (the no-contact part of a press) are skipped; the pose is the pose message nearest in time (within
+//! `min_contact_px` (the no-contact part of a press) are skipped — unless no frame has that much, when a **light press**
+//! is taken in at a threshold of [`LIGHT_PRESS_SIGMAS`] times the no-contact frames' own noise (at least
+//! [`LIGHT_PRESS_MIN_M`]) and the report says so; the pose is the pose message nearest in time (within
 //! `max_pose_gap_s`) or the CSV row of the frame. The press depth comes from the CSV's `press` column, or, when no
 //! source gives it, is **estimated** by matching the simulated noise-free imprint to the measured one (a grid over
 //! `[-1 mm, max_press]` in 0.5 mm steps, then golden-section refinement; mean absolute imprint difference).
@@ -32,6 +34,8 @@ use super::{DatasetError, SplitName};
 use crate::image::Image;
 use crate::objects::ObjectSet;
 use crate::recording::calibrate::{calibrate, CalibrateConfig, SensorCalibration};
+use crate::recording::process::LightPress;
+pub use crate::recording::process::{LIGHT_PRESS_MIN_M, LIGHT_PRESS_SIGMAS};
 use crate::recording::source::{nearest_stamp, DEFAULT_MAX_POSE_GAP_S};
 use crate::recording::{self, FolderOptions, ProcessConfig, ProcessedRecording, Recording};
 use crate::sensor::{Scene, Se2};
@@ -81,6 +85,10 @@ pub struct RecordingImportConfig {
     /// it (no frame without contact), the given sensor is used and the report says why.
     #[serde(default = "yes")]
     pub calibrate: bool,
+    /// Where no frame has `min_contact_px` over the contact threshold, take the frames that have it over
+    /// [`LIGHT_PRESS_SIGMAS`] times the recording's no-contact noise instead (default true; [`LightPress`]).
+    #[serde(default = "yes")]
+    pub light_press: bool,
 }
 
 fn yes() -> bool {
@@ -103,6 +111,7 @@ impl RecordingImportConfig {
             split: None,
             seed: 0,
             calibrate: true,
+            light_press: true,
         }
     }
 }
@@ -132,6 +141,8 @@ pub struct RecordingImportReport {
     pub calibration: Option<SensorCalibration>,
     /// Why a calibration that was asked for could not be made (the given sensor was used).
     pub calibration_failed: Option<String>,
+    /// Set where the frames were chosen as a light press's ([`RecordingImportConfig::light_press`]).
+    pub light_press: Option<LightPress>,
 }
 
 /// One frame's known pose.
@@ -175,7 +186,14 @@ pub fn import_recording(
 
     let object = PreparedObject::new(set.mesh(&config.object)?)?;
 
-    let chosen = ChosenFrames::of(&processed, &poses, config);
+    let mut chosen = ChosenFrames::of(&processed, &processed.contact_px, &poses, config);
+    let mut light_press = None;
+    if chosen.todo.is_empty() && config.light_press {
+        if let Some((light, retry)) = light_press_frames(&processed, &poses, config) {
+            light_press = Some(light);
+            chosen = retry;
+        }
+    }
     // The tactile shadow, which frames without contact cannot show, from the contact frames with a pose.
     if let Some(cal) = &mut calibration {
         calibrate_shadow(cal, &processed, &object, &chosen.todo, config.max_press_m)?;
@@ -246,7 +264,21 @@ pub fn import_recording(
         },
         calibration,
         calibration_failed,
+        light_press,
     })
+}
+
+/// The frames of a light press ([`ProcessedRecording::light_press`]) where some frame has `config.min_contact_px`
+/// over its threshold; `None` otherwise.
+fn light_press_frames(
+    processed: &ProcessedRecording,
+    poses: &[Option<FramePose>],
+    config: &RecordingImportConfig,
+) -> Option<(LightPress, ChosenFrames)> {
+    let light = processed.light_press(config.process.contact_threshold_m)?;
+    let counts = processed.contact_px_over(light.threshold_m);
+    let chosen = ChosenFrames::of(processed, &counts, poses, config);
+    (!chosen.todo.is_empty()).then_some((light, chosen))
 }
 
 /// The index of `object` in `set`; an error naming the set otherwise (and, where `object` looks like a mesh file,
@@ -297,9 +329,10 @@ struct ChosenFrames {
 
 impl ChosenFrames {
     /// Every `config.every`-th frame of `processed` with enough pixels that have a return, at least
-    /// `config.min_contact_px` of contact and a pose in `poses`.
+    /// `config.min_contact_px` of contact (`contact_px`, per frame) and a pose in `poses`.
     fn of(
         processed: &ProcessedRecording,
+        contact_px: &[usize],
         poses: &[Option<FramePose>],
         config: &RecordingImportConfig,
     ) -> Self {
@@ -312,7 +345,10 @@ impl ChosenFrames {
         for i in (0..processed.len()).step_by(config.every) {
             if let Some(why) = processed.unusable(i) {
                 chosen.skipped_missing.push(why);
-            } else if processed.contact_px[i] < config.min_contact_px {
+            } else if contact_px
+                .get(i)
+                .is_none_or(|&px| px < config.min_contact_px)
+            {
                 chosen.skipped_no_contact += 1;
             } else if let Some(p) = poses[i] {
                 chosen.todo.push((i, p));

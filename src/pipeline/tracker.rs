@@ -10,6 +10,7 @@ use super::{LoadedObject, PipelineError, Progress};
 use crate::model::DiffusionModel;
 use crate::objects::Symmetry;
 use crate::pose::{Estimator, PoseConfig, PosePrior};
+use crate::recording::process::LightPress;
 use crate::recording::ProcessedRecording;
 use crate::sensor::Se2;
 use crate::sim::{PreparedObject, Simulator};
@@ -95,14 +96,17 @@ impl Default for TrackingConfig {
 impl TrackingConfig {
     /// The frames of `recording` to track, every `every`-th: those with enough pixels with a return
     /// ([`ProcessedRecording::unusable`]; `skipped` hears each other one with why) and
-    /// [`TrackingConfig::min_contact_px`] contact pixels.
+    /// [`TrackingConfig::min_contact_px`] contact pixels — over `contact_threshold_m` (the threshold
+    /// [`ProcessedRecording::contact_px`] was counted at), or, where no frame has that much, over a light press's
+    /// threshold ([`ProcessedRecording::light_press`], returned with the frames).
     pub fn frames(
         &self,
         recording: &ProcessedRecording,
         every: usize,
+        contact_threshold_m: f64,
         skipped: &mut dyn FnMut(usize, String),
-    ) -> Vec<usize> {
-        (0..recording.len())
+    ) -> (Vec<usize>, Option<LightPress>) {
+        let usable: Vec<usize> = (0..recording.len())
             .step_by(every.max(1))
             .filter(|&k| match recording.unusable(k) {
                 Some(why) => {
@@ -111,8 +115,26 @@ impl TrackingConfig {
                 }
                 None => true,
             })
-            .filter(|&k| recording.contact_px[k] >= self.min_contact_px)
-            .collect()
+            .collect();
+        let with_contact = |counts: &[usize]| -> Vec<usize> {
+            usable
+                .iter()
+                .copied()
+                .filter(|&k| counts.get(k).is_some_and(|&px| px >= self.min_contact_px))
+                .collect()
+        };
+        let todo = with_contact(&recording.contact_px);
+        if !todo.is_empty() {
+            return (todo, None);
+        }
+        match recording.light_press(contact_threshold_m) {
+            Some(light) => {
+                let todo = with_contact(&recording.contact_px_over(light.threshold_m));
+                let light = (!todo.is_empty()).then_some(light);
+                (todo, light)
+            }
+            None => (todo, None),
+        }
     }
 
     /// Every setting in range; the error names the first that is not.

@@ -99,6 +99,42 @@ pub struct ProcessedRecording {
     pub measured_px: Vec<usize>,
 }
 
+/// A light press's threshold is this many times the no-contact frames' noise
+/// ([`ProcessedRecording::imprint_noise_m`]): at 4σ, Gaussian noise puts 0.1 of the 4096 pixels over it.
+pub const LIGHT_PRESS_SIGMAS: f64 = 4.0;
+
+/// The lowest threshold a light press is taken in at, metres.
+pub const LIGHT_PRESS_MIN_M: f64 = 0.001;
+
+/// A recording taken in as a light press: no frame had enough contact over the contact threshold, so the frames
+/// were chosen at a threshold set by the recording's own noise.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LightPress {
+    /// The threshold the frames were chosen at, metres.
+    pub threshold_m: f64,
+    /// The no-contact frames' imprint noise it was set from, metres.
+    pub noise_m: f64,
+    /// The contact threshold no frame passed, metres.
+    pub contact_threshold_m: f64,
+}
+
+impl LightPress {
+    /// What was done, in words for a warning: no frame had `min_contact_px` over the contact threshold, so the
+    /// frames were chosen at this threshold, set from this noise.
+    pub fn describe(&self, min_contact_px: usize) -> String {
+        format!(
+            "a light press: no frame had {min_contact_px} px over {:.1} mm, so frames were chosen at {:.2} mm \
+             ({LIGHT_PRESS_SIGMAS} x the no-contact frames' noise, {:.2} mm)",
+            self.contact_threshold_m * 1e3,
+            self.threshold_m * 1e3,
+            self.noise_m * 1e3
+        )
+    }
+}
+
+/// Fewest measured no-contact pixels [`ProcessedRecording::imprint_noise_m`] estimates the noise from.
+pub const MIN_NOISE_SAMPLES: usize = 1000;
+
 /// Least share of the reference's measured pixels a frame must measure itself to be de-rendered and registered
 /// (below it, holes are the frame's larger part: a glitch, a cable over the lens, an over-exposed frame).
 pub const MIN_MEASURED_SHARE: f64 = 0.5;
@@ -160,6 +196,55 @@ impl ProcessedRecording {
         let seen = self.reference_for(frame).count_nonzero();
         let measured = self.measured_px.get(frame).copied().unwrap_or(0);
         too_few_returns(measured, seen).map(|why| format!("frame {frame}: {why}; skipped"))
+    }
+
+    /// The imprint's noise where nothing touches, metres: 1.4826 × the median absolute imprint over the pixels
+    /// the no-contact (reference) frames measured, each against its own reference; `None` with fewer than
+    /// [`MIN_NOISE_SAMPLES`] such pixels (no no-contact frames: a given reference). Slightly low, as the
+    /// references are means of these frames.
+    pub fn imprint_noise_m(&self) -> Option<f64> {
+        let mut magnitudes: Vec<f32> = Vec::new();
+        for &k in &self.reference_frames {
+            let (Some(y), Some(s)) = (self.imprints.get(k), self.signatures.get(k)) else {
+                continue;
+            };
+            let r = self.reference_for(k);
+            magnitudes.extend(
+                y.data
+                    .iter()
+                    .zip(&s.data)
+                    .zip(&r.data)
+                    .filter(|((_, &s), &r)| s > 0.0 && r > 0.0)
+                    .map(|((&y, _), _)| y.abs()),
+            );
+        }
+        if magnitudes.len() < MIN_NOISE_SAMPLES {
+            return None;
+        }
+        let mid = magnitudes.len() / 2;
+        let (_, median, _) = magnitudes.select_nth_unstable_by(mid, f32::total_cmp);
+        Some(1.4826 * f64::from(*median))
+    }
+
+    /// The light-press threshold of this recording ([`LightPress`]): [`LIGHT_PRESS_SIGMAS`] times
+    /// [`Self::imprint_noise_m`], at least [`LIGHT_PRESS_MIN_M`]; `None` where the noise cannot be measured or the
+    /// threshold would not be below `contact_threshold_m`.
+    pub fn light_press(&self, contact_threshold_m: f64) -> Option<LightPress> {
+        let noise_m = self.imprint_noise_m()?;
+        let threshold_m = (LIGHT_PRESS_SIGMAS * noise_m).max(LIGHT_PRESS_MIN_M);
+        (threshold_m < contact_threshold_m).then_some(LightPress {
+            threshold_m,
+            noise_m,
+            contact_threshold_m,
+        })
+    }
+
+    /// Pixels with Y above `threshold_m` per frame (as [`Self::contact_px`] at another threshold).
+    pub fn contact_px_over(&self, threshold_m: f64) -> Vec<usize> {
+        self.imprints
+            .iter()
+            .map(|y| contact_pixels(y, threshold_m))
+            .collect()
     }
 
     /// Seconds from the first frame, per frame.

@@ -62,14 +62,23 @@ pub struct TrackRequest {
     pub tracking: TrackingConfig,
     /// Every n-th frame (`tnd recording track --every`).
     pub every: usize,
+    /// The contact threshold the recording's contact pixels were counted at, metres (its read settings').
+    pub contact_threshold_m: f64,
 }
 
 impl TrackRequest {
     /// The frames to track: every n-th of those with contact and enough pixels with a return
-    /// ([`tactile_derender::recording::ProcessedRecording::unusable`], as `tnd recording track`).
+    /// ([`tactile_derender::recording::ProcessedRecording::unusable`], as `tnd recording track`; a light press's
+    /// where no frame has contact over the threshold).
     pub fn frames(&self) -> Vec<usize> {
         self.tracking
-            .frames(&self.recording, self.every, &mut |_, _| {})
+            .frames(
+                &self.recording,
+                self.every,
+                self.contact_threshold_m,
+                &mut |_, _| {},
+            )
+            .0
     }
 }
 

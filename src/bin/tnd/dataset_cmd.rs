@@ -160,6 +160,10 @@ pub struct ImportArgs {
     /// (membrane inflation and footprint, camera position, noise; see tnd calibrate).
     #[arg(long)]
     pub no_calibrate: bool,
+    /// Recordings: where no frame has --min-contact-px over --contact-threshold, fail instead of taking the press
+    /// in as a light one (frames chosen at 4x the no-contact frames' noise, at least 1 mm; said on stderr).
+    #[arg(long)]
+    pub no_light_press: bool,
 }
 
 pub fn run(a: DatasetArgs) -> Result<()> {
@@ -379,6 +383,7 @@ fn run_import(a: ImportArgs) -> Result<()> {
     config.split = split;
     config.seed = a.seed;
     config.calibrate = !a.no_calibrate;
+    config.light_press = !a.no_light_press;
     let mut bar = crate::progress::bar("frames", "frame", 0);
     let report = import_recording::import_recording(
         &a.from,
@@ -398,6 +403,14 @@ fn run_import(a: ImportArgs) -> Result<()> {
     crate::calibrate_cmd::tell_drift(&a.from, report.drift_m, &[]);
     for why in &report.skipped_missing {
         eprintln!("{}: {why}", a.from.display());
+    }
+    if let Some(light) = &report.light_press {
+        eprintln!(
+            "{}: warning: {} (--no-light-press refuses instead); {} pair(s)",
+            a.from.display(),
+            light.describe(a.min_contact_px),
+            report.written.pairs
+        );
     }
     println!("{}", serde_json::to_string(&report)?);
     Ok(())

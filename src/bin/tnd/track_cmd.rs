@@ -364,9 +364,20 @@ pub fn run(a: TrackArgs) -> Result<()> {
         check_same(&a.out, e, "recording", &frames, "another recording")?;
     }
     let mut tracker = Tracker::new(opened.context(&a.input))?;
-    let todo = a.input.tracking.frames(processed, a.every, &mut |_, why| {
-        eprintln!("{}: {why}", a.input.recording.display())
-    });
+    let (todo, light) = a.input.tracking.frames(
+        processed,
+        a.every,
+        a.input.read.contact_threshold_m,
+        &mut |_, why| eprintln!("{}: {why}", a.input.recording.display()),
+    );
+    if let Some(light) = light {
+        eprintln!(
+            "{}: warning: {}; {} frame(s)",
+            a.input.recording.display(),
+            light.describe(a.input.tracking.min_contact_px),
+            todo.len()
+        );
+    }
     if todo.is_empty() {
         let (peak, px) = (0..processed.len())
             .map(|k| (k, processed.contact_px[k]))

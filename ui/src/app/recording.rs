@@ -236,12 +236,14 @@ impl WorkbenchApp {
             pose: self.state.pose.clone(),
             tracking: self.state.recording.track.tracking.clone(),
             every: self.state.recording.track.every,
+            contact_threshold_m: self.state.recording.read.contact_threshold_m,
         };
         let frames = req.frames().len();
         if frames == 0 {
             return Err(anyhow!(
-                "no frame has {} contact pixels (imprint over 3 mm) to track",
-                req.tracking.min_contact_px
+                "no frame has {} contact pixels (imprint over {:.1} mm, or a light press's threshold) to track",
+                req.tracking.min_contact_px,
+                req.contact_threshold_m * 1e3
             ));
         }
         view.rows.clear();

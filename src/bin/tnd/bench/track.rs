@@ -76,10 +76,12 @@ pub fn run(a: &TrackBenchArgs) -> Result<()> {
         tracking: &per_frame,
         ..opened.context(&a.input)
     })?;
-    let frames = a
-        .input
-        .tracking
-        .frames(&opened.processed, a.every, &mut |_, _| {});
+    let (frames, _) = a.input.tracking.frames(
+        &opened.processed,
+        a.every,
+        a.input.read.contact_threshold_m,
+        &mut |_, _| {},
+    );
     let (mut t_carried, mut t_scratch) = (Vec::new(), Vec::new());
     let (mut r_carried, mut r_scratch) = (Vec::new(), Vec::new());
     let mut bar = progress::bar("tracking twice", " frames", frames.len());

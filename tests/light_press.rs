@@ -1,0 +1,74 @@
+//! A light press (no frame with enough contact over the contact threshold) imported at the recording's own noise,
+//! and refused with the fallback off.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use tactile_derender::dataset::import_recording::{
+    import_recording, PoseSource, RecordingImportConfig, LIGHT_PRESS_MIN_M, LIGHT_PRESS_SIGMAS,
+};
+use tactile_derender::dataset::{Dataset, SplitName};
+use tactile_derender::objects::ObjectSet;
+use tactile_derender::recording::synth::{write_press_recording, DepthEncoding, PressSequence};
+use tactile_derender::sensor::Se2;
+use tactile_derender::sim::{PreparedObject, SimConfig};
+
+const OBJECT: &str = "cylinder_r12";
+
+#[test]
+fn a_light_press_is_taken_in_at_the_recordings_own_noise() {
+    // A press of 2.5 mm never puts an imprint 3 mm deep: no frame passes the default contact threshold. The import
+    // takes it in at 4x the no-contact frames' noise (at least 1 mm) and says so; every pair it makes is a frame
+    // that touches, at its true press. With the fallback off, the one-line error stands.
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = SimConfig::default();
+    config.signature.noise_std = 0.0005;
+    let mut seq = PressSequence::down_and_up(Se2::new(0.002, 0.001, 0.3), 0.0025, 4, 5);
+    seq.encoding = DepthEncoding::F32;
+    let path = dir.path().join("press.mcap");
+    let object = PreparedObject::new(ObjectSet::builtin().mesh(OBJECT).unwrap()).unwrap();
+    write_press_recording(&path, &config, &object, &seq).unwrap();
+    let mut ic = RecordingImportConfig::new(OBJECT, PoseSource::Topic(None));
+    ic.split = Some(SplitName::UnseenObjects);
+    ic.calibrate = false;
+    let report = import_recording(
+        &path,
+        &dir.path().join("light"),
+        &config,
+        &ObjectSet::builtin(),
+        &ic,
+        &mut |_, _| true,
+    )
+    .unwrap();
+    let light = report.light_press.expect("taken in as a light press");
+    assert!(light.noise_m > 0.0 && light.noise_m < 5e-4, "{light:?}");
+    let expected = (LIGHT_PRESS_SIGMAS * light.noise_m).max(LIGHT_PRESS_MIN_M);
+    assert!((light.threshold_m - expected).abs() < 1e-12, "{light:?}");
+    assert!(light.threshold_m < 0.003 && light.contact_threshold_m == 0.003);
+    let touching = seq.presses.iter().filter(|&&p| p > 0.0).count();
+    assert!(
+        report.written.pairs >= 1 && report.written.pairs <= touching,
+        "{report:?}"
+    );
+    let ds = Dataset::open(dir.path().join("light")).unwrap();
+    for i in 0..report.written.pairs {
+        let press = ds.pair(SplitName::UnseenObjects, i).unwrap().meta.press;
+        let nearest = seq
+            .presses
+            .iter()
+            .map(|&p| (p - press).abs())
+            .fold(f64::INFINITY, f64::min);
+        assert!(press > 0.0 && nearest < 3e-4, "pair {i}: press {press} m");
+    }
+    ic.light_press = false;
+    let err = import_recording(
+        &path,
+        &dir.path().join("refused"),
+        &config,
+        &ObjectSet::builtin(),
+        &ic,
+        &mut |_, _| true,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("no frame became a pair"), "{err}");
+}
