@@ -87,6 +87,7 @@ fn the_predicted_contact_scales_the_floors_when_chosen() {
     let config = PosteriorConfig {
         floor_position_m: 0.001,
         floor_exponent: 0.5,
+        contact_from_prediction: false,
         ..PosteriorConfig::untempered()
     };
     let evidence = [ModeEvidence {
@@ -184,8 +185,9 @@ fn a_calibration_from_before_the_frames_noise_keeps_the_evidence_as_recorded() {
     // with the bundled calibration's switch; the bundled one, written out, reads back as it is.
     let old: PosteriorConfig = serde_json::from_str(r#"{"temperature": 2.54}"#).unwrap();
     assert!(!old.frame_noise && old.temperature == 2.54);
+    let asked: PosteriorConfig = serde_json::from_str(r#"{"frame_noise": true}"#).unwrap();
+    assert!(asked.frame_noise);
     let bundled = PosteriorConfig::default();
-    assert!(bundled.frame_noise);
     let back: PosteriorConfig =
         serde_json::from_str(&serde_json::to_string(&bundled).unwrap()).unwrap();
     assert_eq!(back, bundled);
