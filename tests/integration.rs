@@ -31,6 +31,7 @@ mod pose_register;
 mod posterior;
 mod recording;
 mod recording_calibrate;
+mod recording_cli;
 mod signature_check;
 mod simulator;
 mod small_cases;

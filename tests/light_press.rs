@@ -4,15 +4,16 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use tactile_derender::dataset::import_recording::{
-    import_recording, PoseSource, RecordingImportConfig, LIGHT_PRESS_MIN_M, LIGHT_PRESS_SIGMAS,
+    import_recording, PoseSource, RecordingImportConfig,
 };
 use tactile_derender::dataset::{Dataset, SplitName};
 use tactile_derender::objects::ObjectSet;
-use tactile_derender::recording::synth::{write_press_recording, DepthEncoding, PressSequence};
+use tactile_derender::recording::process::{LIGHT_PRESS_MIN_M, LIGHT_PRESS_SIGMAS};
+use tactile_derender::recording::synth::{DepthEncoding, PressSequence};
 use tactile_derender::sensor::Se2;
-use tactile_derender::sim::{PreparedObject, SimConfig};
+use tactile_derender::sim::SimConfig;
 
-const OBJECT: &str = "cylinder_r12";
+use crate::recording::{record, OBJECT};
 
 #[test]
 fn a_light_press_is_taken_in_at_the_recordings_own_noise() {
@@ -24,9 +25,7 @@ fn a_light_press_is_taken_in_at_the_recordings_own_noise() {
     config.signature.noise_std = 0.0005;
     let mut seq = PressSequence::down_and_up(Se2::new(0.002, 0.001, 0.3), 0.0025, 4, 5);
     seq.encoding = DepthEncoding::F32;
-    let path = dir.path().join("press.mcap");
-    let object = PreparedObject::new(ObjectSet::builtin().mesh(OBJECT).unwrap()).unwrap();
-    write_press_recording(&path, &config, &object, &seq).unwrap();
+    let path = record(dir.path(), &config, &seq);
     let mut ic = RecordingImportConfig::new(OBJECT, PoseSource::Topic(None));
     ic.split = Some(SplitName::UnseenObjects);
     ic.calibrate = false;

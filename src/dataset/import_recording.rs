@@ -11,8 +11,8 @@
 //!
 //! Per frame: the imprint Y = R − S from [`crate::recording::process`]; frames with less contact than
 //! `min_contact_px` (the no-contact part of a press) are skipped — unless no frame has that much, when a **light press**
-//! is taken in at a threshold of [`LIGHT_PRESS_SIGMAS`] times the no-contact frames' own noise (at least
-//! [`LIGHT_PRESS_MIN_M`]) and the report says so; the pose is the pose message nearest in time (within
+//! is taken in at a threshold set by the no-contact frames' own noise ([`ProcessedRecording::light_press`]) and the
+//! report says so; the pose is the pose message nearest in time (within
 //! `max_pose_gap_s`) or the CSV row of the frame. The press depth comes from the CSV's `press` column, or, when no
 //! source gives it, is **estimated** by matching the simulated noise-free imprint to the measured one (a grid over
 //! `[-1 mm, max_press]` in 0.5 mm steps, then golden-section refinement; mean absolute imprint difference).
@@ -35,7 +35,6 @@ use crate::image::Image;
 use crate::objects::ObjectSet;
 use crate::recording::calibrate::{calibrate, CalibrateConfig, SensorCalibration};
 use crate::recording::process::LightPress;
-pub use crate::recording::process::{LIGHT_PRESS_MIN_M, LIGHT_PRESS_SIGMAS};
 use crate::recording::source::{nearest_stamp, DEFAULT_MAX_POSE_GAP_S};
 use crate::recording::{self, FolderOptions, ProcessConfig, ProcessedRecording, Recording};
 use crate::sensor::{Scene, Se2};
@@ -85,8 +84,8 @@ pub struct RecordingImportConfig {
     /// it (no frame without contact), the given sensor is used and the report says why.
     #[serde(default = "yes")]
     pub calibrate: bool,
-    /// Where no frame has `min_contact_px` over the contact threshold, take the frames that have it over
-    /// [`LIGHT_PRESS_SIGMAS`] times the recording's no-contact noise instead (default true; [`LightPress`]).
+    /// Where no frame has `min_contact_px` over the contact threshold, take the frames that have it over a
+    /// threshold set by the recording's no-contact noise instead (default true; [`ProcessedRecording::light_press`]).
     #[serde(default = "yes")]
     pub light_press: bool,
 }
@@ -275,8 +274,7 @@ fn light_press_frames(
     poses: &[Option<FramePose>],
     config: &RecordingImportConfig,
 ) -> Option<(LightPress, ChosenFrames)> {
-    let light = processed.light_press(config.process.contact_threshold_m)?;
-    let counts = processed.contact_px_over(light.threshold_m);
+    let (light, counts) = processed.light_press(config.process.contact_threshold_m)?;
     let chosen = ChosenFrames::of(processed, &counts, poses, config);
     (!chosen.todo.is_empty()).then_some((light, chosen))
 }

@@ -128,8 +128,8 @@ impl TrackingConfig {
             return (todo, None);
         }
         match recording.light_press(contact_threshold_m) {
-            Some(light) => {
-                let todo = with_contact(&recording.contact_px_over(light.threshold_m));
+            Some((light, counts)) => {
+                let todo = with_contact(&counts);
                 let light = (!todo.is_empty()).then_some(light);
                 (todo, light)
             }

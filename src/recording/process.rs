@@ -108,7 +108,7 @@ pub const LIGHT_PRESS_MIN_M: f64 = 0.001;
 
 /// A recording taken in as a light press: no frame had enough contact over the contact threshold, so the frames
 /// were chosen at a threshold set by the recording's own noise.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct LightPress {
     /// The threshold the frames were chosen at, metres.
     pub threshold_m: f64,
@@ -227,24 +227,28 @@ impl ProcessedRecording {
     }
 
     /// The light-press threshold of this recording ([`LightPress`]): [`LIGHT_PRESS_SIGMAS`] times
-    /// [`Self::imprint_noise_m`], at least [`LIGHT_PRESS_MIN_M`]; `None` where the noise cannot be measured or the
-    /// threshold would not be below `contact_threshold_m`.
-    pub fn light_press(&self, contact_threshold_m: f64) -> Option<LightPress> {
+    /// [`Self::imprint_noise_m`], at least [`LIGHT_PRESS_MIN_M`], with each frame's contact pixels over it (as
+    /// [`Self::contact_px`] at that threshold); `None` where the noise cannot be measured or the threshold would not
+    /// be below `contact_threshold_m`.
+    pub fn light_press(&self, contact_threshold_m: f64) -> Option<(LightPress, Vec<usize>)> {
         let noise_m = self.imprint_noise_m()?;
         let threshold_m = (LIGHT_PRESS_SIGMAS * noise_m).max(LIGHT_PRESS_MIN_M);
-        (threshold_m < contact_threshold_m).then_some(LightPress {
-            threshold_m,
-            noise_m,
-            contact_threshold_m,
-        })
-    }
-
-    /// Pixels with Y above `threshold_m` per frame (as [`Self::contact_px`] at another threshold).
-    pub fn contact_px_over(&self, threshold_m: f64) -> Vec<usize> {
-        self.imprints
+        if threshold_m >= contact_threshold_m {
+            return None;
+        }
+        let counts = self
+            .imprints
             .iter()
             .map(|y| contact_pixels(y, threshold_m))
-            .collect()
+            .collect();
+        Some((
+            LightPress {
+                threshold_m,
+                noise_m,
+                contact_threshold_m,
+            },
+            counts,
+        ))
     }
 
     /// Seconds from the first frame, per frame.
