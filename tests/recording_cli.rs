@@ -7,30 +7,15 @@ use tactile_derender::dataset::npz::NpzIndex;
 use tactile_derender::recording::{FolderOptions, Recording};
 use tactile_derender::sim::SimConfig;
 
+use crate::cli_common::{tnd_in, tnd_json};
 use crate::recording::OBJECT;
 
 #[test]
 fn the_cli_records_imports_and_scores_a_press_sequence() {
     // As a user would: tnd recording simulate -> tnd recording info -> tnd dataset import -> tnd eval.
     let dir = tempfile::tempdir().unwrap();
-    let tnd = env!("CARGO_BIN_EXE_tnd");
-    let output = |args: &[&str]| {
-        std::process::Command::new(tnd)
-            .args(args)
-            .current_dir(dir.path())
-            .output()
-            .unwrap()
-    };
-    let run = |args: &[&str]| -> serde_json::Value {
-        let out = output(args);
-        assert!(
-            out.status.success(),
-            "tnd {args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let stdout = String::from_utf8(out.stdout).unwrap();
-        serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
-    };
+    let output = |args: &[&str]| tnd_in(dir.path(), args);
+    let run = |args: &[&str]| tnd_json(dir.path(), args);
     let rec = run(&[
         "recording",
         "simulate",
@@ -181,24 +166,8 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
     // frame: the test is of tracking, resuming and scoring, not of the sampler's default); the
     // recorded pose topic is the truth the rows are scored against, never an input.
     let dir = tempfile::tempdir().unwrap();
-    let tnd = env!("CARGO_BIN_EXE_tnd");
-    let output = |args: &[&str]| {
-        std::process::Command::new(tnd)
-            .args(args)
-            .current_dir(dir.path())
-            .output()
-            .unwrap()
-    };
-    let run = |args: &[&str]| -> serde_json::Value {
-        let out = output(args);
-        assert!(
-            out.status.success(),
-            "tnd {args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let stdout = String::from_utf8(out.stdout).unwrap();
-        serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
-    };
+    let output = |args: &[&str]| tnd_in(dir.path(), args);
+    let run = |args: &[&str]| tnd_json(dir.path(), args);
     let simulated = run(&[
         "recording",
         "simulate",

@@ -14,6 +14,15 @@ pub fn tnd_in(dir: &Path, args: &[&str]) -> Output {
         .expect("run tnd")
 }
 
+/// `tnd ARGS` run in `dir`, which must succeed (else the assertion names the arguments and stderr): the JSON of its
+/// last stdout line, where every command writes its result.
+pub fn tnd_json(dir: &Path, args: &[&str]) -> serde_json::Value {
+    let out = tnd_in(dir, args);
+    assert!(out.status.success(), "tnd {args:?}: {}", stderr(&out));
+    let stdout = String::from_utf8(out.stdout).expect("utf-8 stdout");
+    serde_json::from_str(stdout.lines().last().expect("a line on stdout")).expect("JSON")
+}
+
 /// A run's stderr as text.
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
