@@ -280,3 +280,38 @@ fn the_frames_noise_is_measured_from_its_signature_robustly() {
     let blank = Image::filled(s.out.signature.width, s.out.signature.height, 0.0);
     assert!(check(&s, &blank, &config).residual_noise(truth).is_none());
 }
+
+#[test]
+fn the_contacts_misfit_is_the_frames_noise_at_the_truth_and_more_off_it() {
+    // Independent truth: at the true pose the signature differs from its prediction by the noise the simulator
+    // drew (σ per pixel) alone, on the contact as everywhere; a pose 2 mm off leaves the contact unexplained.
+    let truth = Se2::new(0.002, -0.001, 0.3);
+    for sigma in [0.5e-3, 1.38e-3] {
+        let s = setup("cross_w12_s50", truth, 0.006, sigma);
+        let config = SignatureCheckConfig::default();
+        let c = check(&s, &s.out.signature, &config);
+        let at_truth = c.contact_misfit(truth, 0.003).unwrap();
+        assert!(
+            (at_truth / sigma - 1.0).abs() < 0.2,
+            "σ {sigma}: misfit at the truth {at_truth}"
+        );
+        // 2 mm off, only the cross's edges are mispredicted (noise pixels over the threshold dilute them on a
+        // noisy frame); turned by 0.4 rad, its arms.
+        let off = c
+            .contact_misfit(Se2::new(truth.x + 0.002, truth.y, truth.theta), 0.003)
+            .unwrap();
+        let turned = c
+            .contact_misfit(Se2::new(truth.x, truth.y, truth.theta + 0.4), 0.003)
+            .unwrap();
+        assert!(
+            off > at_truth && turned > 1.3 * at_truth,
+            "σ {sigma}: 2 mm off {off}, turned {turned}, against {at_truth}"
+        );
+    }
+    let s = setup("cross_w12_s50", truth, 0.006, 1e-3);
+    let config = SignatureCheckConfig::default();
+    let blank = Image::filled(s.out.signature.width, s.out.signature.height, 0.0);
+    assert!(check(&s, &blank, &config)
+        .contact_misfit(truth, 0.003)
+        .is_none());
+}

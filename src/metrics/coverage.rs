@@ -276,7 +276,8 @@ fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
         starts.push(x);
     }
     let mut step = vec![
-        1.0, 1.0, 1.0, 1.0, 0.3, 1.0, 0.5, 1.0, 1.0, 1.0, 0.5, 0.7, 0.3, 0.5, 0.3, 1.0,
+        1.0, 1.0, 1.0, 1.0, 0.3, 1.0, 0.5, 1.0, 1.0, 1.0, 0.5, 0.7, 0.3, 0.5, 0.3, 1.0, 0.5, 0.5,
+        0.5, 0.5,
     ];
     // The noise floor only where the frames' noise weighs the evidence.
     if base.frame_noise {
@@ -325,6 +326,10 @@ fn encode(c: &PosteriorConfig) -> Vec<f64> {
         c.tail_core_scale.max(1e-3).ln(),
         c.far_exponent,
         c.far_ambiguity,
+        c.tail_rivals,
+        c.far_rivals,
+        c.tail_misfit,
+        c.far_misfit,
     ];
     if c.frame_noise {
         x.push(c.noise_floor_m.max(1e-5).ln());
@@ -353,8 +358,12 @@ fn decode(x: &[f64], base: &PosteriorConfig) -> PosteriorConfig {
         tail_core_scale: exp(x[13], 1.0, 30.0),
         far_exponent: x[14].clamp(-1.0, 2.0),
         far_ambiguity: x[15].clamp(-10.0, 10.0),
+        tail_rivals: x[16].clamp(-10.0, 10.0),
+        far_rivals: x[17].clamp(-10.0, 10.0),
+        tail_misfit: x[18].clamp(-10.0, 10.0),
+        far_misfit: x[19].clamp(-10.0, 10.0),
         noise_floor_m: x
-            .get(16)
+            .get(20)
             .map_or(base.noise_floor_m, |&v| exp(v, 1e-5, 0.005)),
         ..base.clone()
     }

@@ -444,6 +444,7 @@ mod tests {
             contact_px: 100,
             predicted_contact_px: None,
             noise: None,
+            distinct_nats: Vec::new(),
         });
         // Independent truth: for one Gaussian the region through a pose at Mahalanobis distance d holds
         // P(chi²₃ ≤ d²); at (1.5 σ, 0, 0) that is erf(1.5/√2) − √(2/π)·1.5·e^(−1.125) = 0.1912.

@@ -244,6 +244,7 @@ mod tests {
             contact_px: 300,
             predicted_contact_px: None,
             noise: None,
+            distinct_nats: Vec::new(),
         };
         let about = covariance_about(&post, Se2::default(), &Symmetry::default()).unwrap();
         assert!((about[0][0] - (c + 0.5 * 0.02 * 0.02)).abs() < 1e-15);

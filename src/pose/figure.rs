@@ -320,6 +320,7 @@ mod tests {
             contact_px: 100,
             predicted_contact_px: None,
             noise: None,
+            distinct_nats: Vec::new(),
         };
         let fig = FitFigure {
             object: "box",

@@ -106,6 +106,7 @@ mod tests {
             contact_px: 100,
             predicted_contact_px: None,
             noise: None,
+            distinct_nats: Vec::new(),
         };
         let before = Se2::new(0.0005, 0.0, 0.32);
         let previous = PosePosterior {
@@ -113,6 +114,7 @@ mod tests {
             contact_px: 100,
             predicted_contact_px: None,
             noise: None,
+            distinct_nats: Vec::new(),
         };
         let fused = fuse(&current, &previous, &symmetry);
         assert_eq!(fused.modes[0].pose(), a);
@@ -146,6 +148,7 @@ mod tests {
             contact_px: 30,
             predicted_contact_px: None,
             noise: None,
+            distinct_nats: Vec::new(),
         };
         let strong = PosePosterior {
             modes: vec![
@@ -155,6 +158,7 @@ mod tests {
             contact_px: 100,
             predicted_contact_px: None,
             noise: None,
+            distinct_nats: Vec::new(),
         };
         let fused = fuse(&strong, &broad, &symmetry);
         assert_eq!(fused.modes[0].pose(), flipped);
@@ -196,6 +200,7 @@ mod tests {
             contact_px: 100,
             predicted_contact_px: None,
             noise: None,
+            distinct_nats: Vec::new(),
         };
         let current = PosePosterior {
             modes: vec![
@@ -205,6 +210,7 @@ mod tests {
             contact_px: 100,
             predicted_contact_px: None,
             noise: None,
+            distinct_nats: Vec::new(),
         };
         let fused = fuse(&current, &previous, &symmetry);
         let flat = REINIT_SHARE / (REINIT_EXTENT_M * REINIT_EXTENT_M * std::f64::consts::TAU);

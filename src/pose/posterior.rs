@@ -19,9 +19,15 @@
 //!   *tail* (the core scaled by [`PosteriorConfig::tail_core_scale`] and widened by
 //!   [`PosteriorConfig::tail_position_m`] and [`PosteriorConfig::tail_theta_rad`], scaled by the contact: a contact
 //!   the sample got somewhat wrong), a share ε_far is *far* (position spread
-//!   [`PosteriorConfig::far_position_m`], any θ: a pose no hypothesis came near). Both shares follow the contact's
-//!   size, ε = logistic(logit + slope · ln(pixels / [`PosteriorConfig::floor_contact_px`])): a small contact says
-//!   less; the far share also grows as the modes disagree ([`PosteriorConfig::far_ambiguity`]).
+//!   [`PosteriorConfig::far_position_m`], any θ: a pose no hypothesis came near). Both shares are logistic in the
+//!   contact's evidence, ε = logistic(logit + slope · ln(pixels / [`PosteriorConfig::floor_contact_px`]) + …): a
+//!   small contact says less; a contact with **rival explanations** (n distinct refined poses within
+//!   [`PosteriorConfig::rival_window_nats`] of the best: the likelihood is rough there) is more often wrong
+//!   ([`PosteriorConfig::tail_rivals`], [`PosteriorConfig::far_rivals`], per unit of ln n); so is one the best pose
+//!   leaves **unexplained**, its signature's misfit over the contact several times the frame's noise
+//!   ([`FrameNoise::ln_misfit`]; [`PosteriorConfig::tail_misfit`], [`PosteriorConfig::far_misfit`]); the far share
+//!   also follows the modes' disagreement ([`PosteriorConfig::far_ambiguity`]). A quiet, well-explained contact
+//!   with no rival keeps most of its weight in the sharp core.
 //!
 //! The parameters are fitted by the mean negative log density of the truth on labelled pairs
 //! ([`crate::metrics::coverage::fit_posterior`]): a proper score, so a fit is calibrated at every level where the
@@ -162,6 +168,11 @@ pub struct PosePosterior {
     /// in records from before it was measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise: Option<FrameNoise>,
+    /// Δ nats (as computed, before any rescaling) of every distinct pose the check refined to, the best's 0 first,
+    /// also those too light to be a mode: the rival explanations [`PosteriorConfig::rival_window_nats`] counts.
+    /// Empty in records from before it was kept (the modes' own nats stand in).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub distinct_nats: Vec<f64>,
 }
 
 /// The depth noise of one measured signature, at the resolution the check compares it in (metres).
@@ -172,6 +183,37 @@ pub struct FrameNoise {
     /// σ of the measured signature about the best mode's prediction, robust (1.4826 × the median absolute
     /// deviation): the sensor's noise as this frame shows it, with what the model does not explain.
     pub measured_m: f64,
+    /// RMS of the signature about that prediction over the contact, predicted or measured
+    /// ([`super::signature_check::SignatureCheck::contact_misfit`]): near `measured_m` when the pose explains the
+    /// contact. `None` in records from before it was measured, or with too few contact pixels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_rms_m: Option<f64>,
+}
+
+impl FrameNoise {
+    /// ln(`contact_rms_m` / `measured_m`): how many times the frame's noise the pose leaves unexplained on the
+    /// contact, as a log; 0 where either is unknown.
+    pub fn ln_misfit(&self) -> f64 {
+        match self.contact_rms_m {
+            Some(c) if c > 0.0 && self.measured_m > 0.0 => {
+                let v = (c / self.measured_m).ln();
+                if v.is_finite() {
+                    v
+                } else {
+                    0.0
+                }
+            }
+            _ => 0.0,
+        }
+    }
+}
+
+/// What a posterior is calibrated from besides its modes' evidence ([`PosePosterior`]'s fields of the same names).
+struct Context {
+    contact_px: usize,
+    predicted_contact_px: Option<usize>,
+    noise: Option<FrameNoise>,
+    distinct_nats: Vec<f64>,
 }
 
 /// `estimate − reference` in the coordinates the object's symmetry leaves identifiable: the position difference with
@@ -240,6 +282,32 @@ impl PosePosterior {
         symmetry: &Symmetry,
         config: &PosteriorConfig,
     ) -> Self {
+        Self::calibrate(
+            evidence,
+            Context {
+                contact_px,
+                predicted_contact_px,
+                noise,
+                distinct_nats: Vec::new(),
+            },
+            symmetry,
+            config,
+        )
+    }
+
+    /// [`Self::from_evidence_with`] with `context`'s rival nats (empty: those of the distinct `evidence`).
+    fn calibrate(
+        evidence: &[ModeEvidence],
+        context: Context,
+        symmetry: &Symmetry,
+        config: &PosteriorConfig,
+    ) -> Self {
+        let Context {
+            contact_px,
+            predicted_contact_px,
+            noise,
+            distinct_nats,
+        } = context;
         let k = config.evidence_scale(noise.as_ref());
         let mut order: Vec<&ModeEvidence> =
             evidence.iter().filter(|e| e.nats.is_finite()).collect();
@@ -253,6 +321,19 @@ impl PosePosterior {
             }
         }
         let best = kept.first().map_or(0.0, |e| e.nats);
+        let distinct_nats = if distinct_nats.is_empty() {
+            kept.iter().map(|e| e.nats - best).collect()
+        } else {
+            distinct_nats
+        };
+        // ln n, n the distinct poses within the window of the best (itself included).
+        let ln_rivals = (distinct_nats
+            .iter()
+            .filter(|&&d| d <= config.rival_window_nats)
+            .count()
+            .max(1) as f64)
+            .ln();
+        let ln_misfit = noise.as_ref().map_or(0.0, FrameNoise::ln_misfit);
         let used = match predicted_contact_px {
             Some(p) if config.contact_from_prediction => p,
             _ => contact_px,
@@ -261,7 +342,12 @@ impl PosePosterior {
         let floor_scale = (config.floor_contact_px / contact).powf(config.floor_exponent);
         let ln_contact = (contact / config.floor_contact_px).ln();
         let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
-        let tail = logistic(config.tail_logit + config.tail_contact_slope * ln_contact);
+        let tail = logistic(
+            config.tail_logit
+                + config.tail_contact_slope * ln_contact
+                + config.tail_rivals * ln_rivals
+                + config.tail_misfit * ln_misfit,
+        );
         let far_scale = (config.floor_contact_px / contact).powf(config.far_exponent);
         let raw: Vec<f64> = kept
             .iter()
@@ -272,7 +358,9 @@ impl PosePosterior {
         let far = logistic(
             config.far_logit
                 + config.far_contact_slope * ln_contact
-                + config.far_ambiguity * (1.0 - top_weight),
+                + config.far_ambiguity * (1.0 - top_weight)
+                + config.far_rivals * ln_rivals
+                + config.far_misfit * ln_misfit,
         );
         let tail_scale = (config.floor_contact_px / contact).powf(config.tail_exponent);
         let tails = |core: &Mat3| {
@@ -315,6 +403,7 @@ impl PosePosterior {
             contact_px,
             predicted_contact_px,
             noise,
+            distinct_nats,
         }
     }
 
@@ -329,11 +418,14 @@ impl PosePosterior {
                 hessian: m.hessian,
             })
             .collect();
-        Self::from_evidence_with(
+        Self::calibrate(
             &evidence,
-            self.contact_px,
-            self.predicted_contact_px,
-            self.noise,
+            Context {
+                contact_px: self.contact_px,
+                predicted_contact_px: self.predicted_contact_px,
+                noise: self.noise,
+                distinct_nats: self.distinct_nats.clone(),
+            },
             symmetry,
             config,
         )

@@ -78,6 +78,26 @@ pub struct PosteriorConfig {
     /// Change of the far logit per unit of the modes' disagreement, 1 − the top mode's weight (the hypotheses
     /// split between poses: more often none of them is right).
     pub far_ambiguity: f64,
+    /// A rival explanation is a distinct pose the check refined to within this many nats of the best (as computed,
+    /// at the sensor model's noise, whatever [`Self::frame_noise`] weighs them by): the number of them, n (the best
+    /// included), says how rough the likelihood is around this contact — one pose that explains the signature and
+    /// no other is a contact the core describes. Records keep every distinct pose's nats, so a refit can change it.
+    pub rival_window_nats: f64,
+    /// Change of the tail's logit per unit of ln n ([`Self::rival_window_nats`]). Absent from a calibration file: 0
+    /// (fitted before it existed).
+    #[serde(default)]
+    pub tail_rivals: f64,
+    /// Change of the far component's logit per unit of ln n. Absent from a calibration file: 0.
+    #[serde(default)]
+    pub far_rivals: f64,
+    /// Change of the tail's logit per unit of ln(the contact's misfit / the frame's noise)
+    /// ([`super::posterior::FrameNoise::ln_misfit`]): a pose that leaves the contact unexplained is more often
+    /// somewhat wrong. Absent from a calibration file: 0.
+    #[serde(default)]
+    pub tail_misfit: f64,
+    /// The same for the far component's logit. Absent from a calibration file: 0.
+    #[serde(default)]
+    pub far_misfit: f64,
 }
 
 /// [`PosteriorConfig::frame_noise`] of a calibration written before it existed.
@@ -118,6 +138,11 @@ impl Default for PosteriorConfig {
             far_position_m: 4.71e-3,
             far_exponent: 0.273,
             far_ambiguity: 0.898,
+            rival_window_nats: 12.0,
+            tail_rivals: 0.0,
+            far_rivals: 0.0,
+            tail_misfit: 0.0,
+            far_misfit: 0.0,
         }
     }
 }
@@ -182,6 +207,7 @@ impl PosteriorConfig {
                 ("max_sigma_m", self.max_sigma_m),
                 ("floor_contact_px", self.floor_contact_px),
                 ("contact_threshold_m", self.contact_threshold_m),
+                ("rival_window_nats", self.rival_window_nats),
             ],
             &[
                 ("floor_exponent", self.floor_exponent),
@@ -203,6 +229,10 @@ impl PosteriorConfig {
             ("tail_contact_slope", self.tail_contact_slope),
             ("far_logit", self.far_logit),
             ("far_contact_slope", self.far_contact_slope),
+            ("tail_rivals", self.tail_rivals),
+            ("far_rivals", self.far_rivals),
+            ("tail_misfit", self.tail_misfit),
+            ("far_misfit", self.far_misfit),
         ] {
             if !value.is_finite() || value.abs() > 50.0 {
                 return Err(super::PoseError::Config(format!(
@@ -268,6 +298,12 @@ impl PosteriorConfig {
                 "deeper than the sensor",
             ),
             ("step_m", self.step_m, 0.01, "wider than a contact"),
+            (
+                "rival_window_nats",
+                self.rival_window_nats,
+                1e6,
+                "every pose a rival",
+            ),
             (
                 "contact_threshold_m",
                 self.contact_threshold_m,

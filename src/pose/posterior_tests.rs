@@ -144,6 +144,7 @@ fn a_frame_half_as_noisy_weighs_its_evidence_as_four_times_the_nats() {
     let noise = FrameNoise {
         assumed_m: 1.38e-3,
         measured_m: 0.69e-3,
+        contact_rms_m: None,
     };
     let quieter =
         PosePosterior::from_evidence_with(&evidence(1.0), 200, None, Some(noise), &none, &config);
@@ -211,6 +212,7 @@ fn region_mass_of_one_gaussian_follows_the_chi_square_law() {
         contact_px: 300,
         predicted_contact_px: None,
         noise: None,
+        distinct_nats: Vec::new(),
     };
     let none = Symmetry::default();
     for d in [0.5f64, 1.5, 2.5] {
@@ -328,6 +330,105 @@ fn tails_follow_the_contact_and_their_densities_are_exact() {
         let want = 1.0 - (-d * d / 2.0).exp();
         assert!((got - want).abs() < 0.015, "d {d}: {got} vs {want}");
     }
+}
+
+#[test]
+fn rival_explanations_within_the_window_move_the_tail_and_far_shares() {
+    // Analytic: with the contact's slopes at 0, tail = logistic(tail_logit + tail_rivals · ln n) and
+    // far = logistic(far_logit + far_rivals · ln n), n the distinct poses within the window of the best (itself
+    // included); logistic(ln n) = n / (n + 1).
+    let config = PosteriorConfig {
+        temperature: 0.1,
+        tail_logit: 0.0,
+        tail_contact_slope: 0.0,
+        tail_rivals: 1.0,
+        far_logit: -4.0,
+        far_contact_slope: 0.0,
+        far_ambiguity: 0.0,
+        far_rivals: 2.0,
+        rival_window_nats: 12.0,
+        ..PosteriorConfig::untempered()
+    };
+    let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
+    let at = |x: f64, nats: f64| ModeEvidence {
+        pose: Se2::new(x, 0.0, 0.0),
+        nats,
+        hessian: diag(1e8, 1e8, 1e4),
+    };
+    let none = Symmetry::default();
+    // Rivals at 2 and 5 nats count, one at 20 does not; at τ = 0.1 both rivals weigh < e^-20, below min_weight, and
+    // are no modes: counted all the same.
+    let evidence = [at(0.0, 0.0), at(0.01, 2.0), at(-0.01, 5.0), at(0.02, 20.0)];
+    let post = PosePosterior::from_evidence(&evidence, 300, &none, &config);
+    assert_eq!(post.modes.len(), 1);
+    assert_eq!(post.distinct_nats, vec![0.0, 2.0, 5.0, 20.0]);
+    let far = logistic(-4.0 + 2.0 * 3f64.ln());
+    let t = post.modes[0].tails;
+    assert!((t.far - far).abs() < 1e-12, "{} against {far}", t.far);
+    assert!((t.tail - (1.0 - far) * 0.75).abs() < 1e-12, "{}", t.tail);
+    // Recalibrated from the record, the rivals that are no modes still count; a wider window takes the fourth.
+    let again = post.recalibrated(&none, &config);
+    assert!((again.modes[0].tails.tail - t.tail).abs() < 1e-12);
+    let wide = post.recalibrated(
+        &none,
+        &PosteriorConfig {
+            rival_window_nats: 25.0,
+            ..config.clone()
+        },
+    );
+    let far4 = logistic(-4.0 + 2.0 * 4f64.ln());
+    assert!((wide.modes[0].tails.tail - (1.0 - far4) * 0.8).abs() < 1e-12);
+    // One explanation alone: the shares at the logits themselves.
+    let alone = PosePosterior::from_evidence(&evidence[..1], 300, &none, &config);
+    let far1 = logistic(-4.0);
+    assert!((alone.modes[0].tails.tail - (1.0 - far1) * 0.5).abs() < 1e-12);
+    // A record from before the rivals were kept: its modes' nats stand in.
+    let mut old = post.clone();
+    old.distinct_nats.clear();
+    let old = old.recalibrated(&none, &config);
+    assert!((old.modes[0].tails.tail - (1.0 - far1) * 0.5).abs() < 1e-12);
+}
+
+#[test]
+fn a_contact_the_pose_leaves_unexplained_moves_the_tail_and_far_shares() {
+    // Analytic: ln(misfit / noise) = ln e = 1, so tail = logistic(tail_misfit) · (1 − far) and
+    // far = logistic(far_logit + far_misfit); without the misfit (older records) both at their logits.
+    let config = PosteriorConfig {
+        tail_logit: 0.0,
+        tail_contact_slope: 0.0,
+        tail_misfit: 1.5,
+        far_logit: -4.0,
+        far_contact_slope: 0.0,
+        far_ambiguity: 0.0,
+        far_misfit: 2.0,
+        ..PosteriorConfig::untempered()
+    };
+    let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
+    let evidence = [ModeEvidence {
+        pose: Se2::new(0.0, 0.0, 0.0),
+        nats: 0.0,
+        hessian: diag(1e8, 1e8, 1e4),
+    }];
+    let none = Symmetry::default();
+    let noise = |contact_rms_m| FrameNoise {
+        assumed_m: 1.38e-3,
+        measured_m: 1e-3,
+        contact_rms_m,
+    };
+    let shares = |n: FrameNoise| {
+        let post = PosePosterior::from_evidence_with(&evidence, 300, None, Some(n), &none, &config);
+        (post.modes[0].tails.tail, post.modes[0].tails.far)
+    };
+    let (tail, far) = shares(noise(Some(std::f64::consts::E * 1e-3)));
+    let want_far = logistic(-2.0);
+    assert!((far - want_far).abs() < 1e-12, "{far}");
+    assert!(
+        (tail - (1.0 - want_far) * logistic(1.5)).abs() < 1e-12,
+        "{tail}"
+    );
+    let (tail, far) = shares(noise(None));
+    assert!((far - logistic(-4.0)).abs() < 1e-12);
+    assert!((tail - (1.0 - logistic(-4.0)) * 0.5).abs() < 1e-12);
 }
 
 #[test]

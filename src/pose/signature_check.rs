@@ -205,6 +205,9 @@ pub struct Rival {
 /// Fewest measured pixels [`SignatureCheck::residual_noise`] estimates a frame's noise from.
 pub const MIN_NOISE_PIXELS: usize = 64;
 
+/// Fewest contact pixels [`SignatureCheck::contact_misfit`] measures a misfit over.
+pub const MIN_MISFIT_PIXELS: usize = 5;
+
 /// A rival explaining the signature within this many nats of the pick (a likelihood ratio under e⁴ ≈ 55) makes the
 /// estimate ambiguous: which of the two it is, the sensor's noise decides.
 pub const SIGNATURE_AMBIGUOUS_NATS: f64 = 4.0;
@@ -485,13 +488,13 @@ impl SignatureCheck<'_> {
             })
             .count();
         let predicted_contact_px = distinct.first().map(|&(pose, _)| self.contact_px_at(pose));
-        let noise = distinct
-            .first()
-            .and_then(|&(pose, _)| self.residual_noise(pose))
-            .map(|measured_m| FrameNoise {
+        let noise = distinct.first().and_then(|&(pose, _)| {
+            self.residual_noise(pose).map(|measured_m| FrameNoise {
                 assumed_m: self.model.noise_std,
                 measured_m,
-            });
+                contact_rms_m: self.contact_misfit(pose, config.contact_threshold_m),
+            })
+        });
         Ok(PosePosterior::from_evidence_with(
             &evidence,
             contact_px,
@@ -523,6 +526,33 @@ impl SignatureCheck<'_> {
         let centre = median_of(&mut r);
         let mut deviation: Vec<f64> = r.iter().map(|v| (v - centre).abs()).collect();
         Some(1.4826 * median_of(&mut deviation))
+    }
+
+    /// RMS of the measured signature about [`Self::predict`] at `pose` over the contact, predicted or measured
+    /// (where the object at `pose` reaches in front of the membrane, or the signature lies in front of it by more
+    /// than `threshold_m`), metres: what the pose leaves unexplained where the object touches — the frame's noise
+    /// for a pose that explains the contact, more for one that does not. `None` with fewer than
+    /// [`MIN_MISFIT_PIXELS`] such pixels measured.
+    pub fn contact_misfit(&self, pose: Se2, threshold_m: f64) -> Option<f64> {
+        let predicted = self.predict(pose);
+        let depth = self.object_depth(pose);
+        let (mut sum, mut n) = (0.0, 0usize);
+        for (((&s, &p), &d), &e) in self
+            .signature
+            .data
+            .iter()
+            .zip(&predicted.data)
+            .zip(&depth.data)
+            .zip(&self.membrane.data)
+        {
+            let measured = s > 0.0 && s.is_finite() && e > 0.0;
+            let touches = (d > 0.0 && d < e) || f64::from(e - s) > threshold_m;
+            if measured && touches {
+                sum += f64::from(s - p).powi(2);
+                n += 1;
+            }
+        }
+        (n >= MIN_MISFIT_PIXELS).then(|| (sum / n as f64).sqrt())
     }
 
     /// The contact pixels with the object at `pose`: where it reaches in front of the membrane (the contact mask

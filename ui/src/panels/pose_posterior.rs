@@ -68,10 +68,17 @@ pub fn posterior_summary(ui: &mut egui::Ui, r: &PoseAnalysis) {
         .noise
         .map(|n| {
             format!(
-                " This frame's noise about the best mode: {:.2} mm (the sensor model assumes {:.2} mm a pixel), which the \
-                 calibration's frame_noise weighs the evidence by.",
+                " This frame's noise about the best mode: {:.2} mm (the sensor model assumes {:.2} mm a pixel).{}",
                 n.measured_m * 1e3,
-                n.assumed_m * 1e3
+                n.assumed_m * 1e3,
+                n.contact_rms_m
+                    .map(|c| format!(
+                        " On the contact the best mode leaves {:.2} mm unexplained ({:.1}x the frame's noise; \
+                         the more, the heavier the tails).",
+                        c * 1e3,
+                        n.ln_misfit().exp()
+                    ))
+                    .unwrap_or_default()
             )
         })
         .unwrap_or_default();
@@ -79,7 +86,8 @@ pub fn posterior_summary(ui: &mut egui::Ui, r: &PoseAnalysis) {
         "What the measured signature supports: each pose the signature check refined is a mode, weighted by how well \
          it explains the signature (tempered for correlated pixels), with a sharp core from the curvature of that \
          fit, a wider tail for a contact the sample got somewhat wrong and a far share for a pose no hypothesis came \
-         near; the shares grow on small contacts. Fitted to validation data by the log density of the truth \
+         near; the shares grow on small contacts, with rival poses that explain the signature nearly as well, and where \
+         the best pose leaves the contact unexplained. Fitted to validation data by the log density of the truth \
          (docs/uncertainty.md). σ is about the estimate, other modes' cores and tails included — what pose.json's \
          pose_with_covariance carries.{noise}",
     ));
