@@ -31,6 +31,8 @@ def main():
     ap.add_argument("--tnd", default="tnd")
     ap.add_argument("--out", required=True, help="folder for the folds' records and fits")
     ap.add_argument("--folds", type=int, default=5)
+    ap.add_argument("--base", help="calibration the fits start from and keep the unfitted settings of (e.g. "
+                    "rival_window_nats); the shipped default without it")
     ap.add_argument("records", nargs="+")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
@@ -55,8 +57,9 @@ def main():
         fit = os.path.join(a.out, f"fold{k}.json")
         if os.path.exists(fit):
             os.remove(fit)
+        base = ["--config", a.base] if a.base else []
         fitted = subprocess.run([a.tnd, "posterior", "-q", "--method", "combined", "--json", "--force", "--fit",
-                                 fit, "--records", *parts["fit"]], capture_output=True, text=True)
+                                 fit, *base, "--records", *parts["fit"]], capture_output=True, text=True)
         r = subprocess.run([a.tnd, "posterior", "-q", "--method", "combined", "--json", "--config", fit,
                             "--records", *parts["check"]], capture_output=True, text=True)
         if fitted.returncode != 0 or r.returncode != 0:
