@@ -1,7 +1,7 @@
 //! The smaller ways a run could go wrong for an unlucky user, each with the one-line message that names the file:
 //! an MCAP whose depth channel holds no messages, a second import into a finished dataset, a report folder that
 //! cannot be written (refused before the evaluation, not after it), a mesh in the wrong units or fitted to an
-//! impossible size.
+//! impossible size, a sensor file whose depth camera `tnd dataset gen` does not simulate.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -204,4 +204,30 @@ fn a_mis_scaled_mesh_is_refused_before_any_work() {
         !o.status.success() && err.contains("mesh files only"),
         "{err}"
     );
+}
+
+#[test]
+fn a_depth_camera_dataset_gen_does_not_simulate_is_said() {
+    // A sensor file from `tnd calibrate` of a time-of-flight recording carries its depth_camera; dataset gen renders
+    // an ideal camera at the model's resolution and says so instead of keeping quiet (the pairs are still made).
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("tof.json"),
+        r#"{"depth_camera": {"dropout": 0.02}}"#,
+    )
+    .unwrap();
+    let gen = |out: &str, sensor: &[&str]| {
+        let mut args = vec![
+            "dataset", "gen", "-q", "--out", out, "--pairs", "2", "--seed", "3",
+        ];
+        args.extend_from_slice(sensor);
+        tnd_in(dir.path(), &args)
+    };
+    let o = gen("with", &["--sensor", "tof.json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("depth_camera"), "{}", stderr(&o));
+    assert!(dir.path().join("with/manifest.json").exists());
+    let o = gen("without", &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("depth_camera"), "{}", stderr(&o));
 }

@@ -289,6 +289,14 @@ fn gen(a: GenArgs) -> Result<()> {
         ..GenConfig::default()
     };
     let sim = a.sensor.sim_config()?;
+    if !sim.depth_camera.is_ideal() {
+        // Said, not refused: the membrane and the sensor's noise in the file are simulated.
+        eprintln!(
+            "warning: the sensor file's depth_camera (missing returns, depth-dependent noise, flying pixels, a fixed \
+             pattern) is not simulated by tnd dataset gen: its pairs are rendered at the model's resolution by an \
+             ideal camera. `tnd recording simulate` renders it on native frames (then `tnd dataset import`)."
+        );
+    }
     let set = ObjectSet::open(&a.objects).with_context(|| format!("--objects {}", a.objects))?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
