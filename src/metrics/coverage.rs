@@ -104,7 +104,8 @@ pub struct Reliability {
     pub inside: Vec<f64>,
     /// Mean negative log density of the truth (each capped at [`NLL_CAP`]; over x, y in metres and θ in radians).
     pub mean_nll: f64,
-    /// Sharpness: the median over pairs of the top mode's core standard deviation per position axis, mm …
+    /// Sharpness: the median over pairs of the top mode's standard deviation (its core and tail together,
+    /// [`crate::pose::posterior::PosteriorMode::sigmas`]) per position axis, mm …
     pub median_sigma_position_mm: f64,
     /// … and of θ, degrees (`None` where the symmetry leaves θ free in every pair) …
     pub median_sigma_theta_deg: Option<f64>,
