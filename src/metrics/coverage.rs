@@ -109,6 +109,10 @@ pub struct Reliability {
     pub median_sigma_position_mm: f64,
     /// … and of θ, degrees (`None` where the symmetry leaves θ free in every pair) …
     pub median_sigma_theta_deg: Option<f64>,
+    /// … and of θ of the top mode's core alone, degrees: the σ of the contacts the estimate got right (heavy-tailed
+    /// errors put the rest in the tail) …
+    #[serde(default)]
+    pub median_core_sigma_theta_deg: Option<f64>,
     /// … against the median error of the estimate: position (mm) …
     pub median_error_position_mm: f64,
     /// … and θ, degrees.
@@ -123,28 +127,33 @@ pub fn reliability(
     config: Option<&PosteriorConfig>,
     draws: usize,
 ) -> Option<(Coverage, Reliability)> {
-    // Each pair with its region mass, negative log density and top mode's σ.
-    let per_pair: Vec<(&Scored<'_>, f64, f64, [f64; 3])> = scored
+    // Each pair with its region mass, negative log density, top mode's σ and its core's σθ.
+    let per_pair: Vec<(&Scored<'_>, f64, f64, [f64; 3], f64)> = scored
         .par_iter()
         .filter_map(|s| {
             let recalibrated = config.map(|c| s.posterior.recalibrated(&s.symmetry, c));
             let p = recalibrated.as_ref().unwrap_or(s.posterior);
             let mass = p.region_mass(s.truth, &s.symmetry, draws)?;
             let nll = (-p.log_density(s.truth, &s.symmetry)).min(NLL_CAP);
-            let sigmas = p.top()?.sigmas();
-            Some((s, mass, nll, sigmas))
+            let top = p.top()?;
+            let core_theta = top.cov[2][2].max(0.0).sqrt();
+            Some((s, mass, nll, top.sigmas(), core_theta))
         })
         .collect();
-    let coverage = Coverage::of(per_pair.iter().map(|(s, m, _, _)| (*m, s.position_mm)))?;
+    let coverage = Coverage::of(per_pair.iter().map(|(s, m, ..)| (*m, s.position_mm)))?;
     let n = per_pair.len() as f64;
-    let sigma_theta: Vec<f64> = per_pair
-        .iter()
-        .filter(|(s, _, _, _)| s.symmetry.rotation.period_rad().is_some())
-        .map(|(_, _, _, sig)| sig[2].to_degrees())
+    let with_theta = || {
+        per_pair
+            .iter()
+            .filter(|(s, ..)| s.symmetry.rotation.period_rad().is_some())
+    };
+    let sigma_theta: Vec<f64> = with_theta()
+        .map(|(_, _, _, sig, _)| sig[2].to_degrees())
         .collect();
+    let core_theta: Vec<f64> = with_theta().map(|(.., core)| core.to_degrees()).collect();
     let error_theta: Vec<f64> = per_pair
         .iter()
-        .filter_map(|(s, _, _, _)| s.theta_rad.map(|t| t.abs().to_degrees()))
+        .filter_map(|(s, ..)| s.theta_rad.map(|t| t.abs().to_degrees()))
         .collect();
     let median_or_nan = |v: Vec<f64>| median(v).unwrap_or(f64::NAN);
     let reliability = Reliability {
@@ -152,18 +161,19 @@ pub fn reliability(
         levels: RELIABILITY_LEVELS.to_vec(),
         inside: RELIABILITY_LEVELS
             .iter()
-            .map(|&p| per_pair.iter().filter(|(_, m, _, _)| *m <= p).count() as f64 / n)
+            .map(|&p| per_pair.iter().filter(|(_, m, ..)| *m <= p).count() as f64 / n)
             .collect(),
-        mean_nll: per_pair.iter().map(|(_, _, v, _)| v).sum::<f64>() / n,
+        mean_nll: per_pair.iter().map(|(_, _, v, ..)| v).sum::<f64>() / n,
         median_sigma_position_mm: median_or_nan(
             per_pair
                 .iter()
-                .map(|(_, _, _, s)| ((s[0] * s[0] + s[1] * s[1]) / 2.0).sqrt() * 1e3)
+                .map(|(_, _, _, s, _)| ((s[0] * s[0] + s[1] * s[1]) / 2.0).sqrt() * 1e3)
                 .collect(),
         ),
         median_sigma_theta_deg: median(sigma_theta),
+        median_core_sigma_theta_deg: median(core_theta),
         median_error_position_mm: median_or_nan(
-            per_pair.iter().map(|(s, _, _, _)| s.position_mm).collect(),
+            per_pair.iter().map(|(s, ..)| s.position_mm).collect(),
         ),
         median_error_theta_deg: median(error_theta),
     };

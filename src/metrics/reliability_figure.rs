@@ -160,6 +160,7 @@ mod tests {
             mean_nll: -10.0,
             median_sigma_position_mm: 0.5,
             median_sigma_theta_deg: theta,
+            median_core_sigma_theta_deg: theta,
             median_error_position_mm: 0.4,
             median_error_theta_deg: theta.map(|t| t / 2.0),
         };

@@ -182,7 +182,7 @@ fn score_groups(
     drawing: bool,
 ) -> (String, Vec<(String, Reliability)>) {
     let mut table = String::from(
-        "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong | mean NLL | median σ / error, position [mm] | median σ / error, θ [deg] |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong | mean NLL | median σ / error, position [mm] | median σ (core) / error, θ [deg] |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut drawn: Vec<(String, Reliability)> = Vec::new();
     for (name, get) in methods {
@@ -271,7 +271,14 @@ fn row(name: &str, group: &str, c: &Coverage, r: &Reliability) -> String {
             Some(r.median_sigma_position_mm),
             Some(r.median_error_position_mm)
         ),
-        pair(r.median_sigma_theta_deg, r.median_error_theta_deg)
+        match (
+            r.median_sigma_theta_deg,
+            r.median_core_sigma_theta_deg,
+            r.median_error_theta_deg
+        ) {
+            (Some(s), Some(c), Some(e)) => format!("{s:.2} ({c:.2}) / {e:.2}"),
+            (s, _, e) => pair(s, e),
+        }
     )
 }
 
