@@ -24,6 +24,17 @@ pub(crate) fn sibling(path: &Path, kind: &str, pid: u32) -> PathBuf {
     parent.join(format!(".{name}.{kind}.{pid}"))
 }
 
+/// A temporary sibling of `path` no other write of this process uses: `.<name>.tmp.<pid>_<n>`. Two threads
+/// writing one file (a folder's ledger, updated as each entry is written) must not share a temporary file: the
+/// second's create would empty the first's just before it is renamed into place, and a run killed then would leave
+/// an empty file.
+fn unique_tmp(path: &Path) -> PathBuf {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let (parent, name) = parent_and_name(path);
+    parent.join(format!(".{name}.tmp.{}_{n}", std::process::id()))
+}
+
 /// Write `bytes` to `path` atomically (temp file in the same directory + fsync + rename). Parent directories are
 /// created. The error message names `path`.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
@@ -66,7 +77,7 @@ fn write_plain_with(
         ),
         None => named(e),
     })?;
-    let tmp = sibling(path, "tmp", std::process::id());
+    let tmp = unique_tmp(path);
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;
         let mut w = std::io::BufWriter::new(file);
@@ -237,6 +248,45 @@ mod tests {
         assert_eq!(std::fs::read(&p).unwrap(), b"two");
         let names: Vec<_> = std::fs::read_dir(p.parent().unwrap()).unwrap().collect();
         assert_eq!(names.len(), 1, "temporary file left behind");
+    }
+
+    #[test]
+    fn threads_writing_one_file_never_show_a_reader_a_partial_one() {
+        // Invariant of an atomic write: whatever a reader finds is one writer's whole content, never an empty or
+        // cut file — also when several threads of one process write the same file at once (a folder's ledger).
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("ledger.json");
+        write_atomic(&p, &[b'0'; 4096]).unwrap();
+        let done = std::sync::atomic::AtomicBool::new(false);
+        std::thread::scope(|scope| {
+            let writers: Vec<_> = (0..4u8)
+                .map(|t| {
+                    let p = &p;
+                    scope.spawn(move || {
+                        for _ in 0..150 {
+                            write_atomic(p, &[b'a' + t; 4096]).unwrap();
+                        }
+                    })
+                })
+                .collect();
+            let reader = scope.spawn(|| {
+                let mut reads = 0;
+                while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                    let bytes = std::fs::read(&p).unwrap();
+                    assert_eq!(bytes.len(), 4096, "a reader saw {} bytes", bytes.len());
+                    assert!(bytes.iter().all(|&b| b == bytes[0]), "a mixed file");
+                    reads += 1;
+                }
+                reads
+            });
+            for w in writers {
+                w.join().unwrap();
+            }
+            done.store(true, std::sync::atomic::Ordering::Relaxed);
+            assert!(reader.join().unwrap() > 0);
+        });
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(names.len(), 1, "temporary files left behind");
     }
 
     #[test]

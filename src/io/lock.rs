@@ -145,12 +145,17 @@ pub fn check_not_written(output: &Path) -> Result<(), LockError> {
     }
 }
 
-/// A writer's sibling name `.<name>.<kind>.<pid>` ([`super::atomic::sibling`]) left by a process that no longer
-/// runs: `(name, kind)`, kind `tmp` or `old`.
+/// A writer's sibling name `.<name>.<kind>.<pid>` ([`super::atomic::sibling`]), or `.<name>.tmp.<pid>_<n>` (a
+/// file's atomic write), left by a process that no longer runs: `(name, kind)`, kind `tmp` or `old`.
 fn dead_sibling(file_name: &std::ffi::OsStr) -> Option<(&str, &str)> {
     let rest = file_name.to_str()?.strip_prefix('.')?;
     let (rest, pid) = rest.rsplit_once('.')?;
     let (name, kind) = rest.rsplit_once('.')?;
+    let pid = match pid.split_once('_') {
+        Some((pid, n)) if kind == "tmp" && n.parse::<u64>().is_ok() => pid,
+        Some(_) => return None,
+        None => pid,
+    };
     let pid: u32 = pid.parse().ok()?;
     (matches!(kind, "tmp" | "old") && pid != std::process::id() && !alive(pid))
         .then_some((name, kind))
@@ -245,6 +250,26 @@ fn same_file(_file: &File, path: &Path) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(unix)]
+    #[test]
+    fn a_dead_writers_numbered_temporary_file_is_recognised() {
+        // A pid above Linux's largest (2^22) runs no process; this process's own are alive.
+        let name = |s: &str| std::ffi::OsString::from(s);
+        assert_eq!(
+            dead_sibling(&name(".ledger.json.tmp.999999999_3")),
+            Some(("ledger.json", "tmp"))
+        );
+        assert_eq!(
+            dead_sibling(&name(".ledger.json.tmp.999999999")),
+            Some(("ledger.json", "tmp"))
+        );
+        let own = format!(".ledger.json.tmp.{}_3", std::process::id());
+        assert_eq!(dead_sibling(&name(&own)), None);
+        // Only a temporary file is numbered; a user's file that looks like one otherwise is not touched.
+        assert_eq!(dead_sibling(&name(".run.old.999999999_3")), None);
+        assert_eq!(dead_sibling(&name(".ledger.json.tmp.999999999_x")), None);
+    }
 
     #[test]
     fn a_second_writer_is_refused_with_the_holders_pid_until_the_first_drops() {

@@ -307,10 +307,13 @@ fn record_in_folder(real: &Path) {
         };
         updates.push((f.real.clone(), ledger));
     }
-    drop(folders);
+    // Written under the lock: two threads each adding an entry must not write their ledgers in the other order
+    // (the older one last would drop the newer entry, and a run killed then leaves a file the next run takes for
+    // the user's).
     for (dir, ledger) in updates {
         let _ = write_ledger(&dir, &ledger);
     }
+    drop(folders);
 }
 
 /// Whether `path` is as tnd last wrote it ([`WRITTEN_FILES`]).
