@@ -482,7 +482,7 @@ pub(crate) fn remove_all_stale_temp_files(out: &Path) -> Result<(), DatasetError
     Ok(())
 }
 
-/// Remove `.<name>.tmp.<pid>` files left by a killed run (see [`crate::io::write_atomic`]).
+/// Remove `.<name>.tmp.<pid>[_<n>]` files left by a killed run (see [`crate::io::write_atomic`]).
 fn remove_stale_temp_files(dir: &Path) -> Result<(), DatasetError> {
     let entries = match std::fs::read_dir(dir) {
         Ok(e) => e,

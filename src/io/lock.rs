@@ -161,7 +161,7 @@ fn dead_sibling(file_name: &std::ffi::OsStr) -> Option<(&str, &str)> {
         .then_some((name, kind))
 }
 
-/// Temporary files and folders of killed runs on `output`, which we now hold: `.<name>.tmp.<pid>` beside it
+/// Temporary files and folders of killed runs on `output`, which we now hold: `.<name>.tmp.<pid>[_<n>]` beside it
 /// (a folder replacement or an atomic write under way), the same inside it and one level below (its files' atomic
 /// writes), and an old folder parked by an interrupted replacement, which is put back when the new one never
 /// arrived. Best effort: what cannot be removed stays as it was.
