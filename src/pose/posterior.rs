@@ -194,17 +194,10 @@ impl FrameNoise {
     /// ln(`contact_rms_m` / `measured_m`): how many times the frame's noise the pose leaves unexplained on the
     /// contact, as a log; 0 where either is unknown.
     pub fn ln_misfit(&self) -> f64 {
-        match self.contact_rms_m {
-            Some(c) if c > 0.0 && self.measured_m > 0.0 => {
-                let v = (c / self.measured_m).ln();
-                if v.is_finite() {
-                    v
-                } else {
-                    0.0
-                }
-            }
-            _ => 0.0,
-        }
+        self.contact_rms_m
+            .map(|c| (c / self.measured_m).ln())
+            .filter(|v| v.is_finite())
+            .unwrap_or(0.0)
     }
 }
 

@@ -254,21 +254,22 @@ impl SignatureCheck<'_> {
 
     /// Ŝ(q): the noise-free signature the sensor would measure with the object at `pose` (metres).
     pub fn predict(&self, pose: Se2) -> Image {
+        self.render(pose).1
+    }
+
+    /// The object's depth at `pose` ([`Self::object_depth`]) and the signature it predicts from it
+    /// ([`Self::predict`]), rendered once.
+    fn render(&self, pose: Se2) -> (Image, Image) {
         let depth = self.object_depth(pose);
-        let mask = depth.zip_map(self.membrane, |d, e| {
-            if d > 0.0 && e > 0.0 && d < e {
-                1.0
-            } else {
-                0.0
-            }
-        });
-        tactile_signature(
+        let mask = depth.zip_map(self.membrane, |d, e| f32::from(u8::from(in_contact(d, e))));
+        let predicted = tactile_signature(
             &depth,
             self.membrane,
             &mask,
             self.model.shadow_px,
             self.model.spacing,
-        )
+        );
+        (depth, predicted)
     }
 
     /// The robust mean residual between the measured signature and [`Self::predict`] (metres²; lower is better).
@@ -487,13 +488,22 @@ impl SignatureCheck<'_> {
                 s > 0.0 && s.is_finite() && e > 0.0 && f64::from(e - s) > config.contact_threshold_m
             })
             .count();
-        let predicted_contact_px = distinct.first().map(|&(pose, _)| self.contact_px_at(pose));
-        let noise = distinct.first().and_then(|&(pose, _)| {
-            self.residual_noise(pose).map(|measured_m| FrameNoise {
-                assumed_m: self.model.noise_std,
-                measured_m,
-                contact_rms_m: self.contact_misfit(pose, config.contact_threshold_m),
-            })
+        // The best pose's prediction, rendered once for its contact, the frame's noise and the contact's misfit.
+        let best_fit = distinct.first().map(|&(pose, _)| self.render(pose));
+        let predicted_contact_px = best_fit
+            .as_ref()
+            .map(|(depth, _)| self.contact_px_of(depth));
+        let noise = best_fit.as_ref().and_then(|(depth, predicted)| {
+            self.residual_noise_of(predicted)
+                .map(|measured_m| FrameNoise {
+                    assumed_m: self.model.noise_std,
+                    measured_m,
+                    contact_rms_m: self.contact_misfit_of(
+                        depth,
+                        predicted,
+                        config.contact_threshold_m,
+                    ),
+                })
         });
         Ok(PosePosterior::from_evidence_with(
             &evidence,
@@ -510,7 +520,11 @@ impl SignatureCheck<'_> {
     /// noise of the frame as the check sees it, not the contact's misfit); `None` with fewer than
     /// [`MIN_NOISE_PIXELS`] measured pixels.
     pub fn residual_noise(&self, pose: Se2) -> Option<f64> {
-        let predicted = self.predict(pose);
+        self.residual_noise_of(&self.predict(pose))
+    }
+
+    /// [`Self::residual_noise`] about the prediction `predicted`.
+    fn residual_noise_of(&self, predicted: &Image) -> Option<f64> {
         let mut r: Vec<f64> = self
             .signature
             .data
@@ -534,8 +548,12 @@ impl SignatureCheck<'_> {
     /// for a pose that explains the contact, more for one that does not. `None` with fewer than
     /// [`MIN_MISFIT_PIXELS`] such pixels measured.
     pub fn contact_misfit(&self, pose: Se2, threshold_m: f64) -> Option<f64> {
-        let predicted = self.predict(pose);
-        let depth = self.object_depth(pose);
+        let (depth, predicted) = self.render(pose);
+        self.contact_misfit_of(&depth, &predicted, threshold_m)
+    }
+
+    /// [`Self::contact_misfit`] with the object's `depth` and the signature `predicted` from it.
+    fn contact_misfit_of(&self, depth: &Image, predicted: &Image, threshold_m: f64) -> Option<f64> {
         let (mut sum, mut n) = (0.0, 0usize);
         for (((&s, &p), &d), &e) in self
             .signature
@@ -546,7 +564,7 @@ impl SignatureCheck<'_> {
             .zip(&self.membrane.data)
         {
             let measured = s > 0.0 && s.is_finite() && e > 0.0;
-            let touches = (d > 0.0 && d < e) || f64::from(e - s) > threshold_m;
+            let touches = in_contact(d, e) || f64::from(e - s) > threshold_m;
             if measured && touches {
                 sum += f64::from(s - p).powi(2);
                 n += 1;
@@ -558,11 +576,16 @@ impl SignatureCheck<'_> {
     /// The contact pixels with the object at `pose`: where it reaches in front of the membrane (the contact mask
     /// [`Self::predict`] renders), free of the sensor's noise.
     pub fn contact_px_at(&self, pose: Se2) -> usize {
-        self.object_depth(pose)
+        self.contact_px_of(&self.object_depth(pose))
+    }
+
+    /// [`Self::contact_px_at`] of the object's `depth`.
+    fn contact_px_of(&self, depth: &Image) -> usize {
+        depth
             .data
             .iter()
             .zip(&self.membrane.data)
-            .filter(|(&d, &e)| d > 0.0 && e > 0.0 && d < e)
+            .filter(|(&d, &e)| in_contact(d, e))
             .count()
     }
 
@@ -594,6 +617,12 @@ impl SignatureCheck<'_> {
         }
         m
     }
+}
+
+/// The object's depth `d` lies in front of the membrane's `e` (both seen): the contact mask [`SignatureCheck::predict`]
+/// renders.
+fn in_contact(d: f32, e: f32) -> bool {
+    d > 0.0 && e > 0.0 && d < e
 }
 
 /// The membrane as this measurement's reference frame R = S + Y shows it: the nominal E plus the measured offset
