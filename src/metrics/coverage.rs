@@ -13,7 +13,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::objects::Symmetry;
-use crate::pose::posterior::{PosePosterior, PosteriorConfig};
+use crate::pose::posterior::{PosePosterior, PosteriorConfig, ONE_SIGMA};
 use crate::sensor::Se2;
 
 /// The region levels reported.
@@ -113,6 +113,14 @@ pub struct Reliability {
     /// errors put the rest in the tail) …
     #[serde(default)]
     pub median_core_sigma_theta_deg: Option<f64>,
+    /// … and the median half-width of the top mode's central interval holding [`ONE_SIGMA`] of it
+    /// ([`crate::pose::posterior::PosteriorMode::half_widths`]): the spread read as a Gaussian's ±σ, position (mm,
+    /// the RMS over x and y) …
+    #[serde(default)]
+    pub median_half_width_position_mm: Option<f64>,
+    /// … and θ, degrees …
+    #[serde(default)]
+    pub median_half_width_theta_deg: Option<f64>,
     /// … against the median error of the estimate: position (mm) …
     pub median_error_position_mm: f64,
     /// … and θ, degrees.
@@ -127,8 +135,9 @@ pub fn reliability(
     config: Option<&PosteriorConfig>,
     draws: usize,
 ) -> Option<(Coverage, Reliability)> {
-    // Each pair with its region mass, negative log density, top mode's σ and its core's σθ.
-    let per_pair: Vec<(&Scored<'_>, f64, f64, [f64; 3], f64)> = scored
+    // Each pair with its region mass, negative log density, top mode's σ, its core's σθ and its ±σ half-widths.
+    type PairScore<'a, 'b> = (&'a Scored<'b>, f64, f64, [f64; 3], f64, [f64; 3]);
+    let per_pair: Vec<PairScore<'_, '_>> = scored
         .par_iter()
         .filter_map(|s| {
             let recalibrated = config.map(|c| s.posterior.recalibrated(&s.symmetry, c));
@@ -137,7 +146,13 @@ pub fn reliability(
             let nll = (-p.log_density(s.truth, &s.symmetry)).min(NLL_CAP);
             let top = p.top()?;
             let core_theta = top.cov[2][2].max(0.0).sqrt();
-            Some((s, mass, nll, top.sigmas(), core_theta))
+            let period = s
+                .symmetry
+                .rotation
+                .period_rad()
+                .unwrap_or(std::f64::consts::TAU);
+            let half = top.half_widths(ONE_SIGMA, period);
+            Some((s, mass, nll, top.sigmas(), core_theta, half))
         })
         .collect();
     let coverage = Coverage::of(per_pair.iter().map(|(s, m, ..)| (*m, s.position_mm)))?;
@@ -148,9 +163,14 @@ pub fn reliability(
             .filter(|(s, ..)| s.symmetry.rotation.period_rad().is_some())
     };
     let sigma_theta: Vec<f64> = with_theta()
-        .map(|(_, _, _, sig, _)| sig[2].to_degrees())
+        .map(|(_, _, _, sig, ..)| sig[2].to_degrees())
         .collect();
-    let core_theta: Vec<f64> = with_theta().map(|(.., core)| core.to_degrees()).collect();
+    let core_theta: Vec<f64> = with_theta()
+        .map(|(.., core, _)| core.to_degrees())
+        .collect();
+    let half_theta: Vec<f64> = with_theta()
+        .map(|(.., half)| half[2].to_degrees())
+        .collect();
     let error_theta: Vec<f64> = per_pair
         .iter()
         .filter_map(|(s, ..)| s.theta_rad.map(|t| t.abs().to_degrees()))
@@ -167,11 +187,18 @@ pub fn reliability(
         median_sigma_position_mm: median_or_nan(
             per_pair
                 .iter()
-                .map(|(_, _, _, s, _)| ((s[0] * s[0] + s[1] * s[1]) / 2.0).sqrt() * 1e3)
+                .map(|(_, _, _, s, ..)| ((s[0] * s[0] + s[1] * s[1]) / 2.0).sqrt() * 1e3)
                 .collect(),
         ),
         median_sigma_theta_deg: median(sigma_theta),
         median_core_sigma_theta_deg: median(core_theta),
+        median_half_width_position_mm: median(
+            per_pair
+                .iter()
+                .map(|(.., h)| ((h[0] * h[0] + h[1] * h[1]) / 2.0).sqrt() * 1e3)
+                .collect(),
+        ),
+        median_half_width_theta_deg: median(half_theta),
         median_error_position_mm: median_or_nan(
             per_pair.iter().map(|(s, ..)| s.position_mm).collect(),
         ),

@@ -1,8 +1,10 @@
 //! The **reliability figure** of `tnd posterior --figures DIR` ([`super::coverage::reliability`]), as forecasters
 //! draw it: the share of pairs whose truth lies inside the posterior's region of each level against the level (a
 //! calibrated posterior lies on the diagonal; above it is too wide, below it overconfident), one line per contact-size
-//! bin; and sharpness: the median σ of the top mode against the median error of the estimate, position in mm and θ
-//! in degrees, with the lines σ = error and σ = 3 × error (a useful posterior is calibrated *and* near the first).
+//! bin; and sharpness: the median σ of the top mode (filled) and the median half-width of its central 68 % interval
+//! (open: the spread read as a Gaussian's ±σ, which heavy tails set apart from the standard deviation) against the
+//! median error of the estimate, position in mm and θ in degrees, with the lines σ = error and σ = 3 × error (a
+//! useful posterior is calibrated *and* near the first).
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -84,33 +86,48 @@ impl Draw for ReliabilityFigure<'_> {
         }
         draw_legend_at(&mut chart, s, SeriesLabelPosition::UpperLeft)?;
 
-        // Sharpness: median σ against median error, position and θ.
-        type Pick = fn(&Reliability) -> Option<(f64, f64)>;
+        // Sharpness: median σ (filled) and median half-width of the central 68 % interval (open) against median
+        // error, position and θ.
+        // (median error, median σ, median half-width of the central 68 % interval).
+        type Sharp = (f64, f64, Option<f64>);
+        type Pick = fn(&Reliability) -> Option<Sharp>;
         let sharpness: [(&str, &str, &str, Pick); 2] = [
             (
                 "sharpness: position (top mode)",
                 "median position error [mm]",
                 "median σ per axis [mm]",
-                |r| Some((r.median_error_position_mm, r.median_sigma_position_mm)),
+                |r| {
+                    Some((
+                        r.median_error_position_mm,
+                        r.median_sigma_position_mm,
+                        r.median_half_width_position_mm,
+                    ))
+                },
             ),
             (
                 "sharpness: θ (top mode)",
                 "median θ error [deg]",
                 "median σθ [deg]",
-                |r| Some((r.median_error_theta_deg?, r.median_sigma_theta_deg?)),
+                |r| {
+                    Some((
+                        r.median_error_theta_deg?,
+                        r.median_sigma_theta_deg?,
+                        r.median_half_width_theta_deg,
+                    ))
+                },
             ),
         ];
         for (panel, (caption, x_desc, y_desc, pick)) in panels[1..].iter().zip(sharpness) {
-            let points: Vec<(usize, (f64, f64))> = self
+            let points: Vec<(usize, Sharp)> = self
                 .groups
                 .iter()
                 .enumerate()
                 .filter_map(|(k, (_, r))| pick(r).map(|p| (k, p)))
-                .filter(|(_, (x, y))| x.is_finite() && y.is_finite())
+                .filter(|(_, (x, y, _))| x.is_finite() && y.is_finite())
                 .collect();
             let top = points
                 .iter()
-                .map(|(_, (x, y))| x.max(*y))
+                .map(|(_, (x, y, _))| x.max(*y))
                 .fold(0.0f64, f64::max)
                 .max(1e-3)
                 * 1.15;
@@ -134,11 +151,31 @@ impl Draw for ReliabilityFigure<'_> {
                     .label(text)
                     .legend(swatch(grey, stroke));
             }
-            for (k, p) in points {
-                let c = colour(k);
-                chart
-                    .draw_series(std::iter::once(Circle::new(p, dot + 2, c.filled())))
+            let black = RGBColor(40, 40, 40);
+            for (k, (x, y, half)) in &points {
+                let c = colour(*k);
+                let sd = chart
+                    .draw_series(std::iter::once(Circle::new((*x, *y), dot + 2, c.filled())))
                     .map_err(err)?;
+                if *k == 0 {
+                    sd.label("standard deviation")
+                        .legend(move |(x, y)| Circle::new((x + 6, y), dot + 2, black.filled()));
+                }
+                if let Some(h) = half.filter(|h| h.is_finite()) {
+                    let open = chart
+                        .draw_series(std::iter::once(Circle::new(
+                            (*x, h.min(top)),
+                            dot + 2,
+                            c.stroke_width(stroke),
+                        )))
+                        .map_err(err)?;
+                    if *k == 0 {
+                        open.label("±: central 68 % interval")
+                            .legend(move |(x, y)| {
+                                Circle::new((x + 6, y), dot + 2, black.stroke_width(stroke))
+                            });
+                    }
+                }
             }
             draw_legend_at(&mut chart, s, SeriesLabelPosition::LowerRight)?;
         }
@@ -161,6 +198,8 @@ mod tests {
             median_sigma_position_mm: 0.5,
             median_sigma_theta_deg: theta,
             median_core_sigma_theta_deg: theta,
+            median_half_width_position_mm: Some(0.3),
+            median_half_width_theta_deg: theta,
             median_error_position_mm: 0.4,
             median_error_theta_deg: theta.map(|t| t / 2.0),
         };
@@ -183,6 +222,7 @@ mod tests {
         // Both groups in the legend with their pair counts, and the axes say what is plotted.
         assert!(text.contains("all (10 pairs)") && text.contains("&lt;100 px (10 pairs)"));
         assert!(text.contains("region level") && text.contains("median σθ [deg]"));
+        assert!(text.contains("central 68 % interval") && text.contains("standard deviation"));
         assert!(image::open(png).unwrap().width() == 2400);
     }
 }

@@ -110,6 +110,11 @@ pub struct PoseRecord {
     pub posterior: Option<PosePosterior>,
     /// The probability mass of the posterior's smallest region holding the truth, when it is known.
     pub truth_region: Option<f64>,
+    /// Half-widths of the central intervals about the estimate's mode holding 68 % of it — x, y (metres), θ
+    /// (radians; [`crate::pose::posterior::PosteriorMode::half_widths`]): its spread read as a Gaussian's ±σ, which
+    /// heavy tails make far narrower than the covariance's standard deviation.
+    #[serde(default)]
+    pub half_width_68: Option<[f64; 3]>,
     /// The estimate as a 4x4 transform (with an estimate and a posterior).
     pub transform: Option<ObjectTransform>,
     /// The estimate as a ROS `PoseWithCovarianceStamped`, the covariance the posterior's about it.
@@ -168,6 +173,15 @@ impl PoseRecord {
             out: source.out,
             posterior: estimate.posterior.clone(),
             truth_region: estimate.truth_region,
+            half_width_68: best.zip(estimate.posterior.as_ref()).and_then(|(b, p)| {
+                let period = symmetry
+                    .rotation
+                    .period_rad()
+                    .unwrap_or(std::f64::consts::TAU);
+                p.mode_of(b, symmetry)
+                    .or(p.top())
+                    .map(|m| m.half_widths(crate::pose::posterior::ONE_SIGMA, period))
+            }),
             transform,
             pose_with_covariance,
         }

@@ -27,6 +27,8 @@ pub struct FitFigure<'a> {
     pub samples: &'a [[f64; 2]],
     /// The pose posterior: each mode's 90 % position ellipse, and the outline at the top mode's 90 % θ extremes.
     pub posterior: Option<&'a super::posterior::PosePosterior>,
+    /// The object's rotation symmetry period, radians (2π without one): the posterior's far θ is uniform over it.
+    pub theta_period: f64,
 }
 
 /// An outline placed in the world: loops of (x, y) millimetres.
@@ -34,8 +36,6 @@ type Outlines = Vec<Vec<[f64; 2]>>;
 
 /// The probability of the posterior's position ellipses and θ range in the fit figure.
 pub const ELLIPSE_P: f64 = 0.9;
-/// The two-sided standard normal quantile of [`ELLIPSE_P`]: the θ range is ± this many σθ.
-const THETA_Z: f64 = 1.644_853_626_951_472_2;
 
 /// The fit figure's chart: world x and y in millimetres.
 type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
@@ -112,11 +112,12 @@ impl FitFigure<'_> {
             .unwrap_or_default()
     }
 
-    /// θ uncertainty: the half-width of the top mode's [`ELLIPSE_P`] θ range (±1.645 σθ of its spread, at most π),
+    /// θ uncertainty: the half-width of the top mode's central [`ELLIPSE_P`] θ interval (its core, tail and far
+    /// component; [`super::posterior::PosteriorMode::half_widths`]),
     /// with the outline placed at both extremes; `None` without a posterior or with no finite, positive range.
     fn theta_range(&self) -> Option<(f64, [Outlines; 2])> {
         self.posterior.and_then(|p| p.top()).and_then(|top| {
-            let half = (THETA_Z * top.sigmas()[2]).min(std::f64::consts::PI);
+            let half = top.half_widths(ELLIPSE_P, self.theta_period)[2];
             (half.is_finite() && half > 0.0).then(|| {
                 let at = |sign: f64| {
                     let mean = top.pose();
@@ -332,6 +333,7 @@ mod tests {
             baseline: Some(Se2::new(0.002, 0.0, 0.3)),
             samples: &[[0.0011, 0.0], [0.0013, 0.0002]],
             posterior: Some(&posterior),
+            theta_period: std::f64::consts::TAU,
         };
         let size = FigureConfig {
             width_px: 900,
@@ -350,7 +352,7 @@ mod tests {
             "threshold baseline",
             "registered samples (2)",
             "posterior: 90 % region of 1 mode",
-            // The θ range: ±1.645 σθ of the mode's θ variance (below).
+            // The θ range: ±1.645 σθ of the mode's θ variance (a Gaussian's 90 % central interval; below).
             theta_label.as_str(),
         ] {
             assert!(text.contains(want), "no '{want}' in the SVG");

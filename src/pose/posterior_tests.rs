@@ -432,6 +432,75 @@ fn a_contact_the_pose_leaves_unexplained_moves_the_tail_and_far_shares() {
 }
 
 #[test]
+fn half_widths_hold_their_share_of_the_mode() {
+    // Analytic: one Gaussian's ±σ holds erf(1/√2) and its 90 % central interval is ±1.6449 σ.
+    let sd = [0.001, 0.002, 0.03];
+    let mut mode = PosteriorMode {
+        weight: 1.0,
+        mean: [0.01, -0.02, 0.5],
+        cov: diag(sd[0] * sd[0], sd[1] * sd[1], sd[2] * sd[2]),
+        nats: 0.0,
+        hessian: [[0.0; 3]; 3],
+        tails: ModeTails::default(),
+    };
+    let tau = std::f64::consts::TAU;
+    let h = mode.half_widths(ONE_SIGMA, tau);
+    for i in 0..3 {
+        assert!(
+            (h[i] / sd[i] - 1.0).abs() < 1e-9,
+            "{i}: {} against {}",
+            h[i],
+            sd[i]
+        );
+    }
+    assert!((mode.half_widths(0.9, tau)[2] / sd[2] - 1.644_853_6).abs() < 1e-6);
+    // Core, tail and far component: the share of draws from the mixture within ±h (an independent Monte Carlo
+    // integral) is the level asked for.
+    mode.tails = ModeTails {
+        tail: 0.3,
+        tail_cov: diag(
+            25.0 * sd[0] * sd[0],
+            16.0 * sd[1] * sd[1],
+            100.0 * sd[2] * sd[2],
+        ),
+        far: 0.1,
+        far_position_m: 0.008,
+    };
+    let period = std::f64::consts::PI;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let n = 200_000;
+    let draws: Vec<[f64; 3]> = (0..n)
+        .map(|_| {
+            let u: f64 = rand::Rng::random(&mut rng);
+            let z: [f64; 3] = [0; 3].map(|_| StandardNormal.sample(&mut rng));
+            if u < 0.6 {
+                [0, 1, 2].map(|i| z[i] * sd[i])
+            } else if u < 0.9 {
+                [0, 1, 2].map(|i| z[i] * mode.tails.tail_cov[i][i].sqrt())
+            } else {
+                let v: f64 = rand::Rng::random(&mut rng);
+                [z[0] * 0.008, z[1] * 0.008, (v - 0.5) * period]
+            }
+        })
+        .collect();
+    for p in [0.5, ONE_SIGMA, 0.9] {
+        let h = mode.half_widths(p, period);
+        for i in 0..3 {
+            let inside = draws.iter().filter(|d| d[i].abs() <= h[i]).count() as f64 / n as f64;
+            assert!((inside - p).abs() < 0.005, "level {p}, axis {i}: {inside}");
+        }
+    }
+    // A far component alone: θ uniform over the period, so the interval is that share of it.
+    mode.tails = ModeTails {
+        tail: 0.0,
+        tail_cov: mode.cov,
+        far: 1.0,
+        far_position_m: 0.008,
+    };
+    assert!((mode.half_widths(0.5, period)[2] - period / 4.0).abs() < 1e-9);
+}
+
+#[test]
 fn symmetry_reduces_the_difference() {
     // A 4-fold object turned by π/2 is the same pose; a translation axis along x (object frame), the object at
     // θ = π/2: its world axis is y, so a y offset does not count.

@@ -115,6 +115,7 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
         .query_by_label_contains("that it is none of them); σ x")
         .is_some());
     assert!(h.query_by_label_contains("; error x").is_some());
+    assert!(h.query_by_label_contains("(68 % within ±").is_some());
     assert!(h
         .query_by_label_contains("the truth is inside its")
         .is_some());

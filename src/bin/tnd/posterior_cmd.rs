@@ -182,7 +182,7 @@ fn score_groups(
     drawing: bool,
 ) -> (String, Vec<(String, Reliability)>) {
     let mut table = String::from(
-        "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong | mean NLL | median σ / error, position [mm] | median σ (core) / error, θ [deg] |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong | mean NLL | median σ (±68 %) / error, position [mm] | median σ (core, ±68 %) / error, θ [deg] |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut drawn: Vec<(String, Reliability)> = Vec::new();
     for (name, get) in methods {
@@ -259,25 +259,22 @@ fn write_fit(f: &Fit, path: &Path, pairs: usize) -> Result<()> {
 }
 
 fn row(name: &str, group: &str, c: &Coverage, r: &Reliability) -> String {
-    let pair = |sigma: Option<f64>, error: Option<f64>| match (sigma, error) {
-        (Some(s), Some(e)) => format!("{s:.2} / {e:.2}"),
-        _ => "-".into(),
-    };
+    let num = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
     format!(
-        "| {name} | {group} | {} | {:.2} | {} | {} |\n",
+        "| {name} | {group} | {} | {:.2} | {:.2} ({}) / {:.2} | {} |\n",
         coverage_cells(c),
         r.mean_nll,
-        pair(
-            Some(r.median_sigma_position_mm),
-            Some(r.median_error_position_mm)
-        ),
-        match (
-            r.median_sigma_theta_deg,
-            r.median_core_sigma_theta_deg,
-            r.median_error_theta_deg
-        ) {
-            (Some(s), Some(c), Some(e)) => format!("{s:.2} ({c:.2}) / {e:.2}"),
-            (s, _, e) => pair(s, e),
+        r.median_sigma_position_mm,
+        num(r.median_half_width_position_mm),
+        r.median_error_position_mm,
+        match r.median_sigma_theta_deg {
+            Some(s) => format!(
+                "{s:.2} ({}, {}) / {}",
+                num(r.median_core_sigma_theta_deg),
+                num(r.median_half_width_theta_deg),
+                num(r.median_error_theta_deg)
+            ),
+            None => "-".into(),
         }
     )
 }

@@ -1,5 +1,5 @@
 //! The Pose tab's posterior line ([`tactile_derender::pose::posterior`]): its modes, the share that the pose is none
-//! of them, σ about the estimate and, with a truth, the estimate's error beside it and the smallest region holding it.
+//! of them, σ about the estimate (and the central intervals holding 68 %) and, with a truth, the estimate's error beside it and the smallest region holding it.
 
 use crate::pose_view::PoseAnalysis;
 
@@ -16,11 +16,36 @@ pub fn posterior_summary(ui: &mut egui::Ui, r: &PoseAnalysis) {
     let top = post.modes.first().map_or(0.0, |m| m.weight);
     let far = post.modes.first().map_or(0.0, |m| m.tails.far);
     let theta_free = r.symmetry.rotation.period_rad().is_none();
+    // The estimate's mode's central intervals holding 68 %: its spread read as a Gaussian's ±σ (heavy tails make
+    // the standard deviation far wider than the typical error).
+    let period = r
+        .symmetry
+        .rotation
+        .period_rad()
+        .unwrap_or(std::f64::consts::TAU);
+    let half = post
+        .mode_of(est, &r.symmetry)
+        .or(post.top())
+        .map(|m| m.half_widths(tactile_derender::pose::posterior::ONE_SIGMA, period));
     let theta_sigma = if theta_free {
         "θ free".to_string()
     } else {
         format!("θ {:.1}°", cov[2][2].sqrt().to_degrees())
     };
+    let within = half
+        .map(|h| {
+            let theta = if theta_free {
+                String::new()
+            } else {
+                format!(", ±{:.1}°", h[2].to_degrees())
+            };
+            format!(
+                " (68 % within ±{:.2} mm, ±{:.2} mm{theta})",
+                h[0] * 1e3,
+                h[1] * 1e3
+            )
+        })
+        .unwrap_or_default();
     let truth = r
         .truth
         .map(|t| {
@@ -51,7 +76,7 @@ pub fn posterior_summary(ui: &mut egui::Ui, r: &PoseAnalysis) {
         .unwrap_or_default();
     let text = format!(
         "posterior: {} mode{} (top weight {:.2}; {:.0} % that it is none of them); σ x {:.2} mm, y {:.2} mm, \
-         {theta_sigma}{truth}",
+         {theta_sigma}{within}{truth}",
         post.modes.len(),
         if post.modes.len() == 1 { "" } else { "s" },
         top,
