@@ -207,9 +207,10 @@ fn a_mis_scaled_mesh_is_refused_before_any_work() {
 }
 
 #[test]
-fn a_depth_camera_dataset_gen_does_not_simulate_is_said() {
+fn a_depth_camera_dataset_gen_simulates_is_said() {
     // A sensor file from `tnd calibrate` of a time-of-flight recording carries its depth_camera; dataset gen renders
-    // an ideal camera at the model's resolution and says so instead of keeping quiet (the pairs are still made).
+    // its pairs through it (tests/dataset.rs checks the pairs) and says so, since they cost more than an ideal
+    // camera's.
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(
         dir.path().join("tof.json"),
@@ -225,9 +226,22 @@ fn a_depth_camera_dataset_gen_does_not_simulate_is_said() {
     };
     let o = gen("with", &["--sensor", "tof.json"]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(stderr(&o).contains("depth_camera"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("artefacts"), "{}", stderr(&o));
     assert!(dir.path().join("with/manifest.json").exists());
+    let o = gen(
+        "varied",
+        &["--camera-artefacts-range", "0,1.5", "--sensor-levels", "2"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("artefacts"), "{}", stderr(&o));
     let o = gen("without", &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(!stderr(&o).contains("depth_camera"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("artefacts"), "{}", stderr(&o));
+    let o = gen("bad", &["--camera-artefacts-range", "1"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--camera-artefacts-range"),
+        "{}",
+        stderr(&o)
+    );
 }

@@ -17,6 +17,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::camera_pass::CameraPass;
 use super::manifest::{
     DatasetKind, DatasetManifest, ObjectSetInfo, ShardEntry, SplitCounts, FORMAT_NAME,
     FORMAT_VERSION, MANIFEST_FILE, OBJECTS_DIR, PROGRESS_FILE,
@@ -189,7 +190,13 @@ pub fn generate(
     let todo = keep_intact_chunks(out, config, &mut state, progress);
     report.kept_chunks = config.chunks() - todo.len();
 
-    let sampler = Sampler::new(&sims, &objects, &names, &draw, config);
+    // Each sensor's depth camera, where it has one: its pairs are rendered natively and brought to the model's size
+    // as an import brings a recording's frames.
+    let cameras: Vec<Option<CameraPass>> = sims
+        .par_iter()
+        .map(|s| CameraPass::new(s.config()))
+        .collect::<Result<_, _>>()?;
+    let sampler = Sampler::new(&sims, &objects, &names, &draw, config).with_cameras(&cameras);
     let state = simulate_and_write(out, &plan, &todo, &sampler, state, &mut report, progress)?;
 
     let manifest_path = out.join(MANIFEST_FILE);

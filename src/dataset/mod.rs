@@ -16,6 +16,7 @@
 //! validation), [`reader`] ([`Dataset`]: random access and shuffled mini-batches), [`import`] and [`resample`] (real
 //! sensor data), [`stats`] (summaries for `tnd dataset stats`).
 
+pub mod camera_pass;
 pub mod config;
 pub mod gen;
 pub mod import;

@@ -83,6 +83,8 @@ pub struct Sampler<'a> {
     /// Where object positions are drawn, per simulator.
     pub offsets: Vec<OffsetBox>,
     pub min_pixels: usize,
+    /// Per simulator, its depth camera's pass where it has one ([`super::camera_pass`]; empty: every camera ideal).
+    pub cameras: &'a [Option<super::camera_pass::CameraPass>],
 }
 
 impl<'a> Sampler<'a> {
@@ -108,7 +110,15 @@ impl<'a> Sampler<'a> {
                 .map(|s| OffsetBox::new(s, config.offset_fraction))
                 .collect(),
             min_pixels: config.min_contact_pixels(w, h),
+            cameras: &[],
         }
+    }
+
+    /// The same, each simulator's pair seen through its depth camera's pass where it has one (`cameras[k]` for
+    /// `sims[k]`).
+    pub fn with_cameras(mut self, cameras: &'a [Option<super::camera_pass::CameraPass>]) -> Self {
+        self.cameras = cameras;
+        self
     }
 
     /// Simulate the planned pair, redrawing pose and press until the contact is large enough: the record and the
@@ -140,14 +150,28 @@ impl<'a> Sampler<'a> {
             if d.contact_pixels < self.min_pixels {
                 continue;
             }
-            let sig = signature::synthesize(
-                &d.depth,
-                sim.nominal_depth(),
-                &d.mask,
-                &sim_cfg.signature,
-                spacing,
-                d.noise_seed,
-            );
+            let sig = match self.cameras.get(level).and_then(Option::as_ref) {
+                Some(camera) => {
+                    let scene = Scene {
+                        object: d.pose,
+                        sensor: d.sensor,
+                    };
+                    let m = camera.measure(object, &scene, d.noise_seed);
+                    signature::Signature {
+                        signature: m.signature,
+                        reference: m.reference,
+                        imprint: m.imprint,
+                    }
+                }
+                None => signature::synthesize(
+                    &d.depth,
+                    sim.nominal_depth(),
+                    &d.mask,
+                    &sim_cfg.signature,
+                    spacing,
+                    d.noise_seed,
+                ),
+            };
             let record = Record {
                 index: plan.index,
                 seed: plan.seed,

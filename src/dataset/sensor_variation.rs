@@ -29,18 +29,25 @@ pub struct SensorVariation {
     /// Depth noise standard deviation, metres.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise_std: Option<[f64; 2]>,
+    /// Strength of the depth camera's artefacts ([`crate::sim::DepthCameraConfig`]): 0 an ideal camera, 1 the
+    /// sensor's own `depth_camera` (the time-of-flight preset where the sensor's is ideal), between and beyond
+    /// scaled — missing returns, the edge band, the fixed pattern and the noise's growth with depth; flying pixels on
+    /// above 0. Each level has its own fixed pattern.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_artefacts: Option<[f64; 2]>,
     /// Number of sensors (2..=64; each is one prepared membrane).
     pub levels: usize,
 }
 
 impl SensorVariation {
-    fn ranges(&self) -> [(&'static str, Option<[f64; 2]>); 5] {
+    fn ranges(&self) -> [(&'static str, Option<[f64; 2]>); 6] {
         [
             ("inflation", self.inflation),
             ("camera offset", self.camera_offset),
             ("footprint scale", self.footprint_scale),
             ("shadow width", self.shadow_px),
             ("noise", self.noise_std),
+            ("camera artefacts", self.camera_artefacts),
         ]
     }
 
@@ -110,6 +117,14 @@ impl SensorVariation {
         if let Some(r) = self.noise_std {
             c.signature.noise_std = at(4, r);
         }
+        if let Some(r) = self.camera_artefacts {
+            let full = if base.depth_camera.is_ideal() {
+                crate::sim::DepthCameraConfig::time_of_flight()
+            } else {
+                base.depth_camera.clone()
+            };
+            c.depth_camera = full.scaled(at(5, r), full.fixed_pattern_seed.wrapping_add(k as u64));
+        }
         c
     }
 
@@ -130,6 +145,7 @@ impl SensorVariation {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+    use std::collections::BTreeSet;
 
     #[test]
     fn levels_cover_every_stratum_of_every_range_once() {
@@ -139,6 +155,7 @@ mod tests {
             footprint_scale: None,
             shadow_px: Some([15.0, 30.0]),
             noise_std: Some([0.001, 0.0025]),
+            camera_artefacts: Some([0.0, 1.6]),
             levels: 8,
         };
         let base = SimConfig::default();
@@ -158,6 +175,24 @@ mod tests {
         assert_eq!(strata(&|c| -c.mount.position[2], [0.057, 0.063]), all);
         assert_eq!(strata(&|c| c.signature.shadow_px, [15.0, 30.0]), all);
         assert_eq!(strata(&|c| c.signature.noise_std, [0.001, 0.0025]), all);
+        // The camera's strength scales the time-of-flight preset (the default sensor's camera is ideal); each level
+        // has its own fixed pattern.
+        let tof = crate::sim::DepthCameraConfig::time_of_flight();
+        assert_eq!(
+            strata(&|c| c.depth_camera.dropout / tof.dropout, [0.0, 1.6]),
+            all
+        );
+        for c in &sensors {
+            let k = c.depth_camera.dropout / tof.dropout;
+            assert!((c.depth_camera.fixed_pattern_m - k * tof.fixed_pattern_m).abs() < 1e-12);
+            assert!((c.depth_camera.noise_exponent - k * tof.noise_exponent).abs() < 1e-9);
+            assert_eq!(c.depth_camera.flying_jump_m, tof.flying_jump_m);
+        }
+        let patterns: BTreeSet<u64> = sensors
+            .iter()
+            .map(|c| c.depth_camera.fixed_pattern_seed)
+            .collect();
+        assert_eq!(patterns.len(), 8);
         // Not the same order in every setting (the levels are not a diagonal of the hypercube).
         let first: Vec<f64> = sensors.iter().map(|c| c.elastomer.inflation).collect();
         let shadow: Vec<f64> = sensors.iter().map(|c| c.signature.shadow_px).collect();
@@ -205,6 +240,7 @@ mod tests {
             footprint_scale: None,
             shadow_px: Some([15.0, 30.0]),
             noise_std: None,
+            camera_artefacts: None,
             levels: 4,
         };
         let config = crate::dataset::GenConfig {

@@ -72,6 +72,22 @@ impl DepthCameraConfig {
         }
     }
 
+    /// This camera's artefacts at `strength` (0: an ideal camera, 1: this one): missing returns, the edge band, the
+    /// fixed pattern and the noise's growth with depth scaled by it, flying pixels kept above 0; the fixed pattern
+    /// from `pattern_seed` (another camera of the same kind).
+    pub fn scaled(&self, strength: f64, pattern_seed: u64) -> Self {
+        let s = strength.max(0.0);
+        Self {
+            noise_exponent: (self.noise_exponent * s).min(4.0),
+            noise_reference_m: self.noise_reference_m,
+            dropout: (self.dropout * s).min(0.9),
+            edge_missing_px: self.edge_missing_px * s,
+            flying_jump_m: if s > 0.0 { self.flying_jump_m } else { 0.0 },
+            fixed_pattern_m: (self.fixed_pattern_m * s).min(0.01),
+            fixed_pattern_seed: pattern_seed,
+        }
+    }
+
     /// A camera that adds nothing to the signature's noise.
     pub fn is_ideal(&self) -> bool {
         self.noise_exponent == 0.0

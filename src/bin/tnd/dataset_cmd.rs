@@ -114,6 +114,11 @@ pub struct GenArgs {
     /// Vary the depth noise per pair: MIN,MAX standard deviation in metres (e.g. 0.001,0.0025).
     #[arg(long)]
     pub noise_range: Option<String>,
+    /// Vary the depth camera's artefacts per pair: MIN,MAX strength (0: an ideal camera, 1: the sensor file's
+    /// depth_camera, or the time-of-flight preset where the file has none; e.g. 0,1.5). Pairs with artefacts are
+    /// rendered at the camera's native resolution and brought to the model's as an import brings a recording.
+    #[arg(long)]
+    pub camera_artefacts_range: Option<String>,
     /// Number of sensors a sensor variation spreads over its ranges (2..=64).
     #[arg(long, default_value_t = 16)]
     pub sensor_levels: usize,
@@ -261,12 +266,14 @@ fn gen(a: GenArgs) -> Result<()> {
         )?,
         shadow_px: range("shadow-range", &a.shadow_range, "15,30")?,
         noise_std: range("noise-range", &a.noise_range, "0.001,0.0025")?,
+        camera_artefacts: range("camera-artefacts-range", &a.camera_artefacts_range, "0,1")?,
         levels: a.sensor_levels,
     };
     let whole_sensor = variation.camera_offset.is_some()
         || variation.footprint_scale.is_some()
         || variation.shadow_px.is_some()
-        || variation.noise_std.is_some();
+        || variation.noise_std.is_some()
+        || variation.camera_artefacts.is_some();
     let (inflation, sensor_variation) = if whole_sensor {
         (None, Some(variation))
     } else {
@@ -289,12 +296,11 @@ fn gen(a: GenArgs) -> Result<()> {
         ..GenConfig::default()
     };
     let sim = a.sensor.sim_config()?;
-    if !sim.depth_camera.is_ideal() {
-        // Said, not refused: the membrane and the sensor's noise in the file are simulated.
+    if !sim.depth_camera.is_ideal() || variation.camera_artefacts.is_some() {
         eprintln!(
-            "warning: the sensor file's depth_camera (missing returns, depth-dependent noise, flying pixels, a fixed \
-             pattern) is not simulated by tnd dataset gen: its pairs are rendered at the model's resolution by an \
-             ideal camera. `tnd recording simulate` renders it on native frames (then `tnd dataset import`)."
+            "the depth camera's artefacts (missing returns, depth-dependent noise, flying pixels, a fixed pattern) are \
+             simulated: pairs are rendered at the camera's native resolution and brought to the model's as \
+             `tnd dataset import` brings a recording (slower than an ideal camera's pairs)"
         );
     }
     let set = ObjectSet::open(&a.objects).with_context(|| format!("--objects {}", a.objects))?;
