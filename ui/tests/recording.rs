@@ -179,6 +179,10 @@ fn every_other_contact_frame_is_tracked_in_the_background_and_saved_as_csv() {
     assert!(h
         .query_by_label_contains(&format!("track: {} frames", rows.len()))
         .is_some());
+    // σ beside the error: each frame's 68 % interval.
+    assert!(h
+        .query_by_label_contains("median 68 % interval ±")
+        .is_some());
     h.get_by_label("Save track CSV").click();
     h.run_ok();
     let csv = std::fs::read_to_string(dir.path().join("press_track.csv")).unwrap();

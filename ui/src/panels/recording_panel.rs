@@ -500,6 +500,25 @@ fn short_list(frames: &[usize]) -> String {
     parts.join(", ")
 }
 
+/// A track row's half-widths of the central intervals holding 68 % of its estimate's mode (x, y metres, θ radians;
+/// [`tactile_derender::pose::posterior::PosteriorMode::half_widths`], θ over a full turn); `None` without a posterior.
+fn half_width_68(r: &FrameTrack) -> Option<[f64; 3]> {
+    let p = r.posterior.as_ref()?;
+    let mode = r
+        .estimate
+        .and_then(|e| {
+            p.modes.iter().find(|m| {
+                let d = m.pose();
+                (d.x - e.x).hypot(d.y - e.y) < 1e-9
+            })
+        })
+        .or(p.top())?;
+    Some(mode.half_widths(
+        tactile_derender::pose::posterior::ONE_SIGMA,
+        std::f64::consts::TAU,
+    ))
+}
+
 /// The track: start / cancel / save, its progress, and the pose over time (a click moves the cursor there).
 fn track_section(
     app: &WorkbenchApp,
@@ -553,13 +572,39 @@ fn track_section(
         .iter()
         .filter_map(|r| r.estimate_error.map(|e| e.0))
         .collect();
+    // Each row's ±σ read as a Gaussian's: the central intervals holding 68 % of its estimate's mode.
+    let half: Vec<Option<[f64; 3]>> = t.rows.iter().map(half_width_68).collect();
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied()
+    };
+    let spread = match (
+        median(
+            half.iter()
+                .flatten()
+                .map(|h| h[0].hypot(h[1]) * 1e3 / 2f64.sqrt())
+                .collect(),
+        ),
+        median(half.iter().flatten().map(|h| h[2].to_degrees()).collect()),
+    ) {
+        (Some(p), Some(th)) => format!("; median 68 % interval ±{p:.2} mm, ±{th:.1}°"),
+        _ => String::new(),
+    };
     ui.label(if errors.is_empty() {
-        format!("track: {} frames", t.rows.len())
+        format!("track: {} frames{spread}", t.rows.len())
     } else {
+        let theta: Vec<f64> = t
+            .rows
+            .iter()
+            .filter_map(|r| r.estimate_error.and_then(|e| e.1).map(f64::abs))
+            .collect();
         format!(
-            "track: {} frames; position error against the recorded pose {:.2} mm mean",
+            "track: {} frames; position error against the recorded pose {:.2} mm mean{}{spread}",
             t.rows.len(),
-            errors.iter().sum::<f64>() / errors.len() as f64
+            errors.iter().sum::<f64>() / errors.len() as f64,
+            median(theta)
+                .map(|m| format!(", θ {m:.1}° median"))
+                .unwrap_or_default()
         )
     });
     let width = (ui.available_width() / 2.0 - 8.0).max(200.0);
@@ -608,8 +653,21 @@ fn track_section(
             .x_axis_label("time (s)")
             .y_axis_label(label)
             .allow_drag(false)
+            .legend(egui_plot::Legend::default())
             .show(ui, |pl| {
                 pl.points(Points::new("θ", theta).radius(2.5));
+                if scored {
+                    // σ beside the error: the estimate's ±68 % θ interval about 0.
+                    for sign in [1.0, -1.0] {
+                        let band: Vec<[f64; 2]> = t
+                            .rows
+                            .iter()
+                            .zip(&half)
+                            .filter_map(|(r, h)| h.map(|h| [at(r.frame), sign * h[2].to_degrees()]))
+                            .collect();
+                        pl.line(Line::new("±68 % interval", PlotPoints::from(band)));
+                    }
+                }
                 pl.pointer_coordinate()
             });
         for p in [position, angle] {
