@@ -48,6 +48,6 @@ note "training for ${left} s"
 cd "$root" || exit 1
 MODELS=b B_INIT=.dev/b3.safetensors LR_B=1e-4 OBJECT_SEED=5 PAIR_SEED=45 PAIRS=${PAIRS:-300000} SAVE_EVERY_S=60 \
     TRAIN_MESHES=.dev/train_meshes.tar.xz MESH_SHARE=0.3 BOUNDARY_WEIGHT=2 INFLATION=0.027,0.033 \
-    SENSOR_VARIATION="--camera-offset-range 0.057,0.063 --footprint-scale-range 0.95,1.05 --shadow-range 15,30 --noise-range 0.001,0.0025" \
+    SENSOR_VARIATION="--camera-offset-range 0.057,0.063 --footprint-scale-range 0.95,1.05 --shadow-range 15,30 --noise-range 0.001,0.0025 --camera-artefacts-range 0,1.5" \
     bash "$here/device_run.sh" /tmp/tnd-session/tnd "$out/train" "$left" > "$out/train.out" 2>&1
 note "training exit $?; $(ls "$out/train" | tr '\n' ' ')"
