@@ -735,3 +735,63 @@ fn a_depth_camera_changes_what_the_model_sees_not_the_truth() {
         "imprint moved {imprint_moved}, signature {signature_moved}"
     );
 }
+
+#[test]
+fn native_frames_are_as_quiet_as_imported_ones_and_keep_the_truth() {
+    // `native_frames` with an ideal camera: each pair rendered natively and area-resampled to the model's size, as an
+    // import brings a recording's frames. The noise an imprint carries (noisy minus noise-free, same draws) is, at
+    // the model's resolution, √2 σ (reference and signature each σ: an analytic truth); through the native path the
+    // resampling averages several native pixels and the reference is a median of frames, so it is far quieter.
+    let tmp = tempfile::tempdir().unwrap();
+    let set = small_set(&tmp.path().join("set"));
+    let gen = |name: &str, native_frames: bool, noise: f64| {
+        let mut c = sim_config();
+        c.signature.noise_std = noise;
+        let cfg = GenConfig {
+            native_frames,
+            ..gen_config(8)
+        };
+        let out = tmp.path().join(name);
+        generate(&out, &c, &set, &cfg, &|_| {}).unwrap();
+        Dataset::open(&out).unwrap()
+    };
+    let sigma = 0.00138;
+    let rms_noise = |noisy: &Dataset, clean: &Dataset| {
+        let (mut sum, mut n) = (0.0, 0usize);
+        for i in 0..noisy.len(SplitName::Train) {
+            let (p, q) = (
+                noisy.pair(SplitName::Train, i).unwrap(),
+                clean.pair(SplitName::Train, i).unwrap(),
+            );
+            assert_eq!((&p.mask, &p.target), (&q.mask, &q.target));
+            for (a, b) in p.imprint.data.iter().zip(&q.imprint.data) {
+                sum += f64::from(a - b).powi(2);
+                n += 1;
+            }
+        }
+        (sum / n as f64).sqrt()
+    };
+    let model_res = rms_noise(&gen("m1", false, sigma), &gen("m0", false, 0.0));
+    let native = rms_noise(&gen("n1", true, sigma), &gen("n0", true, 0.0));
+    let analytic = 2f64.sqrt() * sigma;
+    assert!(
+        (model_res / analytic - 1.0).abs() < 0.1,
+        "{model_res} against {analytic}"
+    );
+    assert!(
+        native < 0.6 * model_res,
+        "native {native}, model resolution {model_res}"
+    );
+    // The truth is the same draws' either way.
+    let (a, b) = (gen("m2", false, sigma), gen("n2", true, sigma));
+    for i in 0..a.len(SplitName::Train) {
+        let (p, q) = (
+            a.pair(SplitName::Train, i).unwrap(),
+            b.pair(SplitName::Train, i).unwrap(),
+        );
+        assert_eq!(
+            (&p.mask, &p.target, p.meta.press),
+            (&q.mask, &q.target, q.meta.press)
+        );
+    }
+}

@@ -234,9 +234,13 @@ fn a_depth_camera_dataset_gen_simulates_is_said() {
     );
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("artefacts"), "{}", stderr(&o));
+    let o = gen("native", &["--native-frames"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("native resolution"), "{}", stderr(&o));
     let o = gen("without", &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!stderr(&o).contains("artefacts"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("native resolution"), "{}", stderr(&o));
     let o = gen("bad", &["--camera-artefacts-range", "1"]);
     assert!(!o.status.success());
     assert!(

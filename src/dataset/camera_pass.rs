@@ -35,9 +35,9 @@ pub struct Measured {
 
 impl CameraPass {
     /// The pass for `config`'s sensor; `None` when its depth camera is ideal (nothing to add to the model-resolution
-    /// pair).
-    pub fn new(config: &SimConfig) -> Result<Option<Self>, SimError> {
-        if config.depth_camera.is_ideal() {
+    /// pair) unless `native_frames` asks for the native render and the import's resampling anyway.
+    pub fn new(config: &SimConfig, native_frames: bool) -> Result<Option<Self>, SimError> {
+        if config.depth_camera.is_ideal() && !native_frames {
             return Ok(None);
         }
         Ok(Some(Self {

@@ -37,6 +37,12 @@ pub struct GenConfig {
     /// every pair uses the sensor as it is). Not together with `inflation`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensor_variation: Option<super::sensor_variation::SensorVariation>,
+    /// Render every pair at the camera's native resolution and bring it to the model's as an import brings a
+    /// recording's frames ([`super::camera_pass`]), even with an ideal camera (a sensor with a depth camera always
+    /// is). Such inputs are several times quieter than model-resolution pairs, as imported frames are (default
+    /// false).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub native_frames: bool,
 }
 
 /// Per-pair variation of the membrane's inflation height, as a real Soft Bubble's drifts with its air pressure and
@@ -84,6 +90,7 @@ impl Default for GenConfig {
             holdout_every: 10,
             inflation: None,
             sensor_variation: None,
+            native_frames: false,
         }
     }
 }

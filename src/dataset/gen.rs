@@ -190,11 +190,11 @@ pub fn generate(
     let todo = keep_intact_chunks(out, config, &mut state, progress);
     report.kept_chunks = config.chunks() - todo.len();
 
-    // Each sensor's depth camera, where it has one: its pairs are rendered natively and brought to the model's size
-    // as an import brings a recording's frames.
+    // Each sensor's depth camera, where it has one (or every sensor's with `native_frames`): its pairs are rendered
+    // natively and brought to the model's size as an import brings a recording's frames.
     let cameras: Vec<Option<CameraPass>> = sims
         .par_iter()
-        .map(|s| CameraPass::new(s.config()))
+        .map(|s| CameraPass::new(s.config(), config.native_frames))
         .collect::<Result<_, _>>()?;
     let sampler = Sampler::new(&sims, &objects, &names, &draw, config).with_cameras(&cameras);
     let state = simulate_and_write(out, &plan, &todo, &sampler, state, &mut report, progress)?;

@@ -119,6 +119,11 @@ pub struct GenArgs {
     /// rendered at the camera's native resolution and brought to the model's as an import brings a recording.
     #[arg(long)]
     pub camera_artefacts_range: Option<String>,
+    /// Render every pair at the camera's native resolution and bring it to the model's as `tnd dataset import` brings
+    /// a recording (with an ideal camera too; a sensor with a depth_camera always is): inputs like imported frames,
+    /// several times quieter than model-resolution pairs.
+    #[arg(long)]
+    pub native_frames: bool,
     /// Number of sensors a sensor variation spreads over its ranges (2..=64).
     #[arg(long, default_value_t = 16)]
     pub sensor_levels: usize,
@@ -293,10 +298,16 @@ fn gen(a: GenArgs) -> Result<()> {
         shard_pairs: a.shard_pairs,
         inflation,
         sensor_variation,
+        native_frames: a.native_frames,
         ..GenConfig::default()
     };
     let sim = a.sensor.sim_config()?;
-    if !sim.depth_camera.is_ideal() || variation.camera_artefacts.is_some() {
+    if a.native_frames && sim.depth_camera.is_ideal() && variation.camera_artefacts.is_none() {
+        eprintln!(
+            "pairs are rendered at the camera's native resolution and brought to the model's as `tnd dataset import` \
+             brings a recording (slower than model-resolution pairs)"
+        );
+    } else if !sim.depth_camera.is_ideal() || variation.camera_artefacts.is_some() {
         eprintln!(
             "the depth camera's artefacts (missing returns, depth-dependent noise, flying pixels, a fixed pattern) are \
              simulated: pairs are rendered at the camera's native resolution and brought to the model's as \
