@@ -10,6 +10,7 @@ mod fuzz_common;
 
 mod architecture;
 mod dataset;
+mod dataset_camera;
 mod dataset_import;
 mod dataset_objects;
 mod dataset_training;
