@@ -146,12 +146,7 @@ pub fn reliability(
             let nll = (-p.log_density(s.truth, &s.symmetry)).min(NLL_CAP);
             let top = p.top()?;
             let core_theta = top.cov[2][2].max(0.0).sqrt();
-            let period = s
-                .symmetry
-                .rotation
-                .period_rad()
-                .unwrap_or(std::f64::consts::TAU);
-            let half = top.half_widths(ONE_SIGMA, period);
+            let half = top.half_widths(ONE_SIGMA, &s.symmetry);
             Some((s, mass, nll, top.sigmas(), core_theta, half))
         })
         .collect();

@@ -611,11 +611,7 @@ pub fn write_fit_figure(
         baseline: estimate.report.baseline.map(|b| b.pose),
         samples: &samples,
         posterior: estimate.posterior.as_ref(),
-        theta_period: object
-            .symmetry
-            .rotation
-            .period_rad()
-            .unwrap_or(std::f64::consts::TAU),
+        symmetry: object.symmetry,
     };
     Ok(crate::io::figure::write_figure(dir, "fit", figure, &fit)?)
 }

@@ -173,15 +173,9 @@ impl PoseRecord {
             out: source.out,
             posterior: estimate.posterior.clone(),
             truth_region: estimate.truth_region,
-            half_width_68: best.zip(estimate.posterior.as_ref()).and_then(|(b, p)| {
-                let period = symmetry
-                    .rotation
-                    .period_rad()
-                    .unwrap_or(std::f64::consts::TAU);
-                p.mode_of(b, symmetry)
-                    .or(p.top())
-                    .map(|m| m.half_widths(crate::pose::posterior::ONE_SIGMA, period))
-            }),
+            half_width_68: best
+                .zip(estimate.posterior.as_ref())
+                .and_then(|(b, p)| p.estimate_half_widths(b, symmetry)),
             transform,
             pose_with_covariance,
         }

@@ -27,8 +27,8 @@ pub struct FitFigure<'a> {
     pub samples: &'a [[f64; 2]],
     /// The pose posterior: each mode's 90 % position ellipse, and the outline at the top mode's 90 % θ extremes.
     pub posterior: Option<&'a super::posterior::PosePosterior>,
-    /// The object's rotation symmetry period, radians (2π without one): the posterior's far θ is uniform over it.
-    pub theta_period: f64,
+    /// The object's symmetry: the posterior's far θ is uniform over its period.
+    pub symmetry: crate::objects::Symmetry,
 }
 
 /// An outline placed in the world: loops of (x, y) millimetres.
@@ -117,7 +117,7 @@ impl FitFigure<'_> {
     /// with the outline placed at both extremes; `None` without a posterior or with no finite, positive range.
     fn theta_range(&self) -> Option<(f64, [Outlines; 2])> {
         self.posterior.and_then(|p| p.top()).and_then(|top| {
-            let half = top.half_widths(ELLIPSE_P, self.theta_period)[2];
+            let half = top.half_widths(ELLIPSE_P, &self.symmetry)[2];
             (half.is_finite() && half > 0.0).then(|| {
                 let at = |sign: f64| {
                     let mean = top.pose();
@@ -333,7 +333,7 @@ mod tests {
             baseline: Some(Se2::new(0.002, 0.0, 0.3)),
             samples: &[[0.0011, 0.0], [0.0013, 0.0002]],
             posterior: Some(&posterior),
-            theta_period: std::f64::consts::TAU,
+            symmetry: Default::default(),
         };
         let size = FigureConfig {
             width_px: 900,

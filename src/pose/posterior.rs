@@ -132,11 +132,12 @@ impl PosteriorMode {
     }
 
     /// Half-widths of the central intervals about the mean of x, y (metres) and θ (radians) that hold `p` of this
-    /// mode's weight — its core, tail and far component, the far θ uniform over `theta_period` (the symmetry's
-    /// period; 2π without one). With heavy tails the standard deviation ([`Self::sigmas`]) is set by the few
+    /// mode's weight — its core, tail and far component, the far θ uniform over `symmetry`'s period (a full turn
+    /// without one; [`theta_period`]). With heavy tails the standard deviation ([`Self::sigmas`]) is set by the few
     /// contacts far off; this is the spread read the way a Gaussian's is: at `p` = [`ONE_SIGMA`] it is ±σ for a
     /// Gaussian mode, and the truth lies within it `p` of the time for a calibrated one.
-    pub fn half_widths(&self, p: f64, theta_period: f64) -> [f64; 3] {
+    pub fn half_widths(&self, p: f64, symmetry: &Symmetry) -> [f64; 3] {
+        let theta_period = theta_period(symmetry);
         let t = &self.tails;
         let (core, tail, far) = (
             (1.0 - t.tail - t.far).max(0.0),
@@ -475,6 +476,14 @@ impl PosePosterior {
         )
     }
 
+    /// [`PosteriorMode::half_widths`] at [`ONE_SIGMA`] of the mode `estimate` falls in (the heaviest where it falls
+    /// in none): the estimate's ±σ read as a Gaussian's; `None` without modes.
+    pub fn estimate_half_widths(&self, estimate: Se2, symmetry: &Symmetry) -> Option<[f64; 3]> {
+        self.mode_of(estimate, symmetry)
+            .or(self.top())
+            .map(|m| m.half_widths(ONE_SIGMA, symmetry))
+    }
+
     /// The heaviest mode.
     pub fn top(&self) -> Option<&PosteriorMode> {
         self.modes.first()
@@ -550,10 +559,7 @@ impl PosePosterior {
         }
         let level = log_density_of(&components, pose, symmetry);
         let total: f64 = components.iter().map(|c| c.weight).sum();
-        let period = symmetry
-            .rotation
-            .period_rad()
-            .unwrap_or(std::f64::consts::TAU);
+        let period = theta_period(symmetry);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x5eed_9051);
         let chol: Vec<Option<Mat3>> = components.iter().map(|c| cholesky3(&c.cov)).collect();
         let mut inside = 0usize;
@@ -586,6 +592,15 @@ impl PosePosterior {
         }
         Some(inside as f64 / n as f64)
     }
+}
+
+/// The period over which a far component's θ is uniform: the symmetry's, a full turn without one (and where θ is
+/// free, whose θ no density reads).
+fn theta_period(symmetry: &Symmetry) -> f64 {
+    symmetry
+        .rotation
+        .period_rad()
+        .unwrap_or(std::f64::consts::TAU)
 }
 
 /// The central probability of ±1σ of a Gaussian: erf(1/√2).

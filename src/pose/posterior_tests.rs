@@ -443,8 +443,8 @@ fn half_widths_hold_their_share_of_the_mode() {
         hessian: [[0.0; 3]; 3],
         tails: ModeTails::default(),
     };
-    let tau = std::f64::consts::TAU;
-    let h = mode.half_widths(ONE_SIGMA, tau);
+    let none = Symmetry::default();
+    let h = mode.half_widths(ONE_SIGMA, &none);
     for i in 0..3 {
         assert!(
             (h[i] / sd[i] - 1.0).abs() < 1e-9,
@@ -453,7 +453,7 @@ fn half_widths_hold_their_share_of_the_mode() {
             sd[i]
         );
     }
-    assert!((mode.half_widths(0.9, tau)[2] / sd[2] - 1.644_853_6).abs() < 1e-6);
+    assert!((mode.half_widths(0.9, &none)[2] / sd[2] - 1.644_853_6).abs() < 1e-6);
     // Core, tail and far component: the share of draws from the mixture within ±h (an independent Monte Carlo
     // integral) is the level asked for.
     mode.tails = ModeTails {
@@ -465,6 +465,11 @@ fn half_widths_hold_their_share_of_the_mode() {
         ),
         far: 0.1,
         far_position_m: 0.008,
+    };
+    // Two-fold symmetry: the far θ is uniform over half a turn.
+    let two_fold = Symmetry {
+        rotation: RotationSymmetry::NFold(2),
+        translation_axis: None,
     };
     let period = std::f64::consts::PI;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
@@ -484,7 +489,7 @@ fn half_widths_hold_their_share_of_the_mode() {
         })
         .collect();
     for p in [0.5, ONE_SIGMA, 0.9] {
-        let h = mode.half_widths(p, period);
+        let h = mode.half_widths(p, &two_fold);
         for i in 0..3 {
             let inside = draws.iter().filter(|d| d[i].abs() <= h[i]).count() as f64 / n as f64;
             assert!((inside - p).abs() < 0.005, "level {p}, axis {i}: {inside}");
@@ -497,7 +502,7 @@ fn half_widths_hold_their_share_of_the_mode() {
         far: 1.0,
         far_position_m: 0.008,
     };
-    assert!((mode.half_widths(0.5, period)[2] - period / 4.0).abs() < 1e-9);
+    assert!((mode.half_widths(0.5, &two_fold)[2] - period / 4.0).abs() < 1e-9);
 }
 
 #[test]

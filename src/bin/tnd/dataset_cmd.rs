@@ -302,16 +302,17 @@ fn gen(a: GenArgs) -> Result<()> {
         ..GenConfig::default()
     };
     let sim = a.sensor.sim_config()?;
-    if a.native_frames && sim.depth_camera.is_ideal() && variation.camera_artefacts.is_none() {
+    let artefacts = !sim.depth_camera.is_ideal() || variation.camera_artefacts.is_some();
+    if artefacts || a.native_frames {
         eprintln!(
-            "pairs are rendered at the camera's native resolution and brought to the model's as `tnd dataset import` \
-             brings a recording (slower than model-resolution pairs)"
-        );
-    } else if !sim.depth_camera.is_ideal() || variation.camera_artefacts.is_some() {
-        eprintln!(
-            "the depth camera's artefacts (missing returns, depth-dependent noise, flying pixels, a fixed pattern) are \
-             simulated: pairs are rendered at the camera's native resolution and brought to the model's as \
-             `tnd dataset import` brings a recording (slower than an ideal camera's pairs)"
+            "pairs are rendered at the camera's native resolution{} and brought to the model's as `tnd dataset \
+             import` brings a recording (slower than model-resolution pairs)",
+            if artefacts {
+                " with the depth camera's artefacts (missing returns, depth-dependent noise, flying pixels, a fixed \
+                 pattern)"
+            } else {
+                ""
+            }
         );
     }
     let set = ObjectSet::open(&a.objects).with_context(|| format!("--objects {}", a.objects))?;

@@ -1,5 +1,6 @@
 //! The Pose tab's posterior line ([`tactile_derender::pose::posterior`]): its modes, the share that the pose is none
-//! of them, σ about the estimate (and the central intervals holding 68 %) and, with a truth, the estimate's error beside it and the smallest region holding it.
+//! of them, σ about the estimate (and the central intervals holding 68 %) and, with a truth, the estimate's error
+//! beside it and the smallest region holding it.
 
 use crate::pose_view::PoseAnalysis;
 
@@ -18,15 +19,7 @@ pub fn posterior_summary(ui: &mut egui::Ui, r: &PoseAnalysis) {
     let theta_free = r.symmetry.rotation.period_rad().is_none();
     // The estimate's mode's central intervals holding 68 %: its spread read as a Gaussian's ±σ (heavy tails make
     // the standard deviation far wider than the typical error).
-    let period = r
-        .symmetry
-        .rotation
-        .period_rad()
-        .unwrap_or(std::f64::consts::TAU);
-    let half = post
-        .mode_of(est, &r.symmetry)
-        .or(post.top())
-        .map(|m| m.half_widths(tactile_derender::pose::posterior::ONE_SIGMA, period));
+    let half = post.estimate_half_widths(est, &r.symmetry);
     let theta_sigma = if theta_free {
         "θ free".to_string()
     } else {

@@ -501,22 +501,12 @@ fn short_list(frames: &[usize]) -> String {
 }
 
 /// A track row's half-widths of the central intervals holding 68 % of its estimate's mode (x, y metres, θ radians;
-/// [`tactile_derender::pose::posterior::PosteriorMode::half_widths`], θ over a full turn); `None` without a posterior.
+/// [`tactile_derender::pose::posterior::PosePosterior::estimate_half_widths`]; the row does not keep the object's
+/// symmetry, so a full turn); `None` without a posterior or an estimate.
 fn half_width_68(r: &FrameTrack) -> Option<[f64; 3]> {
-    let p = r.posterior.as_ref()?;
-    let mode = r
-        .estimate
-        .and_then(|e| {
-            p.modes.iter().find(|m| {
-                let d = m.pose();
-                (d.x - e.x).hypot(d.y - e.y) < 1e-9
-            })
-        })
-        .or(p.top())?;
-    Some(mode.half_widths(
-        tactile_derender::pose::posterior::ONE_SIGMA,
-        std::f64::consts::TAU,
-    ))
+    r.posterior
+        .as_ref()?
+        .estimate_half_widths(r.estimate?, &Default::default())
 }
 
 /// The track: start / cancel / save, its progress, and the pose over time (a click moves the cursor there).
