@@ -228,6 +228,40 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
     );
     let share = |p: &str| inside[p].as_f64().unwrap();
     assert!(share("0.5") <= share("0.9") && share("0.9") <= share("0.95") && share("0.95") <= 1.0);
+    // tnd posterior scores the track from its folder (posteriors.json beside track.csv) as the track scored itself,
+    // and fits a calibration to it, replaying each carried frame's fusion.
+    let scored = output(&["posterior", "--tracks", "track", "--json"]);
+    assert!(scored.status.success(), "{scored:?}");
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&scored.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let all = lines
+        .iter()
+        .find(|l| l["rows"] == "track" && l["contact"] == "all")
+        .unwrap();
+    assert_eq!(all["coverage"]["pairs"].as_u64(), Some(with_contact as u64));
+    for (i, p) in ["0.5", "0.9", "0.95"].iter().enumerate() {
+        let theirs = all["coverage"]["inside"][i].as_f64().unwrap();
+        assert!((theirs - share(p)).abs() < 1e-12, "{all} vs {summary}");
+    }
+    let fitted = run(&[
+        "posterior",
+        "--tracks",
+        "track",
+        "--fit",
+        "fit.json",
+        "--json",
+    ]);
+    assert_eq!(
+        fitted["pairs"].as_u64(),
+        Some(with_contact as u64),
+        "{fitted}"
+    );
+    assert!(
+        tactile_derender::pose::posterior::PosteriorConfig::read(&dir.path().join("fit.json"))
+            .is_ok()
+    );
     let csv = std::fs::read_to_string(dir.path().join("track/track.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), with_contact + 1);
@@ -305,6 +339,12 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
     let before = summary["position_err_mm"]["mean"].as_f64().unwrap();
     let after = again["position_err_mm"]["mean"].as_f64().unwrap();
     assert!(after > before + 0.3, "{before} -> {after}");
+    // Its posteriors are kept beside the rows, so every frame's region is scored against the new poses too.
+    assert_eq!(
+        again["truth_inside"]["frames"].as_u64(),
+        Some(with_contact as u64),
+        "{again}"
+    );
     // A failed start (an unknown object) leaves nothing behind that would block the corrected command.
     let mut wrong = track.to_vec();
     wrong[4] = "no_such_object";

@@ -12,6 +12,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub use super::nelder_mead::nelder_mead;
 use crate::objects::Symmetry;
 use crate::pose::posterior::{PosePosterior, PosteriorConfig, ONE_SIGMA};
 use crate::sensor::Se2;
@@ -68,26 +69,64 @@ pub struct Scored<'a> {
     pub theta_rad: Option<f64>,
     /// Pixels in contact (for the contact-size bins).
     pub contact_pixels: usize,
+    /// A track's carried frame: the index, in the same slice and before this one, of the frame whose posterior the
+    /// tracker fused this one with ([`crate::pose::fusion::fuse`]). A recalibration replays the fusion in order
+    /// ([`calibrated`]), so that a calibration fitted to tracks is fitted to what the track reports.
+    pub prior: Option<usize>,
 }
 
-/// Coverage of `scored` with each posterior recalibrated by `config` (as recorded when `None`), `draws` Monte Carlo
+/// Each pair's posterior recalibrated by `config`, and each track frame's ([`Scored::prior`]) fused in order with
+/// its earlier frame's as recalibrated and fused: what the tracker would have reported under `config`. (Records keep
+/// a frame's fused posterior; its modes' evidence is the frame's own, so [`PosePosterior::recalibrated`] gives the
+/// frame's own posterior back before the fusion.)
+pub fn calibrated(scored: &[Scored<'_>], config: &PosteriorConfig) -> Vec<PosePosterior> {
+    let mut out: Vec<PosePosterior> = scored
+        .par_iter()
+        .map(|s| s.posterior.recalibrated(&s.symmetry, config))
+        .collect();
+    for (i, s) in scored.iter().enumerate() {
+        if let Some(j) = s.prior.filter(|&j| j < i) {
+            out[i] = crate::pose::fusion::fuse(&out[i], &out[j], &s.symmetry);
+        }
+    }
+    out
+}
+
+/// The pairs of `scored` with `posteriors` (one each, in order) in place of theirs, as final: no fusion left to
+/// replay.
+pub fn with_posteriors<'a>(
+    scored: &[Scored<'_>],
+    posteriors: &'a [PosePosterior],
+) -> Vec<Scored<'a>> {
+    scored
+        .iter()
+        .zip(posteriors)
+        .map(|(s, p)| Scored {
+            posterior: p,
+            truth: s.truth,
+            symmetry: s.symmetry,
+            position_mm: s.position_mm,
+            theta_rad: s.theta_rad,
+            contact_pixels: s.contact_pixels,
+            prior: None,
+        })
+        .collect()
+}
+
+/// Coverage of `scored` with each posterior recalibrated by `config` ([`calibrated`]; as recorded when `None`), `draws` Monte Carlo
 /// draws per region.
 pub fn coverage_with(
     scored: &[Scored<'_>],
     config: Option<&PosteriorConfig>,
     draws: usize,
 ) -> Option<Coverage> {
+    let recalibrated = config.map(|c| calibrated(scored, c));
     let pairs: Vec<(f64, f64)> = scored
         .par_iter()
-        .map(|s| {
-            let mass = match config {
-                Some(c) => s.posterior.recalibrated(&s.symmetry, c).region_mass(
-                    s.truth,
-                    &s.symmetry,
-                    draws,
-                ),
-                None => s.posterior.region_mass(s.truth, &s.symmetry, draws),
-            };
+        .enumerate()
+        .map(|(i, s)| {
+            let p = recalibrated.as_ref().map_or(s.posterior, |r| &r[i]);
+            let mass = p.region_mass(s.truth, &s.symmetry, draws);
             (mass.unwrap_or(f64::NAN), s.position_mm)
         })
         .collect();
@@ -128,7 +167,7 @@ pub struct Reliability {
 }
 
 /// The coverage, reliability diagram, sharpness and mean negative log density of `scored`'s posteriors,
-/// recalibrated by `config` (as recorded when `None`), from one Monte Carlo region mass per pair (`draws` draws);
+/// recalibrated by `config` ([`calibrated`]; as recorded when `None`), from one Monte Carlo region mass per pair (`draws` draws);
 /// pairs without modes are left out; `None` without pairs.
 pub fn reliability(
     scored: &[Scored<'_>],
@@ -137,11 +176,12 @@ pub fn reliability(
 ) -> Option<(Coverage, Reliability)> {
     // Each pair with its region mass, negative log density, top mode's σ, its core's σθ and its ±σ half-widths.
     type PairScore<'a, 'b> = (&'a Scored<'b>, f64, f64, [f64; 3], f64, [f64; 3]);
+    let recalibrated = config.map(|c| calibrated(scored, c));
     let per_pair: Vec<PairScore<'_, '_>> = scored
         .par_iter()
-        .filter_map(|s| {
-            let recalibrated = config.map(|c| s.posterior.recalibrated(&s.symmetry, c));
-            let p = recalibrated.as_ref().unwrap_or(s.posterior);
+        .enumerate()
+        .filter_map(|(i, s)| {
+            let p = recalibrated.as_ref().map_or(s.posterior, |r| &r[i]);
             let mass = p.region_mass(s.truth, &s.symmetry, draws)?;
             let nll = (-p.log_density(s.truth, &s.symmetry)).min(NLL_CAP);
             let top = p.top()?;
@@ -230,13 +270,12 @@ fn bin_weights(scored: &[Scored<'_>]) -> Vec<f64> {
 /// Mean negative log density of the truths under `scored`'s posteriors recalibrated by `config`, each pair weighted
 /// by `weights` and capped at `cap` (so that one pair far outside every mode does not decide alone).
 pub fn mean_nll(scored: &[Scored<'_>], weights: &[f64], config: &PosteriorConfig, cap: f64) -> f64 {
+    let posteriors = calibrated(scored, config);
     let total: f64 = scored
         .par_iter()
+        .zip(&posteriors)
         .zip(weights)
-        .map(|(s, w)| {
-            let p = s.posterior.recalibrated(&s.symmetry, config);
-            w * (-p.log_density(s.truth, &s.symmetry)).min(cap)
-        })
+        .map(|((s, p), w)| w * (-p.log_density(s.truth, &s.symmetry)).min(cap))
         .sum();
     total / scored.len().max(1) as f64
 }
@@ -402,72 +441,6 @@ fn decode(x: &[f64], base: &PosteriorConfig) -> PosteriorConfig {
     }
 }
 
-/// Minimise `f` from `x0` by Nelder–Mead (reflection 1, expansion 2, contraction ½, shrink ½) with an initial
-/// simplex of `step` along each axis, for `iterations` iterations. Returns the best point and its value.
-pub fn nelder_mead(
-    f: &dyn Fn(&[f64]) -> f64,
-    x0: &[f64],
-    step: &[f64],
-    iterations: usize,
-) -> (Vec<f64>, f64) {
-    let n = x0.len();
-    let value = |x: &[f64]| {
-        let v = f(x);
-        if v.is_nan() {
-            f64::INFINITY
-        } else {
-            v
-        }
-    };
-    let mut simplex: Vec<(Vec<f64>, f64)> = (0..=n)
-        .map(|i| {
-            let mut x = x0.to_vec();
-            if i > 0 {
-                x[i - 1] += step[i - 1];
-            }
-            let v = value(&x);
-            (x, v)
-        })
-        .collect();
-    let along = |a: &[f64], b: &[f64], t: f64| -> Vec<f64> {
-        a.iter().zip(b).map(|(a, b)| a + t * (b - a)).collect()
-    };
-    for _ in 0..iterations {
-        simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
-        let centroid: Vec<f64> = (0..n)
-            .map(|j| simplex[..n].iter().map(|(x, _)| x[j]).sum::<f64>() / n as f64)
-            .collect();
-        let worst = simplex[n].clone();
-        let reflected = along(&centroid, &worst.0, -1.0);
-        let fr = value(&reflected);
-        if fr < simplex[0].1 {
-            let expanded = along(&centroid, &worst.0, -2.0);
-            let fe = value(&expanded);
-            simplex[n] = if fe < fr {
-                (expanded, fe)
-            } else {
-                (reflected, fr)
-            };
-        } else if fr < simplex[n - 1].1 {
-            simplex[n] = (reflected, fr);
-        } else {
-            let contracted = along(&centroid, &worst.0, 0.5);
-            let fc = value(&contracted);
-            if fc < worst.1 {
-                simplex[n] = (contracted, fc);
-            } else {
-                let best = simplex[0].0.clone();
-                for point in simplex.iter_mut().skip(1) {
-                    point.0 = along(&best, &point.0, 0.5);
-                    point.1 = value(&point.0);
-                }
-            }
-        }
-    }
-    simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
-    simplex.swap_remove(0)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -511,6 +484,7 @@ mod tests {
                 position_mm: t.x.hypot(t.y) * 1e3,
                 theta_rad: Some(t.theta.abs()),
                 contact_pixels,
+                prior: None,
             })
             .collect()
     }
@@ -609,5 +583,68 @@ mod tests {
         );
         let far = fitted.modes[0].tails.far;
         assert!(far > 0.1 && far < 0.35, "far share {far}, {fit:?}");
+    }
+
+    #[test]
+    fn a_calibration_replays_a_tracks_fusion_in_frame_order() {
+        // Three frames of a track of one object at pose a: the second frame's contact slightly prefers the pose
+        // turned by half a turn, the earlier frame says a. The tracker fuses each frame with the one before.
+        let a = Se2::new(0.001, -0.002, 0.3);
+        let flipped = Se2::new(0.001, -0.002, 0.3 - std::f64::consts::PI);
+        let hessian = [[4e6, 0.0, 0.0], [0.0, 4e6, 0.0], [0.0, 0.0, 400.0]];
+        let ev = |pose: Se2, nats: f64| ModeEvidence {
+            pose,
+            nats,
+            hessian,
+        };
+        let symmetry = Symmetry::default();
+        let recorded = PosteriorConfig::default();
+        let own = |evidence: &[ModeEvidence]| {
+            PosePosterior::from_evidence(evidence, 300, &symmetry, &recorded)
+        };
+        let first = own(&[ev(a, 0.0)]);
+        let second =
+            crate::pose::fusion::fuse(&own(&[ev(flipped, 0.0), ev(a, 1.0)]), &first, &symmetry);
+        let third = crate::pose::fusion::fuse(&own(&[ev(a, 0.0)]), &second, &symmetry);
+        assert_eq!(second.modes[0].pose(), a, "the earlier frame decides");
+        let frames = [&first, &second, &third];
+        let scored: Vec<Scored<'_>> = frames
+            .iter()
+            .enumerate()
+            .map(|(i, p)| Scored {
+                posterior: p,
+                truth: a,
+                symmetry,
+                position_mm: 0.0,
+                theta_rad: Some(0.0),
+                contact_pixels: 300,
+                prior: i.checked_sub(1),
+            })
+            .collect();
+        // Under the calibration it was recorded with, the replay gives back what the track reported.
+        let replayed = calibrated(&scored, &recorded);
+        for (r, f) in replayed.iter().zip(frames) {
+            assert_eq!(r.modes.len(), f.modes.len());
+            for (m, n) in r.modes.iter().zip(&f.modes) {
+                assert_eq!(m.pose(), n.pose());
+                assert!((m.weight - n.weight).abs() < 1e-12, "{m:?} vs {n:?}");
+            }
+        }
+        // Without the links each frame is its own again: the second frame's top mode is the flipped pose, and the
+        // truth is far less likely under it.
+        let alone: Vec<Scored<'_>> = scored
+            .iter()
+            .map(|s| Scored {
+                prior: None,
+                ..s.clone()
+            })
+            .collect();
+        let unfused = calibrated(&alone, &recorded);
+        assert_eq!(unfused[1].modes[0].pose(), flipped);
+        let ones = [1.0; 3];
+        assert!(
+            mean_nll(&scored, &ones, &recorded, NLL_CAP) + 0.1
+                < mean_nll(&alone, &ones, &recorded, NLL_CAP)
+        );
     }
 }

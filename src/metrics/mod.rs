@@ -12,6 +12,7 @@ pub mod depth;
 pub mod eval_log;
 pub mod evaluate;
 pub mod model_generator;
+pub mod nelder_mead;
 pub mod paper_table;
 pub mod pose;
 pub mod reliability_figure;

@@ -34,6 +34,7 @@ pub mod pose;
 pub mod pose_record;
 pub mod press;
 pub mod track;
+pub mod track_posteriors;
 pub mod tracker;
 
 pub use derender::{derender, imprint_guidance, mean_std, DerenderConfig, Derendered};

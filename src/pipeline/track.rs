@@ -79,9 +79,13 @@ pub struct FrameTrack {
     /// inside the track's p region when this is ≤ p. `None` without a recorded pose or a posterior, and for rows read
     /// back from a track and scored against other poses than before (the posterior is not in the CSV).
     pub truth_region: Option<f64>,
-    /// The frame's pose posterior while the row is in memory (for [`Self::score`]; not in the CSV).
+    /// The frame's pose posterior while the row is in memory (for [`Self::score`]; not in the CSV: a track keeps it
+    /// in [`super::track_posteriors::TrackPosteriors`]).
     #[serde(skip)]
     pub posterior: Option<crate::pose::posterior::PosePosterior>,
+    /// The earlier frame whose posterior reweighed this one's ([`crate::pose::fusion`]; `None`: the frame's own).
+    #[serde(skip)]
+    pub fused_with: Option<usize>,
 }
 
 /// Columns of [`FrameTrack::csv_row`].
@@ -160,6 +164,7 @@ impl FrameTrack {
             carried: false,
             truth_region: None,
             posterior: None,
+            fused_with: None,
         }
     }
 
@@ -300,6 +305,7 @@ impl FrameTrack {
                 },
                 truth_region: num(37)?,
                 posterior: None,
+                fused_with: None,
             })
         })
     }

@@ -257,6 +257,10 @@ impl<'a> Tracker<'a> {
             out.samples.len(),
         );
         row.carried = carry.is_some();
+        row.fused_with = carry
+            .as_ref()
+            .filter(|c| c.prior.posterior.is_some())
+            .map(|c| c.frame);
         let observation = super::Observation {
             samples: &out.samples,
             imprint,

@@ -12,18 +12,26 @@ use serde_json::json;
 use tactile_derender::io::figure::{write_figure, FigureConfig};
 use tactile_derender::metrics::breakdown::{bin_label, CONTACT_BINS};
 use tactile_derender::metrics::coverage::{
-    fit_posterior, reliability, Coverage, Fit, Reliability, Scored, WRONG_MM,
+    calibrated, fit_posterior, reliability, with_posteriors, Coverage, Fit, Reliability, Scored,
+    WRONG_MM,
 };
 use tactile_derender::metrics::eval_log::EvalLog;
 use tactile_derender::metrics::evaluate::{MethodResult, PairRecord, REGION_DRAWS};
 use tactile_derender::metrics::reliability_figure::ReliabilityFigure;
+use tactile_derender::pipeline::track::FrameTrack;
+use tactile_derender::pipeline::track_posteriors::TrackPosteriors;
 use tactile_derender::pose::posterior::PosteriorConfig;
 
 #[derive(Args, Debug)]
 pub struct PosteriorArgs {
     /// Records files of `tnd eval --records` (pairs with a known true pose).
-    #[arg(long, required = true, num_args = 1..)]
+    #[arg(long, num_args = 1.., required_unless_present = "tracks")]
     pub records: Vec<PathBuf>,
+    /// Folders of `tnd recording track` scored against recorded poses (track.csv and posteriors.json): their
+    /// frames are the "track" rows, and a calibration fitted to them replays each carried frame's fusion with the
+    /// frames before it, as the track reports it.
+    #[arg(long, num_args = 1.., value_name = "DIR")]
+    pub tracks: Vec<PathBuf>,
     /// The rows scored: combined (the default pipeline: the sample and the imprint's proposals, checked), model,
     /// multi, baseline_checked, or all.
     #[arg(long, default_value = "all")]
@@ -59,9 +67,10 @@ const METHODS: [(&str, Row); 4] = [
 ];
 
 pub fn run(a: PosteriorArgs) -> Result<()> {
-    let methods = chosen_methods(&a.method)?;
+    let methods = chosen_methods(&a.method, a.records.is_empty())?;
     check_records_once(&a.records)?;
     let mut inputs: Vec<&Path> = a.records.iter().map(PathBuf::as_path).collect();
+    inputs.extend(a.tracks.iter().map(PathBuf::as_path));
     inputs.extend(a.config.as_deref());
     let fitted_file = |p: &Path| PosteriorConfig::read(p).is_ok();
     let _claim = a
@@ -83,15 +92,23 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
     for path in &a.records {
         records.extend(EvalLog::read(path)?.1);
     }
-    let all: Vec<Scored<'_>> = methods
+    let tracks = read_tracks(&a.tracks)?;
+    // Each chosen row's pairs: the records' rows, then the tracks' frames.
+    let mut rows: Vec<(&str, Vec<Scored<'_>>)> = methods
         .iter()
-        .flat_map(|(_, g)| scored(&records, *g))
+        .map(|(name, get)| (*name, scored(&records, *get)))
         .collect();
+    if !tracks.is_empty() {
+        rows.push((TRACK_ROWS, track_scored(&tracks)));
+    }
+    rows.retain(|(_, r)| !r.is_empty());
+    let all = concatenated(rows.iter().map(|(_, r)| r.as_slice()));
     if all.is_empty() {
         bail!(
-            "no pair of {} has a posterior of the chosen rows (records of tnd eval with the signature check, from this \
-             version on)",
-            a.records.len()
+            "no pair of {} records file(s) and {} track(s) has a posterior of the chosen rows (records of tnd eval with \
+             the signature check, tracks scored against recorded poses, from this version on)",
+            a.records.len(),
+            a.tracks.len()
         );
     }
     let fitted = a
@@ -99,7 +116,7 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
         .as_ref()
         .map(|_| fit_posterior(&all, &config.clone().unwrap_or_default()));
     let used = fitted.as_ref().map(|f| &f.config).or(config.as_ref());
-    let (table, drawn) = score_groups(&methods, &records, used, figures.is_some());
+    let (table, drawn) = score_groups(&rows, used, figures.is_some());
     if !a.json {
         eprintln!(
             "\nThe truth inside the posterior's regions ({}; confidently wrong: > {WRONG_MM} mm off, outside the 95 % region)\n\n{table}",
@@ -116,7 +133,7 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
             (None, Some(p)) => format!("calibration {}", p.display()),
             (None, None) => "as recorded".into(),
         };
-        draw_reliability(dir.path(), methods[0].0, &calibration, &drawn)?;
+        draw_reliability(dir.path(), rows[0].0, &calibration, &drawn)?;
     }
     if let (Some(f), Some(path)) = (&fitted, &a.fit) {
         write_fit(f, path, all.len())?;
@@ -124,8 +141,71 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
     Ok(())
 }
 
-/// The rows `--method` names (all four for "all"), or an error listing the names.
-fn chosen_methods(method: &str) -> Result<Vec<&'static (&'static str, Row)>> {
+/// The name of the tracks' rows.
+const TRACK_ROWS: &str = "track";
+
+/// Each `--tracks` folder's rows (track.csv) and posteriors (posteriors.json), or a one-line error naming the
+/// folder and what is missing.
+fn read_tracks(dirs: &[PathBuf]) -> Result<Vec<(Vec<FrameTrack>, TrackPosteriors)>> {
+    dirs.iter()
+        .map(|dir| {
+            let rows = crate::track_cmd::earlier_rows(dir)?;
+            if rows.is_empty() {
+                bail!("--tracks {}: no track.csv with rows (a folder of tnd recording track)", dir.display());
+            }
+            let posteriors = TrackPosteriors::read(dir)?.ok_or_else(|| {
+                anyhow!(
+                    "--tracks {}: no {} (a track of an earlier version: run tnd recording track into a fresh folder)",
+                    dir.display(),
+                    TrackPosteriors::FILE
+                )
+            })?;
+            Ok((rows, posteriors))
+        })
+        .collect()
+}
+
+/// The scored frames of every track, one list (each track's fusion links kept); frames whose fusion cannot be
+/// replayed (the frame before has no recorded pose) are left out with a warning.
+fn track_scored(tracks: &[(Vec<FrameTrack>, TrackPosteriors)]) -> Vec<Scored<'_>> {
+    let mut left_out = 0;
+    let lists: Vec<Vec<Scored<'_>>> = tracks
+        .iter()
+        .map(|(rows, posteriors)| {
+            let (scored, left) = posteriors.scored(rows);
+            left_out += left;
+            scored
+        })
+        .collect();
+    if left_out > 0 {
+        eprintln!(
+            "warning: {left_out} track frame(s) left out: the frame their posterior was fused with has no recorded pose"
+        );
+    }
+    concatenated(lists.iter().map(Vec::as_slice))
+}
+
+/// The lists one after another, each pair's [`Scored::prior`] moved with its list.
+fn concatenated<'a, 'b>(lists: impl Iterator<Item = &'b [Scored<'a>]>) -> Vec<Scored<'a>>
+where
+    'a: 'b,
+{
+    let mut out: Vec<Scored<'a>> = Vec::new();
+    for list in lists {
+        let offset = out.len();
+        out.extend(list.iter().map(|s| Scored {
+            prior: s.prior.map(|i| i + offset),
+            ..s.clone()
+        }));
+    }
+    out
+}
+
+/// The rows `--method` names (all four for "all"), or an error listing the names; none when only tracks are given.
+fn chosen_methods(method: &str, no_records: bool) -> Result<Vec<&'static (&'static str, Row)>> {
+    if no_records {
+        return Ok(Vec::new());
+    }
     let methods: Vec<_> = METHODS
         .iter()
         .filter(|(name, _)| method == "all" || method == *name)
@@ -168,16 +248,17 @@ fn scored(records: &[PairRecord], get: Row) -> Vec<Scored<'_>> {
                 position_mm: m.pose?.position_mm,
                 theta_rad: m.pose?.theta_rad,
                 contact_pixels: r.contact_pixels,
+                prior: None,
             })
         })
         .collect()
 }
 
-/// Score each chosen row over all its pairs and per contact-size bin under the calibration `used`: print one JSON
-/// line per group and answer the markdown table, with the first row's reliabilities to draw when `drawing`.
+/// Score each chosen row over all its pairs and per contact-size bin under the calibration `used` (tracks' fusion
+/// replayed over the whole row first): print one JSON line per group and answer the markdown table, with the first
+/// row's reliabilities to draw when `drawing`.
 fn score_groups(
-    methods: &[&(&str, Row)],
-    records: &[PairRecord],
+    rows: &[(&str, Vec<Scored<'_>>)],
     used: Option<&PosteriorConfig>,
     drawing: bool,
 ) -> (String, Vec<(String, Reliability)>) {
@@ -185,9 +266,14 @@ fn score_groups(
         "| rows | contact | pairs | inside 50 % | inside 90 % | inside 95 % | confidently wrong | mean NLL | median σ (±68 %) / error, position [mm] | median σ (core, ±68 %) / error, θ [deg] |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut drawn: Vec<(String, Reliability)> = Vec::new();
-    for (name, get) in methods {
-        for (group, mine) in contact_groups(scored(records, *get)) {
-            let Some((c, r)) = reliability(&mine, used, REGION_DRAWS) else {
+    for (i, (name, all)) in rows.iter().enumerate() {
+        let posteriors = used.map(|c| calibrated(all, c));
+        let all = match &posteriors {
+            Some(p) => with_posteriors(all, p),
+            None => all.clone(),
+        };
+        for (group, mine) in contact_groups(all) {
+            let Some((c, r)) = reliability(&mine, None, REGION_DRAWS) else {
                 continue;
             };
             println!(
@@ -195,7 +281,7 @@ fn score_groups(
                 json!({"rows": name, "contact": group, "coverage": c, "wrong_mm": WRONG_MM, "reliability": r})
             );
             table.push_str(&row(name, &group, &c, &r));
-            if drawing && *name == methods[0].0 {
+            if drawing && i == 0 {
                 drawn.push((group, r));
             }
         }

@@ -15,6 +15,7 @@ use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::track::{
     Carry, FrameTrack, PressChoice, TrackContext, Tracker, TrackingConfig,
 };
+use tactile_derender::pipeline::track_posteriors::TrackPosteriors;
 use tactile_derender::pipeline::{DerenderConfig, ObjectSpec};
 use tactile_derender::pose::PoseConfig;
 use tactile_derender::recording::source::DEFAULT_MAX_POSE_GAP_S;
@@ -175,7 +176,7 @@ fn check_same(out: &Path, earlier: &Value, key: &str, now: &Value, what: &str) -
 }
 
 /// The rows of an earlier run's track.csv (none when there is none).
-fn earlier_rows(out: &Path) -> Result<Vec<FrameTrack>> {
+pub(crate) fn earlier_rows(out: &Path) -> Result<Vec<FrameTrack>> {
     let path = out.join("track.csv");
     let Ok(text) = std::fs::read_to_string(&path) else {
         return Ok(Vec::new());
@@ -394,6 +395,9 @@ pub fn run(a: TrackArgs) -> Result<()> {
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create", a.out.display()))?;
     let mut rows = earlier_rows(&a.out)?;
+    let mut posteriors =
+        TrackPosteriors::read(&a.out)?.unwrap_or_else(|| TrackPosteriors::new(object.symmetry));
+    posteriors.restore(&mut rows);
     write_json(&a.out, &json!({"settings": settings, "recording": frames}))?;
     let done: BTreeSet<usize> = rows.iter().map(|r| r.frame).collect();
     if !done.is_empty() {
@@ -423,6 +427,8 @@ pub fn run(a: TrackArgs) -> Result<()> {
             }
             let mut row = tracker.track(processed, k, &mut |_, _| true)?;
             score(&mut row);
+            posteriors.keep(&row);
+            posteriors.write(&a.out)?;
             rows.push(row);
             rows.sort_by_key(|r| r.frame);
             carries.insert(k, tracker.carry().cloned());
