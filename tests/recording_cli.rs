@@ -280,6 +280,14 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
             cells[col("cov_thetatheta")].parse().unwrap(),
         );
         assert!(xx > 0.0 && yy > 0.0 && tt > 0.0, "{line}");
+        // The ±68 % half-widths beside it: positive, θ within half a turn.
+        let half: Vec<f64> = ["half_x_68", "half_y_68", "half_theta_68"]
+            .map(|c| cells[col(c)].parse().unwrap())
+            .to_vec();
+        assert!(
+            half.iter().all(|h| *h > 0.0) && half[2] <= std::f64::consts::PI,
+            "{line}"
+        );
     }
     // The press's first contact frame is estimated from scratch; the frames after it carry its estimate forward.
     let carried: Vec<&str> = lines[1..]

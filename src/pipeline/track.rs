@@ -79,6 +79,11 @@ pub struct FrameTrack {
     /// inside the track's p region when this is ≤ p. `None` without a recorded pose or a posterior, and for rows read
     /// back from a track and scored against other poses than before (the posterior is not in the CSV).
     pub truth_region: Option<f64>,
+    /// Half-widths of the central intervals about the estimate's mode holding 68 % of it — x, y (metres), θ
+    /// (radians; [`crate::pose::posterior::PosePosterior::estimate_half_widths`]): the covariance's spread read as
+    /// a Gaussian's ±σ, which heavy tails make far narrower than the standard deviation.
+    #[serde(default)]
+    pub half_width_68: Option<[f64; 3]>,
     /// The frame's pose posterior while the row is in memory (for [`Self::score`]; not in the CSV: a track keeps it
     /// in [`super::track_posteriors::TrackPosteriors`]).
     #[serde(skip)]
@@ -89,7 +94,7 @@ pub struct FrameTrack {
 }
 
 /// Columns of [`FrameTrack::csv_row`].
-const CSV_COLUMNS: [&str; 38] = [
+const CSV_COLUMNS: [&str; 41] = [
     "frame",
     "stamp_ns",
     "contact_px",
@@ -128,6 +133,9 @@ const CSV_COLUMNS: [&str; 38] = [
     "cov_thetatheta",
     "carried",
     "truth_region",
+    "half_x_68",
+    "half_y_68",
+    "half_theta_68",
 ];
 
 /// Columns of a track written before the posterior's (read back with none).
@@ -136,6 +144,8 @@ const CSV_COLUMNS_V1: usize = 28;
 const CSV_COLUMNS_V2: usize = 36;
 /// Columns of a track written before the truth's region (read back with none).
 const CSV_COLUMNS_V3: usize = 37;
+/// Columns of a track written before the half-widths (read back with none).
+const CSV_COLUMNS_V4: usize = 38;
 
 impl FrameTrack {
     /// A frame with nothing estimated yet.
@@ -163,6 +173,7 @@ impl FrameTrack {
             covariance: None,
             carried: false,
             truth_region: None,
+            half_width_68: None,
             posterior: None,
             fused_with: None,
         }
@@ -223,6 +234,10 @@ impl FrameTrack {
             },
             u8::from(self.carried).to_string(),
             num(self.truth_region),
+            match self.half_width_68 {
+                Some(h) => h.map(|v| v.to_string()).join(","),
+                None => ",,".into(),
+            },
         ]
         .join(",")
     }
@@ -241,6 +256,9 @@ impl FrameTrack {
             }
             if cells.len() == CSV_COLUMNS_V3 {
                 cells.push("");
+            }
+            if cells.len() == CSV_COLUMNS_V4 {
+                cells.extend(["", "", ""]);
             }
             if cells.len() != CSV_COLUMNS.len() {
                 return Err(format!(
@@ -304,6 +322,10 @@ impl FrameTrack {
                     c => return Err(format!("carried '{c}' is neither 0 nor 1")),
                 },
                 truth_region: num(37)?,
+                half_width_68: match [38, 39, 40].map(num) {
+                    [Ok(Some(x)), Ok(Some(y)), Ok(Some(t))] => Some([x, y, t]),
+                    _ => None,
+                },
                 posterior: None,
                 fused_with: None,
             })
@@ -370,6 +392,14 @@ mod tests {
     #[test]
     fn csv_rows_have_the_header_s_columns_and_read_back_exactly() {
         let columns = FrameTrack::csv_header().split(',').count();
+        // A row as an earlier version wrote it: the first `columns` cells.
+        let written_before = |row: &FrameTrack, columns: usize| {
+            row.csv_row()
+                .split(',')
+                .take(columns)
+                .collect::<Vec<_>>()
+                .join(",")
+        };
         let mut row = FrameTrack::new(3, 100, 40, 2);
         assert_eq!(row.csv_row().split(',').count(), columns);
         assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
@@ -398,14 +428,16 @@ mod tests {
         assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
         row.truth_region = Some(0.4375);
         assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
-        // A row as an earlier version wrote it: the first `columns` cells.
-        let written_before = |row: &FrameTrack, columns: usize| {
-            row.csv_row()
-                .split(',')
-                .take(columns)
-                .collect::<Vec<_>>()
-                .join(",")
-        };
+        row.half_width_68 = Some([1.0 / 3.0 * 1e-3, 2e-4, 0.0123]);
+        assert_eq!(FrameTrack::from_csv_row(&row.csv_row()), Ok(row.clone()));
+        // A row of a track written before the half-widths reads back without them.
+        let v4 = written_before(&row, 38);
+        let read = FrameTrack::from_csv_row(&v4).unwrap();
+        assert_eq!(
+            (read.half_width_68, read.truth_region),
+            (None, Some(0.4375))
+        );
+        row.half_width_68 = None;
         // A row of a track written before the truth's region reads back without one.
         let v3 = written_before(&row, 37);
         assert_eq!(FrameTrack::from_csv_row(&v3).unwrap().truth_region, None);

@@ -401,6 +401,9 @@ fn fill_row(row: &mut FrameTrack, placed: &super::PlacedEstimate, symmetry: &Sym
         row.covariance = row
             .estimate
             .and_then(|e| crate::pose::export::covariance_about(p, e, symmetry));
+        row.half_width_68 = row
+            .estimate
+            .and_then(|e| p.estimate_half_widths(e, symmetry));
     }
     row.posterior = estimate.posterior.clone();
     row.pose_modes = if report.samples.len() >= 2 {

@@ -500,15 +500,6 @@ fn short_list(frames: &[usize]) -> String {
     parts.join(", ")
 }
 
-/// A track row's half-widths of the central intervals holding 68 % of its estimate's mode (x, y metres, θ radians;
-/// [`tactile_derender::pose::posterior::PosePosterior::estimate_half_widths`]; the row does not keep the object's
-/// symmetry, so a full turn); `None` without a posterior or an estimate.
-fn half_width_68(r: &FrameTrack) -> Option<[f64; 3]> {
-    r.posterior
-        .as_ref()?
-        .estimate_half_widths(r.estimate?, &Default::default())
-}
-
 /// The track: start / cancel / save, its progress, and the pose over time (a click moves the cursor there).
 fn track_section(
     app: &WorkbenchApp,
@@ -563,7 +554,7 @@ fn track_section(
         .filter_map(|r| r.estimate_error.map(|e| e.0))
         .collect();
     // Each row's ±σ read as a Gaussian's: the central intervals holding 68 % of its estimate's mode.
-    let half: Vec<Option<[f64; 3]>> = t.rows.iter().map(half_width_68).collect();
+    let half: Vec<Option<[f64; 3]>> = t.rows.iter().map(|r| r.half_width_68).collect();
     let median = |mut v: Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v.get(v.len() / 2).copied()
