@@ -107,18 +107,20 @@ fn calibrated_without_frame_noise() -> bool {
 
 impl Default for PosteriorConfig {
     /// Fitted (`tnd posterior --fit`, rounded to three digits) to 529 pairs of the bundled model's records on the
-    /// 42 real validation meshes: nominal single frames, press recordings with and without a time-of-flight camera's
-    /// artefacts, and three off-nominal sensors (docs/uncertainty.md, where the same fit held out by object is
-    /// scored). The fit chose the predicted contact and the evidence as recorded; since session 34 the tails also
-    /// follow the rival explanations (within 50 nats) and the contact's misfit.
+    /// 42 real validation meshes — nominal single frames, press recordings with and without a time-of-flight camera's
+    /// artefacts, three off-nominal sensors — and to 338 frames of 41 tracked presses of the same meshes (the
+    /// fusion of each carried frame replayed; since session 36), so that one calibration serves single frames and
+    /// tracks (docs/uncertainty.md, where the same fit held out by object is scored). The fit chose the predicted
+    /// contact and the evidence as recorded; the tails also follow the rival explanations (within 50 nats) and the
+    /// contact's misfit.
     fn default() -> Self {
         Self {
-            temperature: 1.90,
-            covariance_temperature: 1.27,
-            floor_position_m: 2.90e-5,
-            floor_theta_rad: 0.00485,
+            temperature: 1.69,
+            covariance_temperature: 1.8,
+            floor_position_m: 2.57e-5,
+            floor_theta_rad: 0.00437,
             floor_contact_px: 300.0,
-            floor_exponent: 0.902,
+            floor_exponent: 0.996,
             contact_threshold_m: 0.003,
             contact_from_prediction: true,
             frame_noise: false,
@@ -128,22 +130,22 @@ impl Default for PosteriorConfig {
             step_m: 5e-4,
             lever_m: 0.02,
             max_sigma_m: 0.03,
-            tail_logit: -1.74,
-            tail_contact_slope: -0.147,
-            tail_position_m: 2.74e-5,
-            tail_theta_rad: 0.0705,
-            tail_exponent: 0.354,
-            tail_core_scale: 3.95,
-            far_logit: -6.54,
-            far_contact_slope: 0.282,
-            far_position_m: 0.00448,
-            far_exponent: 0.287,
-            far_ambiguity: -0.176,
+            tail_logit: -1.96,
+            tail_contact_slope: -0.0277,
+            tail_position_m: 0.000279,
+            tail_theta_rad: 0.0823,
+            tail_exponent: 0.435,
+            tail_core_scale: 3.19,
+            far_logit: -6.21,
+            far_contact_slope: 0.559,
+            far_position_m: 0.00395,
+            far_exponent: 0.455,
+            far_ambiguity: -1.67,
             rival_window_nats: 50.0,
-            tail_rivals: 0.846,
-            far_rivals: 1.92,
-            tail_misfit: 4.56,
-            far_misfit: 6.48,
+            tail_rivals: 0.902,
+            far_rivals: 2.33,
+            tail_misfit: 6.43,
+            far_misfit: 4.84,
         }
     }
 }
