@@ -95,7 +95,7 @@ pub fn calibrated(scored: &[Scored<'_>], config: &PosteriorConfig) -> Vec<PosePo
 /// The pairs of `scored` with `posteriors` (one each, in order) in place of theirs, as final: no fusion left to
 /// replay.
 pub fn with_posteriors<'a>(
-    scored: &[Scored<'_>],
+    scored: &[Scored<'a>],
     posteriors: &'a [PosePosterior],
 ) -> Vec<Scored<'a>> {
     scored
@@ -103,12 +103,8 @@ pub fn with_posteriors<'a>(
         .zip(posteriors)
         .map(|(s, p)| Scored {
             posterior: p,
-            truth: s.truth,
-            symmetry: s.symmetry,
-            position_mm: s.position_mm,
-            theta_rad: s.theta_rad,
-            contact_pixels: s.contact_pixels,
             prior: None,
+            ..s.clone()
         })
         .collect()
 }
