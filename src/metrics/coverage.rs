@@ -86,7 +86,7 @@ pub fn calibrated(scored: &[Scored<'_>], config: &PosteriorConfig) -> Vec<PosePo
         .collect();
     for (i, s) in scored.iter().enumerate() {
         if let Some(j) = s.prior.filter(|&j| j < i) {
-            out[i] = crate::pose::fusion::fuse(&out[i], &out[j], &s.symmetry);
+            out[i] = crate::pose::fusion::fuse(&out[i], &out[j], &s.symmetry, config.fusion_weight);
         }
     }
     out
@@ -329,7 +329,8 @@ pub fn fit_posterior(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
 
 /// [`fit_posterior`] with `base`'s contact count.
 fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
-    let x0 = encode(base);
+    let fusion = scored.iter().any(|s| s.prior.is_some());
+    let x0 = encode(base, fusion);
     // Each contact-size bin counts alike (a pair weighs 1 / its bin's pairs): the posterior is to be calibrated in
     // every bin, and small contacts, the hardest, are the fewest.
     let weights = bin_weights(scored);
@@ -350,6 +351,10 @@ fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
     // The noise floor only where the frames' noise weighs the evidence.
     if base.frame_noise {
         step.push(1.0);
+    }
+    // The fusion weight only where track frames are fused.
+    if fusion {
+        step.push(0.3);
     }
     let mut best: Option<(Vec<f64>, f64)> = None;
     for x in starts {
@@ -375,8 +380,10 @@ fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
     }
 }
 
-/// The fitted settings as free coordinates (logs of scales, logits and slopes as they are).
-fn encode(c: &PosteriorConfig) -> Vec<f64> {
+/// The fitted settings as free coordinates (logs of scales, logits and slopes as they are); the noise floor where
+/// the frames' noise weighs the evidence, and [`PosteriorConfig::fusion_weight`] where `fusion` (the pairs include
+/// fused track frames).
+fn encode(c: &PosteriorConfig, fusion: bool) -> Vec<f64> {
     let mut x = vec![
         c.temperature.ln(),
         c.covariance_temperature.ln(),
@@ -402,6 +409,9 @@ fn encode(c: &PosteriorConfig) -> Vec<f64> {
     if c.frame_noise {
         x.push(c.noise_floor_m.max(1e-5).ln());
     }
+    if fusion {
+        x.push(c.fusion_weight);
+    }
     x
 }
 
@@ -409,6 +419,17 @@ fn encode(c: &PosteriorConfig) -> Vec<f64> {
 /// a degenerate optimum: a zero-width core on a handful of exact pairs).
 fn decode(x: &[f64], base: &PosteriorConfig) -> PosteriorConfig {
     let exp = |v: f64, lo: f64, hi: f64| v.clamp(lo.ln(), hi.ln()).exp();
+    // Past the 20 settings every fit has: the noise floor (where the frames' noise is on), then the fusion weight.
+    let mut extra = x.get(20..).unwrap_or_default().iter();
+    let noise_floor_m = match base.frame_noise {
+        true => extra
+            .next()
+            .map_or(base.noise_floor_m, |&v| exp(v, 1e-5, 0.005)),
+        false => base.noise_floor_m,
+    };
+    let fusion_weight = extra
+        .next()
+        .map_or(base.fusion_weight, |&v| v.clamp(0.0, 1.0));
     PosteriorConfig {
         temperature: exp(x[0], 0.05, 1e5),
         covariance_temperature: exp(x[1], 0.05, 1e5),
@@ -430,217 +451,12 @@ fn decode(x: &[f64], base: &PosteriorConfig) -> PosteriorConfig {
         far_rivals: x[17].clamp(-10.0, 10.0),
         tail_misfit: x[18].clamp(-10.0, 10.0),
         far_misfit: x[19].clamp(-10.0, 10.0),
-        noise_floor_m: x
-            .get(20)
-            .map_or(base.noise_floor_m, |&v| exp(v, 1e-5, 0.005)),
+        noise_floor_m,
+        fusion_weight,
         ..base.clone()
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::pose::posterior::ModeEvidence;
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
-
-    /// One posterior per truth whose evidence says σ = `sp` m and `st` rad about the origin (raw: τ = 1, no
-    /// floors or tails), with its truth.
-    fn raw_posteriors(truths: &[Se2], sp: f64, st: f64) -> Vec<(PosePosterior, Se2)> {
-        let hessian = [
-            [1.0 / (sp * sp), 0.0, 0.0],
-            [0.0, 1.0 / (sp * sp), 0.0],
-            [0.0, 0.0, 1.0 / (st * st)],
-        ];
-        let evidence = ModeEvidence {
-            pose: Se2::default(),
-            nats: 0.0,
-            hessian,
-        };
-        truths
-            .iter()
-            .map(|&t| {
-                let raw = PosteriorConfig::untempered();
-                (
-                    PosePosterior::from_evidence(&[evidence], 300, &Symmetry::default(), &raw),
-                    t,
-                )
-            })
-            .collect()
-    }
-
-    /// The pairs to score: each truth against its posterior, the estimate at the origin.
-    fn scored_of(posteriors: &[(PosePosterior, Se2)], contact_pixels: usize) -> Vec<Scored<'_>> {
-        posteriors
-            .iter()
-            .map(|(p, t)| Scored {
-                posterior: p,
-                truth: *t,
-                symmetry: Symmetry::default(),
-                position_mm: t.x.hypot(t.y) * 1e3,
-                theta_rad: Some(t.theta.abs()),
-                contact_pixels,
-                prior: None,
-            })
-            .collect()
-    }
-
-    #[test]
-    fn coverage_counts_levels_and_confident_misses() {
-        let c = Coverage::of(
-            [
-                (0.1, 1.0),
-                (0.6, 2.0),
-                (0.93, 9.0),
-                (0.99, 7.0),
-                (0.99, 1.0),
-            ]
-            .into_iter(),
-        )
-        .unwrap();
-        assert_eq!(c.pairs, 5);
-        assert_eq!(c.inside, [0.2, 0.4, 0.6]);
-        assert_eq!(c.confidently_wrong, 1);
-        assert!(Coverage::of(std::iter::empty()).is_none());
-    }
-
-    #[test]
-    fn the_fit_recovers_a_known_error_scale() {
-        // Independent truth: estimates off by N(0, 2 mm) in x and y and N(0, 3°) in θ, while every posterior's
-        // evidence says σ = 0.2 mm and 0.3° at τ = 1 (a sensor's pixels taken as independent). Fitted, the 90 %
-        // region covers about 90 % of the truths, where the raw evidence covers almost none.
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let pos = Normal::new(0.0, 0.002).unwrap();
-        let rot = Normal::new(0.0, 3f64.to_radians()).unwrap();
-        let truths: Vec<Se2> = (0..300)
-            .map(|_| {
-                Se2::new(
-                    pos.sample(&mut rng),
-                    pos.sample(&mut rng),
-                    rot.sample(&mut rng),
-                )
-            })
-            .collect();
-        let raw = PosteriorConfig::untempered();
-        let posteriors = raw_posteriors(&truths, 0.0002, 0.3f64.to_radians());
-        let scored = scored_of(&posteriors, 500);
-        let before = coverage_with(&scored, None, 1000).unwrap();
-        assert!(before.inside[1] < 0.1, "{before:?}");
-        let fit = fit_posterior(&scored, &raw);
-        let after = fit.coverage.unwrap();
-        assert!((after.inside[1] - 0.9).abs() <= 0.05, "{fit:?}");
-        assert!(after.inside[0] > 0.35 && after.inside[0] < 0.65, "{fit:?}");
-    }
-
-    #[test]
-    fn the_fit_keeps_a_sharp_core_under_heavy_tails() {
-        // Independent truth: 80 % of the estimates off by N(0, 0.3 mm) and N(0, 1°), 20 % by N(0, 4 mm) and a θ
-        // anywhere, while every posterior's evidence says σ = 0.1 mm and 0.1°. A calibrated fit covers the truth at
-        // 50 % and 90 %, and its top mode's core stays near the 0.3 mm of the bulk where one Gaussian wide enough
-        // for the outliers would be several millimetres wide.
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        let (near_p, near_t) = (
-            Normal::new(0.0, 3e-4).unwrap(),
-            Normal::new(0.0, 1f64.to_radians()).unwrap(),
-        );
-        let far_p = Normal::new(0.0, 4e-3).unwrap();
-        let truths: Vec<Se2> = (0..400)
-            .map(|i| {
-                if i % 5 == 0 {
-                    let theta: f64 = rand::Rng::random_range(
-                        &mut rng,
-                        -std::f64::consts::PI..std::f64::consts::PI,
-                    );
-                    Se2::new(far_p.sample(&mut rng), far_p.sample(&mut rng), theta)
-                } else {
-                    Se2::new(
-                        near_p.sample(&mut rng),
-                        near_p.sample(&mut rng),
-                        near_t.sample(&mut rng),
-                    )
-                }
-            })
-            .collect();
-        let posteriors = raw_posteriors(&truths, 1e-4, 0.1f64.to_radians());
-        let scored = scored_of(&posteriors, 300);
-        let fit = fit_posterior(&scored, &PosteriorConfig::default());
-        let (_, r) = reliability(&scored, Some(&fit.config), 2000).unwrap();
-        let at =
-            |level: f64| r.inside[RELIABILITY_LEVELS.iter().position(|&l| l == level).unwrap()];
-        assert!((at(0.5) - 0.5).abs() <= 0.08, "{r:?} {fit:?}");
-        assert!((at(0.9) - 0.9).abs() <= 0.05, "{r:?} {fit:?}");
-        let fitted = posteriors[0]
-            .0
-            .recalibrated(&Symmetry::default(), &fit.config);
-        let core_mm = fitted.modes[0].cov[0][0].sqrt() * 1e3;
-        assert!(
-            core_mm > 0.15 && core_mm < 0.5,
-            "core σ {core_mm} mm, {fit:?}"
-        );
-        let far = fitted.modes[0].tails.far;
-        assert!(far > 0.1 && far < 0.35, "far share {far}, {fit:?}");
-    }
-
-    #[test]
-    fn a_calibration_replays_a_tracks_fusion_in_frame_order() {
-        // Three frames of a track of one object at pose a: the second frame's contact slightly prefers the pose
-        // turned by half a turn, the earlier frame says a. The tracker fuses each frame with the one before.
-        let a = Se2::new(0.001, -0.002, 0.3);
-        let flipped = Se2::new(0.001, -0.002, 0.3 - std::f64::consts::PI);
-        let hessian = [[4e6, 0.0, 0.0], [0.0, 4e6, 0.0], [0.0, 0.0, 400.0]];
-        let ev = |pose: Se2, nats: f64| ModeEvidence {
-            pose,
-            nats,
-            hessian,
-        };
-        let symmetry = Symmetry::default();
-        let recorded = PosteriorConfig::default();
-        let own = |evidence: &[ModeEvidence]| {
-            PosePosterior::from_evidence(evidence, 300, &symmetry, &recorded)
-        };
-        let first = own(&[ev(a, 0.0)]);
-        let second =
-            crate::pose::fusion::fuse(&own(&[ev(flipped, 0.0), ev(a, 1.0)]), &first, &symmetry);
-        let third = crate::pose::fusion::fuse(&own(&[ev(a, 0.0)]), &second, &symmetry);
-        assert_eq!(second.modes[0].pose(), a, "the earlier frame decides");
-        let frames = [&first, &second, &third];
-        let scored: Vec<Scored<'_>> = frames
-            .iter()
-            .enumerate()
-            .map(|(i, p)| Scored {
-                posterior: p,
-                truth: a,
-                symmetry,
-                position_mm: 0.0,
-                theta_rad: Some(0.0),
-                contact_pixels: 300,
-                prior: i.checked_sub(1),
-            })
-            .collect();
-        // Under the calibration it was recorded with, the replay gives back what the track reported.
-        let replayed = calibrated(&scored, &recorded);
-        for (r, f) in replayed.iter().zip(frames) {
-            assert_eq!(r.modes.len(), f.modes.len());
-            for (m, n) in r.modes.iter().zip(&f.modes) {
-                assert_eq!(m.pose(), n.pose());
-                assert!((m.weight - n.weight).abs() < 1e-12, "{m:?} vs {n:?}");
-            }
-        }
-        // Without the links each frame is its own again: the second frame's top mode is the flipped pose, and the
-        // truth is far less likely under it.
-        let alone: Vec<Scored<'_>> = scored
-            .iter()
-            .map(|s| Scored {
-                prior: None,
-                ..s.clone()
-            })
-            .collect();
-        let unfused = calibrated(&alone, &recorded);
-        assert_eq!(unfused[1].modes[0].pose(), flipped);
-        let ones = [1.0; 3];
-        assert!(
-            mean_nll(&scored, &ones, &recorded, NLL_CAP) + 0.1
-                < mean_nll(&alone, &ones, &recorded, NLL_CAP)
-        );
-    }
-}
+#[path = "coverage_tests.rs"]
+mod tests;

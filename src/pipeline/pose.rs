@@ -315,7 +315,12 @@ pub fn estimate_observation(
     let prior_posterior = input.prior.and_then(|p| p.posterior.as_ref());
     let fused_top = match (&posterior, prior_posterior) {
         (Some(p), Some(before)) => {
-            let fused = crate::pose::fusion::fuse(p, before, &model.symmetry);
+            let fused = crate::pose::fusion::fuse(
+                p,
+                before,
+                &model.symmetry,
+                config.posterior.fusion_weight,
+            );
             let top = fused.top().map(|m| m.pose());
             posterior = Some(fused);
             top

@@ -10,6 +10,11 @@
 //! Both densities are absolute, so the prior is as strong as the previous posterior is sharp: a calibrated,
 //! sharp posterior (σθ of a few degrees) keeps a track on its pose through a frame whose small contact prefers
 //! another by a few nats, and a broad one (a small first contact, a large far share) barely moves the next frame.
+//!
+//! The prior is raised to the power κ ([`super::posterior::PosteriorConfig::fusion_weight`]): frames of one press
+//! share the model's and the membrane's errors, so the evidence of the frames before is worth a fraction of as much
+//! independent evidence. Fitted to tracked presses of real meshes, κ = 0.15: fused at full weight the tracks' 50 %
+//! regions held the truth in 40 % of frames held out, at 0.15 in 43 % (docs/uncertainty.md).
 
 use super::posterior::{log_sum_exp, reduced_difference, PosePosterior};
 use crate::objects::Symmetry;
@@ -23,13 +28,15 @@ pub const REINIT_SHARE: f64 = 0.05;
 /// Soft Bubble's membrane.
 pub const REINIT_EXTENT_M: f64 = 0.05;
 
-/// `current` reweighted by `previous` (module docs), heaviest first; `current` itself when either has no modes.
+/// `current` reweighted by `previous` raised to the power `weight` ([`super::posterior::PosteriorConfig::fusion_weight`]:
+/// 1 as the module docs say, 0 not at all), heaviest first; `current` itself when either has no modes.
 pub fn fuse(
     current: &PosePosterior,
     previous: &PosePosterior,
     symmetry: &Symmetry,
+    weight: f64,
 ) -> PosePosterior {
-    if current.modes.is_empty() || previous.modes.is_empty() {
+    if current.modes.is_empty() || previous.modes.is_empty() || weight <= 0.0 {
         return current.clone();
     }
     let flat = REINIT_SHARE.ln() + flat_log_density(current.modes[0].pose(), symmetry);
@@ -40,7 +47,7 @@ pub fn fuse(
         .iter()
         .map(|m| {
             let p = previous.predictive_log_density(m.pose(), &m.spread_cov(), symmetry);
-            log_sum_exp(&[kept + p, flat])
+            weight * log_sum_exp(&[kept + p, flat])
         })
         .collect();
     let best = predicted.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -116,7 +123,7 @@ mod tests {
             noise: None,
             distinct_nats: Vec::new(),
         };
-        let fused = fuse(&current, &previous, &symmetry);
+        let fused = fuse(&current, &previous, &symmetry, 1.0);
         assert_eq!(fused.modes[0].pose(), a);
         // Independent truth: each mode's weight times (1 − ε) N(mᵢ; m₋, Cᵢ + C₋) + ε u, u flat over the 5 cm square
         // and 2π; the flipped mode's prediction is e^-970 of a's, so it keeps the flat share alone.
@@ -160,7 +167,7 @@ mod tests {
             noise: None,
             distinct_nats: Vec::new(),
         };
-        let fused = fuse(&strong, &broad, &symmetry);
+        let fused = fuse(&strong, &broad, &symmetry, 1.0);
         assert_eq!(fused.modes[0].pose(), flipped);
         let predict_broad = |m: Se2| {
             let dt = (m.theta - before.theta + std::f64::consts::PI)
@@ -180,9 +187,46 @@ mod tests {
         assert!((fused.modes[0].weight - wf / (wf + wa)).abs() < 1e-9);
         // Nothing to fuse with: unchanged.
         assert_eq!(
-            fuse(&current, &PosePosterior::default(), &symmetry),
+            fuse(&current, &PosePosterior::default(), &symmetry, 1.0),
             current
         );
+    }
+
+    #[test]
+    fn the_fusion_weight_raises_the_prior_to_its_power() {
+        // Two modes 0.3 rad apart, equally weighted by the current frame; the previous frame sure of the first.
+        let symmetry = Symmetry::default();
+        let (a, b) = (Se2::new(0.0, 0.0, 0.0), Se2::new(0.0, 0.0, 0.3));
+        let current = PosePosterior {
+            modes: vec![mode(0.5, a, 0.001, 0.05), mode(0.5, b, 0.001, 0.05)],
+            contact_px: 100,
+            predicted_contact_px: None,
+            noise: None,
+            distinct_nats: Vec::new(),
+        };
+        let previous = PosePosterior {
+            modes: vec![mode(1.0, a, 0.001, 0.05)],
+            ..current.clone()
+        };
+        // Independent truth: the prior of each mode is (1 − ε) N(Δθ; 0, 2 σθ²) N(0; 0, 2 σ²)² + ε u, raised to κ.
+        let flat = REINIT_SHARE / (REINIT_EXTENT_M * REINIT_EXTENT_M * std::f64::consts::TAU);
+        let prior = |dt: f64| {
+            (1.0 - REINIT_SHARE) * normal(0.0, 2e-6) * normal(0.0, 2e-6) * normal(dt, 0.005) + flat
+        };
+        for kappa in [1.0, 0.5, 0.1] {
+            let fused = fuse(&current, &previous, &symmetry, kappa);
+            let (wa, wb) = (prior(0.0).powf(kappa), prior(0.3).powf(kappa));
+            assert_eq!(fused.modes[0].pose(), a);
+            assert!(
+                (fused.modes[0].weight - wa / (wa + wb)).abs() < 1e-9,
+                "κ = {kappa}: {fused:?}"
+            );
+        }
+        // The weaker the prior's power, the less it moves the frame's own weights.
+        let w = |kappa: f64| fuse(&current, &previous, &symmetry, kappa).modes[0].weight;
+        assert!(w(1.0) > w(0.5) && w(0.5) > w(0.1) && w(0.1) > 0.5);
+        // κ = 0: every frame its own.
+        assert_eq!(fuse(&current, &previous, &symmetry, 0.0), current);
     }
 
     #[test]
@@ -212,7 +256,7 @@ mod tests {
             noise: None,
             distinct_nats: Vec::new(),
         };
-        let fused = fuse(&current, &previous, &symmetry);
+        let fused = fuse(&current, &previous, &symmetry, 1.0);
         let flat = REINIT_SHARE / (REINIT_EXTENT_M * REINIT_EXTENT_M * std::f64::consts::TAU);
         let far = |vm: f64| 0.2 * normal(0.0, vm) * normal(0.0, vm) / std::f64::consts::TAU;
         let core = |dt: f64| 0.8 * normal(0.0, 2e-6) * normal(0.0, 2e-6) * normal(dt, 0.005);

@@ -98,6 +98,18 @@ pub struct PosteriorConfig {
     /// The same for the far component's logit. Absent from a calibration file: 0.
     #[serde(default)]
     pub far_misfit: f64,
+    /// κ, how much a track's previous frame counts as the prior of the next ([`super::fusion`]), 0–1: the earlier
+    /// frames' predictive density is raised to this power (a power prior). Neighbouring frames of one press share
+    /// the model's and the membrane's errors, so their evidence is worth less than independent frames' would be;
+    /// 1 treats it as independent, 0 leaves every frame its own. Absent from a calibration file: 1 (how tracks were
+    /// fused before it existed).
+    #[serde(default = "independent_frames")]
+    pub fusion_weight: f64,
+}
+
+/// [`PosteriorConfig::fusion_weight`] of a calibration written before it existed.
+fn independent_frames() -> f64 {
+    1.0
 }
 
 /// [`PosteriorConfig::frame_noise`] of a calibration written before it existed.
@@ -112,7 +124,8 @@ impl Default for PosteriorConfig {
     /// fusion of each carried frame replayed; since session 36), so that one calibration serves single frames and
     /// tracks (docs/uncertainty.md, where the same fit held out by object is scored). The fit chose the predicted
     /// contact and the evidence as recorded; the tails also follow the rival explanations (within 50 nats) and the
-    /// contact's misfit.
+    /// contact's misfit. The fusion weight (since session 37) was fitted to the tracks with the rest as it was: a
+    /// frame's predecessors count for 0.15 of independent evidence.
     fn default() -> Self {
         Self {
             temperature: 1.69,
@@ -146,6 +159,7 @@ impl Default for PosteriorConfig {
             far_rivals: 2.33,
             tail_misfit: 6.43,
             far_misfit: 4.84,
+            fusion_weight: 0.15,
         }
     }
 }
@@ -340,6 +354,12 @@ impl PosteriorConfig {
                     show(max)
                 )));
             }
+        }
+        if !(0.0..=1.0).contains(&self.fusion_weight) {
+            return Err(super::PoseError::Config(format!(
+                "posterior: fusion_weight must be between 0 and 1 (got {})",
+                self.fusion_weight
+            )));
         }
         if self.max_modes == 0 || self.min_weight >= 1.0 {
             return Err(super::PoseError::Config(

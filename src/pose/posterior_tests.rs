@@ -188,6 +188,19 @@ fn a_calibration_from_before_the_frames_noise_keeps_the_evidence_as_recorded() {
     assert!(!old.frame_noise && old.temperature == 2.54);
     let asked: PosteriorConfig = serde_json::from_str(r#"{"frame_noise": true}"#).unwrap();
     assert!(asked.frame_noise);
+    // Tracks were fused at full weight before `fusion_weight` existed; out of 0–1 it is refused.
+    assert_eq!(old.fusion_weight, 1.0);
+    for bad in [-0.1, 1.5] {
+        let c = PosteriorConfig {
+            fusion_weight: bad,
+            ..PosteriorConfig::default()
+        };
+        assert!(c
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("fusion_weight"));
+    }
     let bundled = PosteriorConfig::default();
     let back: PosteriorConfig =
         serde_json::from_str(&serde_json::to_string(&bundled).unwrap()).unwrap();

@@ -39,9 +39,9 @@ pub struct PosteriorArgs {
     /// Recalibrate the recorded posteriors with this calibration (JSON, as --fit writes) before scoring.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
-    /// Fit the calibration (temperatures, floors and heavy tails, by the mean negative log density of the truth) to
-    /// the chosen rows of these records, print their coverage under it, and write it here (JSON) for
-    /// `--posterior FILE`.
+    /// Fit the calibration (temperatures, floors and heavy tails, and with --tracks how much a frame's predecessors
+    /// count; by the mean negative log density of the truth) to the chosen rows of these records, print their
+    /// coverage under it, and write it here (JSON) for `--posterior FILE`.
     #[arg(long, value_name = "FILE")]
     pub fit: Option<PathBuf>,
     /// Draw the reliability diagram and sharpness (per contact-size bin, of the first chosen rows) into this folder:
