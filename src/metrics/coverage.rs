@@ -334,7 +334,7 @@ fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
     // Each contact-size bin counts alike (a pair weighs 1 / its bin's pairs): the posterior is to be calibrated in
     // every bin, and small contacts, the hardest, are the fewest.
     let weights = bin_weights(scored);
-    let objective = |x: &[f64]| mean_nll(scored, &weights, &decode(x, base), NLL_CAP);
+    let objective = |x: &[f64]| mean_nll(scored, &weights, &decode(x, base, fusion), NLL_CAP);
     // From the given calibration and from two others (sharp / broad), each refined from its optimum once more.
     let mut starts = vec![x0.clone()];
     for (ln_tau, ln_floor) in [(0.0, -9.0), (3.0, -7.0)] {
@@ -352,9 +352,9 @@ fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
     if base.frame_noise {
         step.push(1.0);
     }
-    // The fusion weight only where track frames are fused.
+    // The fusion weight only where track frames are fused; its first step points into 0–1.
     if fusion {
-        step.push(0.3);
+        step.push(if base.fusion_weight > 0.7 { -0.3 } else { 0.3 });
     }
     let mut best: Option<(Vec<f64>, f64)> = None;
     for x in starts {
@@ -372,7 +372,7 @@ fn fit_one(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
             coverage: None,
         };
     };
-    let config = decode(&x, base);
+    let config = decode(&x, base, fusion);
     Fit {
         coverage: coverage_with(scored, Some(&config), 1000),
         config,
@@ -415,21 +415,27 @@ fn encode(c: &PosteriorConfig, fusion: bool) -> Vec<f64> {
     x
 }
 
-/// The inverse of [`encode`] onto `base`, each setting clamped to a plausible range (the fit cannot wander off to
-/// a degenerate optimum: a zero-width core on a handful of exact pairs).
-fn decode(x: &[f64], base: &PosteriorConfig) -> PosteriorConfig {
+/// The inverse of [`encode`] (with the same `fusion`) onto `base`, each setting clamped to a plausible range (the fit
+/// cannot wander off to a degenerate optimum: a zero-width core on a handful of exact pairs).
+fn decode(x: &[f64], base: &PosteriorConfig, fusion: bool) -> PosteriorConfig {
     let exp = |v: f64, lo: f64, hi: f64| v.clamp(lo.ln(), hi.ln()).exp();
-    // Past the 20 settings every fit has: the noise floor (where the frames' noise is on), then the fusion weight.
+    // Past the 20 settings every fit has, as `encode` lays them out: the noise floor where the frames' noise is on,
+    // then the fusion weight where `fusion`.
     let mut extra = x.get(20..).unwrap_or_default().iter();
-    let noise_floor_m = match base.frame_noise {
-        true => extra
+    let noise_floor_m = if base.frame_noise {
+        extra
             .next()
-            .map_or(base.noise_floor_m, |&v| exp(v, 1e-5, 0.005)),
-        false => base.noise_floor_m,
+            .map_or(base.noise_floor_m, |&v| exp(v, 1e-5, 0.005))
+    } else {
+        base.noise_floor_m
     };
-    let fusion_weight = extra
-        .next()
-        .map_or(base.fusion_weight, |&v| v.clamp(0.0, 1.0));
+    let fusion_weight = if fusion {
+        extra
+            .next()
+            .map_or(base.fusion_weight, |&v| v.clamp(0.0, 1.0))
+    } else {
+        base.fusion_weight
+    };
     PosteriorConfig {
         temperature: exp(x[0], 0.05, 1e5),
         covariance_temperature: exp(x[1], 0.05, 1e5),

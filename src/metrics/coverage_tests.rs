@@ -282,7 +282,12 @@ fn the_fit_discounts_a_track_whose_frames_repeat_each_other() {
                 prior: *prior,
             })
             .collect();
-        fit_posterior(&scored, &PosteriorConfig::untempered()).config
+        // From full weight, so that a low κ is the fit's doing.
+        let base = PosteriorConfig {
+            fusion_weight: 1.0,
+            ..PosteriorConfig::untempered()
+        };
+        fit_posterior(&scored, &base).config
     };
     let repeated = fitted(false);
     let independent = fitted(true);

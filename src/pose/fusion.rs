@@ -11,10 +11,12 @@
 //! sharp posterior (σθ of a few degrees) keeps a track on its pose through a frame whose small contact prefers
 //! another by a few nats, and a broad one (a small first contact, a large far share) barely moves the next frame.
 //!
-//! The prior is raised to the power κ ([`super::posterior::PosteriorConfig::fusion_weight`]): frames of one press
-//! share the model's and the membrane's errors, so the evidence of the frames before is worth a fraction of as much
-//! independent evidence. Fitted to tracked presses of real meshes, κ = 0.15: fused at full weight the tracks' 50 %
-//! regions held the truth in 40 % of frames held out, at 0.15 in 43 % (docs/uncertainty.md).
+//! Each mode's prediction (with the flat share) is raised to the power κ
+//! ([`super::posterior::PosteriorConfig::fusion_weight`]) before it reweighs the mode: frames of one press share the
+//! model's and the membrane's errors, so the evidence of the frames before is worth a fraction of as much independent
+//! evidence (the frame before counts κ, the one before that κ², as the fusion passes on). Fitted to tracked presses of
+//! real meshes, κ = 0.15: fused at full weight the tracks' 50 % regions held the truth in 40 % of frames held out, at
+//! 0.15 in 43–44 % (docs/uncertainty.md).
 
 use super::posterior::{log_sum_exp, reduced_difference, PosePosterior};
 use crate::objects::Symmetry;
@@ -28,15 +30,16 @@ pub const REINIT_SHARE: f64 = 0.05;
 /// Soft Bubble's membrane.
 pub const REINIT_EXTENT_M: f64 = 0.05;
 
-/// `current` reweighted by `previous` raised to the power `weight` ([`super::posterior::PosteriorConfig::fusion_weight`]:
-/// 1 as the module docs say, 0 not at all), heaviest first; `current` itself when either has no modes.
+/// `current` reweighted by `previous`'s prediction raised to the power `kappa`
+/// ([`super::posterior::PosteriorConfig::fusion_weight`]: 1 as the module docs say, 0 not at all), heaviest first;
+/// `current` itself when either has no modes.
 pub fn fuse(
     current: &PosePosterior,
     previous: &PosePosterior,
     symmetry: &Symmetry,
-    weight: f64,
+    kappa: f64,
 ) -> PosePosterior {
-    if current.modes.is_empty() || previous.modes.is_empty() || weight <= 0.0 {
+    if current.modes.is_empty() || previous.modes.is_empty() || kappa <= 0.0 {
         return current.clone();
     }
     let flat = REINIT_SHARE.ln() + flat_log_density(current.modes[0].pose(), symmetry);
@@ -47,7 +50,7 @@ pub fn fuse(
         .iter()
         .map(|m| {
             let p = previous.predictive_log_density(m.pose(), &m.spread_cov(), symmetry);
-            weight * log_sum_exp(&[kept + p, flat])
+            kappa * log_sum_exp(&[kept + p, flat])
         })
         .collect();
     let best = predicted.iter().copied().fold(f64::NEG_INFINITY, f64::max);

@@ -98,11 +98,11 @@ pub struct PosteriorConfig {
     /// The same for the far component's logit. Absent from a calibration file: 0.
     #[serde(default)]
     pub far_misfit: f64,
-    /// κ, how much a track's previous frame counts as the prior of the next ([`super::fusion`]), 0–1: the earlier
-    /// frames' predictive density is raised to this power (a power prior). Neighbouring frames of one press share
-    /// the model's and the membrane's errors, so their evidence is worth less than independent frames' would be;
-    /// 1 treats it as independent, 0 leaves every frame its own. Absent from a calibration file: 1 (how tracks were
-    /// fused before it existed).
+    /// κ, how much a track's previous frame counts as the prior of the next ([`super::fusion`]), 0–1: the previous
+    /// posterior's prediction of each mode is raised to this power (a power prior; the frame two back then counts
+    /// κ², as the fusion passes on). Neighbouring frames of one press share the model's and the membrane's errors,
+    /// so their evidence is worth less than independent frames' would be; 1 treats it as independent, 0 leaves
+    /// every frame its own. Absent from a calibration file: 1 (how tracks were fused before it existed).
     #[serde(default = "independent_frames")]
     pub fusion_weight: f64,
 }
@@ -124,8 +124,8 @@ impl Default for PosteriorConfig {
     /// fusion of each carried frame replayed; since session 36), so that one calibration serves single frames and
     /// tracks (docs/uncertainty.md, where the same fit held out by object is scored). The fit chose the predicted
     /// contact and the evidence as recorded; the tails also follow the rival explanations (within 50 nats) and the
-    /// contact's misfit. The fusion weight (since session 37) was fitted to the tracks with the rest as it was: a
-    /// frame's predecessors count for 0.15 of independent evidence.
+    /// contact's misfit. The fusion weight (since session 37) was fitted to the tracks with the rest as it was: the
+    /// previous frame's prediction counts at the power 0.15.
     fn default() -> Self {
         Self {
             temperature: 1.69,

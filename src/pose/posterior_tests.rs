@@ -190,16 +190,19 @@ fn a_calibration_from_before_the_frames_noise_keeps_the_evidence_as_recorded() {
     assert!(asked.frame_noise);
     // Tracks were fused at full weight before `fusion_weight` existed; out of 0–1 it is refused.
     assert_eq!(old.fusion_weight, 1.0);
-    for bad in [-0.1, 1.5] {
-        let c = PosteriorConfig {
-            fusion_weight: bad,
-            ..PosteriorConfig::default()
-        };
-        assert!(c
+    let with = |kappa: f64| PosteriorConfig {
+        fusion_weight: kappa,
+        ..PosteriorConfig::default()
+    };
+    for bad in [-0.1, 1.5, f64::NAN] {
+        assert!(with(bad)
             .validate()
             .unwrap_err()
             .to_string()
             .contains("fusion_weight"));
+    }
+    for good in [0.0, 1.0] {
+        assert!(with(good).validate().is_ok());
     }
     let bundled = PosteriorConfig::default();
     let back: PosteriorConfig =
