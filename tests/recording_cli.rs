@@ -333,6 +333,17 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
         stderr.contains("other settings (press: \"auto\" -> \"0.005\")"),
         "{stderr}"
     );
+    // So is another posterior calibration, named setting by setting against the bundled one it was tracked with.
+    std::fs::write(dir.path().join("kappa.json"), r#"{"fusion_weight": 0.5}"#).unwrap();
+    let mut other = track.to_vec();
+    other.extend(["--posterior", "kappa.json"]);
+    let refused = output(&other);
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        stderr.contains("pose.posterior.fusion_weight: 0.15 -> 0.5") && stderr.lines().count() == 1,
+        "{stderr}"
+    );
     // Poses given later rescore the finished track without tracking again: the same object 1 mm further along x.
     let mut table = String::from("frame,x,y,theta\n");
     for k in 0..presses.len() {

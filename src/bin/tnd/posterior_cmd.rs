@@ -136,7 +136,12 @@ pub fn run(a: PosteriorArgs) -> Result<()> {
         draw_reliability(dir.path(), rows[0].0, &calibration, &drawn)?;
     }
     if let (Some(f), Some(path)) = (&fitted, &a.fit) {
-        write_fit(f, path, all.len())?;
+        let track_frames = rows
+            .iter()
+            .filter(|(name, _)| *name == TRACK_ROWS)
+            .map(|(_, r)| r.len())
+            .sum();
+        write_fit(f, path, all.len(), track_frames, a.json)?;
     }
     Ok(())
 }
@@ -333,10 +338,44 @@ fn draw_reliability(
     Ok(())
 }
 
-/// Write the fitted calibration to `path` (JSON for `--posterior FILE`) and print it with its fit over `pairs` pairs.
-fn write_fit(f: &Fit, path: &Path, pairs: usize) -> Result<()> {
+/// Write the fitted calibration to `path` (JSON for `--posterior FILE`) and print it with its fit over `pairs` pairs
+/// (`track_frames` of them tracked frames); unless `json_only`, say in a line what was fitted.
+fn write_fit(
+    f: &Fit,
+    path: &Path,
+    pairs: usize,
+    track_frames: usize,
+    json_only: bool,
+) -> Result<()> {
     tactile_derender::io::write_atomic(path, serde_json::to_string_pretty(&f.config)?.as_bytes())
         .with_context(|| format!("{}: cannot write", path.display()))?;
+    if !json_only {
+        let c = &f.config;
+        let bundled = PosteriorConfig::default().fusion_weight;
+        let fusion = if track_frames > 0 {
+            format!(
+                "fusion weight {:.2} (fitted to {track_frames} tracked frames; the bundled calibration's {bundled})",
+                c.fusion_weight
+            )
+        } else {
+            format!(
+                "fusion weight {:.2} (kept: no tracked frames to fit it to)",
+                c.fusion_weight
+            )
+        };
+        eprintln!(
+            "\nWrote {}: temperature {:.2}, covariance temperature {:.2}, floors {:.3} mm and {:.2} deg at {} contact \
+             px, {fusion}; its objective, the mean negative log density of the truth with each contact-size bin \
+             weighing alike, {:.2} over {pairs} pairs (few pairs flatter it: score the file on others with --config)",
+            path.display(),
+            c.temperature,
+            c.covariance_temperature,
+            c.floor_position_m * 1e3,
+            c.floor_theta_rad.to_degrees(),
+            c.floor_contact_px,
+            f.mean_nll
+        );
+    }
     println!(
         "{}",
         json!({"fit": crate::path_json(path), "config": f.config, "mean_nll": f.mean_nll, "pairs": pairs})

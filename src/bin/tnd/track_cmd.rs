@@ -167,7 +167,15 @@ fn check_same(out: &Path, earlier: &Value, key: &str, now: &Value, what: &str) -
     if then == now {
         return Ok(());
     }
-    let differing = tactile_derender::io::settings::setting_differences(now, then);
+    let mut differing = tactile_derender::io::settings::setting_differences(now, then);
+    // What the earlier run set and this one does not (a build that wrote other settings).
+    if let (Some(t), Some(n)) = (then.as_object(), now.as_object()) {
+        differing.extend(
+            t.iter()
+                .filter(|(k, _)| !n.contains_key(*k))
+                .map(|(k, v)| format!("{k}: {v} -> not set")),
+        );
+    }
     bail!(
         "{}: holds a track of {what} ({}); choose a new --out, or the same settings to resume",
         out.display(),
@@ -356,7 +364,27 @@ pub fn run(a: TrackArgs) -> Result<()> {
     // Refuse another run's folder before any long work; nothing is written until the track can start.
     let earlier = earlier_run(&a.out)?;
     if let Some(e) = &earlier {
-        check_same(&a.out, e, "settings", &settings, "other settings")?;
+        // Pose settings are stored only when not the defaults; compared as the defaults where absent, so that a
+        // difference is named setting by setting (`pose.posterior.fusion_weight: 1.0 -> 0.15`).
+        let with_pose = |v: &Value| {
+            let mut v = v.clone();
+            if let Some(map) = v.as_object_mut() {
+                map.entry("pose")
+                    .or_insert_with(|| json!(PoseConfig::default()));
+            }
+            v
+        };
+        let mut e = e.clone();
+        if let Some(then) = e.get_mut("settings") {
+            *then = with_pose(then);
+        }
+        check_same(
+            &a.out,
+            &e,
+            "settings",
+            &with_pose(&settings),
+            "other settings",
+        )?;
     }
     let opened = open(&a.input, sim_config)?;
     let (processed, recorded, object) = (&opened.processed, &opened.recorded, &opened.object);
