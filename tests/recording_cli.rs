@@ -323,23 +323,22 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
         std::fs::read_to_string(dir.path().join("track/track.csv")).unwrap(),
         csv
     );
-    // Other settings into the same folder are refused, naming them.
-    let mut other = track.to_vec();
-    other.extend(["--press", "0.005"]);
-    let refused = output(&other);
-    assert!(!refused.status.success());
-    let stderr = String::from_utf8_lossy(&refused.stderr);
+    // Other settings into the same folder are refused in one line, naming them; so is another posterior
+    // calibration, setting by setting against the bundled one it was tracked with.
+    let refused_with = |extra: &[&str]| {
+        let mut other = track.to_vec();
+        other.extend(extra);
+        let refused = output(&other);
+        assert!(!refused.status.success());
+        String::from_utf8_lossy(&refused.stderr).into_owned()
+    };
+    let stderr = refused_with(&["--press", "0.005"]);
     assert!(
         stderr.contains("other settings (press: \"auto\" -> \"0.005\")"),
         "{stderr}"
     );
-    // So is another posterior calibration, named setting by setting against the bundled one it was tracked with.
     std::fs::write(dir.path().join("kappa.json"), r#"{"fusion_weight": 0.5}"#).unwrap();
-    let mut other = track.to_vec();
-    other.extend(["--posterior", "kappa.json"]);
-    let refused = output(&other);
-    assert!(!refused.status.success());
-    let stderr = String::from_utf8_lossy(&refused.stderr);
+    let stderr = refused_with(&["--posterior", "kappa.json"]);
     assert!(
         stderr.contains("pose.posterior.fusion_weight: 0.15 -> 0.5") && stderr.lines().count() == 1,
         "{stderr}"

@@ -5,14 +5,19 @@ use crate::pose::posterior::ModeEvidence;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
-/// One posterior per truth whose evidence says σ = `sp` m and `st` rad about the origin (raw: τ = 1, no
-/// floors or tails), with its truth.
-fn raw_posteriors(truths: &[Se2], sp: f64, st: f64) -> Vec<(PosePosterior, Se2)> {
-    let hessian = [
+/// The Hessian of evidence that says σ = `sp` m in x and y and `st` rad in θ, independently.
+fn diagonal_hessian(sp: f64, st: f64) -> [[f64; 3]; 3] {
+    [
         [1.0 / (sp * sp), 0.0, 0.0],
         [0.0, 1.0 / (sp * sp), 0.0],
         [0.0, 0.0, 1.0 / (st * st)],
-    ];
+    ]
+}
+
+/// One posterior per truth whose evidence says σ = `sp` m and `st` rad about the origin (raw: τ = 1, no
+/// floors or tails), with its truth.
+fn raw_posteriors(truths: &[Se2], sp: f64, st: f64) -> Vec<(PosePosterior, Se2)> {
+    let hessian = diagonal_hessian(sp, st);
     let evidence = ModeEvidence {
         pose: Se2::default(),
         nats: 0.0,
@@ -221,11 +226,7 @@ fn two_frame_tracks(independent: bool, seed: u64) -> Vec<(PosePosterior, Se2, Op
     let spread = Normal::new(0.0, (2.0 * mu).sqrt()).unwrap();
     let (a, b) = (Se2::new(0.0, 0.0, 0.0), Se2::new(0.0, 0.0, 1.0));
     let (sp, st) = (2e-4, 0.01);
-    let hessian = [
-        [1.0 / (sp * sp), 0.0, 0.0],
-        [0.0, 1.0 / (sp * sp), 0.0],
-        [0.0, 0.0, 1.0 / (st * st)],
-    ];
+    let hessian = diagonal_hessian(sp, st);
     let frame = |log_odds: f64| {
         let evidence = [
             ModeEvidence {

@@ -99,6 +99,17 @@ mod tests {
         }
     }
 
+    /// A frame's posterior of `modes` at a contact of `contact_px` pixels (no prediction, noise or rivals kept).
+    fn posterior(modes: Vec<PosteriorMode>, contact_px: usize) -> PosePosterior {
+        PosePosterior {
+            modes,
+            contact_px,
+            predicted_contact_px: None,
+            noise: None,
+            distinct_nats: Vec::new(),
+        }
+    }
+
     /// The density of N(0, var) at d: the independent truth of the tests below (the fusion's densities come from the
     /// mixture code).
     fn normal(d: f64, var: f64) -> f64 {
@@ -111,21 +122,12 @@ mod tests {
         let flipped = Se2::new(0.0, 0.0, 0.3 + std::f64::consts::PI);
         let symmetry = Symmetry::default();
         // The current frame slightly prefers the flipped pose; the previous one was sure of `a`.
-        let current = PosePosterior {
-            modes: vec![mode(0.55, flipped, 0.001, 0.05), mode(0.45, a, 0.001, 0.05)],
-            contact_px: 100,
-            predicted_contact_px: None,
-            noise: None,
-            distinct_nats: Vec::new(),
-        };
+        let current = posterior(
+            vec![mode(0.55, flipped, 0.001, 0.05), mode(0.45, a, 0.001, 0.05)],
+            100,
+        );
         let before = Se2::new(0.0005, 0.0, 0.32);
-        let previous = PosePosterior {
-            modes: vec![mode(1.0, before, 0.001, 0.05)],
-            contact_px: 100,
-            predicted_contact_px: None,
-            noise: None,
-            distinct_nats: Vec::new(),
-        };
+        let previous = posterior(vec![mode(1.0, before, 0.001, 0.05)], 100);
         let fused = fuse(&current, &previous, &symmetry, 1.0);
         assert_eq!(fused.modes[0].pose(), a);
         // Independent truth: each mode's weight times (1 − ε) N(mᵢ; m₋, Cᵢ + C₋) + ε u, u flat over the 5 cm square
@@ -153,23 +155,14 @@ mod tests {
         assert_eq!(fused.modes[0].cov, current.modes[1].cov);
         // A broad previous posterior (a first frame of a small contact) is a weak prior: evidence of 10⁵ to 1 wins.
         let (s_m, s_rad) = (0.005, 0.5);
-        let broad = PosePosterior {
-            modes: vec![mode(1.0, before, s_m, s_rad)],
-            contact_px: 30,
-            predicted_contact_px: None,
-            noise: None,
-            distinct_nats: Vec::new(),
-        };
-        let strong = PosePosterior {
-            modes: vec![
+        let broad = posterior(vec![mode(1.0, before, s_m, s_rad)], 30);
+        let strong = posterior(
+            vec![
                 mode(1.0 - 1e-5, flipped, 0.001, 0.05),
                 mode(1e-5, a, 0.001, 0.05),
             ],
-            contact_px: 100,
-            predicted_contact_px: None,
-            noise: None,
-            distinct_nats: Vec::new(),
-        };
+            100,
+        );
         let fused = fuse(&strong, &broad, &symmetry, 1.0);
         assert_eq!(fused.modes[0].pose(), flipped);
         let predict_broad = |m: Se2| {
@@ -200,17 +193,11 @@ mod tests {
         // Two modes 0.3 rad apart, equally weighted by the current frame; the previous frame sure of the first.
         let symmetry = Symmetry::default();
         let (a, b) = (Se2::new(0.0, 0.0, 0.0), Se2::new(0.0, 0.0, 0.3));
-        let current = PosePosterior {
-            modes: vec![mode(0.5, a, 0.001, 0.05), mode(0.5, b, 0.001, 0.05)],
-            contact_px: 100,
-            predicted_contact_px: None,
-            noise: None,
-            distinct_nats: Vec::new(),
-        };
-        let previous = PosePosterior {
-            modes: vec![mode(1.0, a, 0.001, 0.05)],
-            ..current.clone()
-        };
+        let current = posterior(
+            vec![mode(0.5, a, 0.001, 0.05), mode(0.5, b, 0.001, 0.05)],
+            100,
+        );
+        let previous = posterior(vec![mode(1.0, a, 0.001, 0.05)], 100);
         // Independent truth: the prior of each mode is (1 − ε) N(Δθ; 0, 2 σθ²) N(0; 0, 2 σ²)² + ε u, raised to κ.
         let flat = REINIT_SHARE / (REINIT_EXTENT_M * REINIT_EXTENT_M * std::f64::consts::TAU);
         let prior = |dt: f64| {
@@ -242,23 +229,14 @@ mod tests {
         let mut previous = mode(1.0, before, 0.001, 0.05);
         previous.tails.far = 0.2;
         previous.tails.far_position_m = 0.004;
-        let previous = PosePosterior {
-            modes: vec![previous],
-            contact_px: 100,
-            predicted_contact_px: None,
-            noise: None,
-            distinct_nats: Vec::new(),
-        };
-        let current = PosePosterior {
-            modes: vec![
+        let previous = posterior(vec![previous], 100);
+        let current = posterior(
+            vec![
                 mode(0.5, before, 0.001, 0.05),
                 mode(0.5, turned, 0.001, 0.05),
             ],
-            contact_px: 100,
-            predicted_contact_px: None,
-            noise: None,
-            distinct_nats: Vec::new(),
-        };
+            100,
+        );
         let fused = fuse(&current, &previous, &symmetry, 1.0);
         let flat = REINIT_SHARE / (REINIT_EXTENT_M * REINIT_EXTENT_M * std::f64::consts::TAU);
         let far = |vm: f64| 0.2 * normal(0.0, vm) * normal(0.0, vm) / std::f64::consts::TAU;
