@@ -305,6 +305,12 @@ fn nan_frames_go_through_frames_import_pose_and_track_from_the_cli() {
     for r in [&a, &b] {
         assert!(r["pairs"].as_u64().unwrap() >= 3, "{r}");
     }
+    // Their frames were resampled from the camera's 224 x 171: `--model auto` de-renders them with the recording
+    // model.
+    for ds in ["ds_nan", "ds_zero"] {
+        let ds = tactile_derender::dataset::Dataset::open(d.join(ds)).unwrap();
+        assert!(ds.manifest().frames_resampled());
+    }
     // README's single-frame step on the exported frames, as written (the sensor calibrated from the reference).
     let frame = format!("frames/frame_{peak:06}.npy");
     let pose_out = ok(&[
@@ -326,6 +332,13 @@ fn nan_frames_go_through_frames_import_pose_and_track_from_the_cli() {
     ]);
     let err = pose_out["estimate_error"]["position_mm"].as_f64();
     assert!(err.is_some_and(f64::is_finite), "{pose_out}");
+    // Native frames are resampled to the model's size: `--model auto` (the default) takes the recording model.
+    assert!(
+        pose_out["generator"]
+            .as_str()
+            .is_some_and(|g| g.starts_with("model recording")),
+        "{pose_out}"
+    );
     assert!(
         pose_out["calibration"].is_object(),
         "calibrated from the reference"

@@ -133,6 +133,25 @@ pub struct DatasetManifest {
 }
 
 impl DatasetManifest {
+    /// Whether the pairs' inputs were brought to the model resolution by area resampling from a camera's larger
+    /// frame, as a recorded frame is: imported from frames larger than the model's, or generated through a depth
+    /// camera ([`super::camera_pass`]). Such inputs are quieter than model-resolution pairs, and `--model auto`
+    /// picks the model matched to them ([`crate::model::checkpoint::matched_model`]).
+    pub fn frames_resampled(&self) -> bool {
+        let imported = self
+            .import
+            .as_ref()
+            .is_some_and(|i| i.source_resolution.iter().any(|r| *r != self.resolution));
+        let through_camera = self.generation.as_ref().is_some_and(|g| {
+            g.native_frames
+                || !self.sim.depth_camera.is_ideal()
+                || g.sensor_variation
+                    .as_ref()
+                    .is_some_and(|v| v.camera_artefacts.is_some())
+        });
+        imported || through_camera
+    }
+
     /// The array table written into every manifest.
     pub fn array_table() -> BTreeMap<String, String> {
         ARRAYS

@@ -48,21 +48,55 @@ pub const BUNDLED_SMALL_MODEL: &[u8] = include_bytes!("../../assets/models/small
 /// The name that selects [`BUNDLED_SMALL_MODEL`] (`--model small`).
 pub const BUNDLED_SMALL_MODEL_NAME: &str = "small";
 
+/// The bundled recording model (`assets/models/recording.safetensors`, 5.4 MB in f16): the default fine-tuned on
+/// pairs rendered at a depth camera's native resolution and brought to the model's by the import's crop and area
+/// resampling, the way every recorded frame reaches the model. Such imprints are several times quieter than
+/// model-resolution pairs, and the default, trained on the latter, de-renders them less well
+/// (`assets/models/README.md`).
+pub const BUNDLED_RECORDING_MODEL: &[u8] =
+    include_bytes!("../../assets/models/recording.safetensors");
+
+/// The name that selects [`BUNDLED_RECORDING_MODEL`] (`--model recording`).
+pub const BUNDLED_RECORDING_MODEL_NAME: &str = "recording";
+
 /// The bundled models by name: `(name, bytes)`.
-pub const BUNDLED_MODELS: [(&str, &[u8]); 2] = [
+pub const BUNDLED_MODELS: [(&str, &[u8]); 3] = [
     (BUNDLED_MODEL_NAME, BUNDLED_MODEL),
     (BUNDLED_SMALL_MODEL_NAME, BUNDLED_SMALL_MODEL),
+    (BUNDLED_RECORDING_MODEL_NAME, BUNDLED_RECORDING_MODEL),
 ];
 
-/// The bundled model that `path` names ([`BUNDLED_MODELS`]): a bare name such as `small` that is not also an
-/// existing file (a file of that name wins).
+/// The name that picks the bundled model matched to how the input's frames reached the model resolution (the
+/// commands' default, [`matched_model`]); where nothing decides it, it is the default model.
+pub const AUTO_MODEL_NAME: &str = "auto";
+
+/// `model` with [`AUTO_MODEL_NAME`] resolved for an input whose frames were (`resampled`) or were not brought to
+/// the model resolution by area resampling from a camera's larger frame: the bundled recording model for such
+/// frames (recordings, their exported frames, imported datasets, pairs generated through a depth camera), the
+/// bundled default for frames made or given at the model resolution. Any other name or path is returned as it is,
+/// and so is `auto` where a file of that name exists.
+pub fn matched_model(model: &Path, resampled: bool) -> PathBuf {
+    if model.to_str() != Some(AUTO_MODEL_NAME) || model.exists() {
+        return model.to_path_buf();
+    }
+    PathBuf::from(if resampled {
+        BUNDLED_RECORDING_MODEL_NAME
+    } else {
+        BUNDLED_MODEL_NAME
+    })
+}
+
+/// The bundled model that `path` names ([`BUNDLED_MODELS`]; `auto` where no input decides is the default): a bare
+/// name such as `small` that is not also an existing file (a file of that name wins).
 pub fn bundled_name(path: &Path) -> Option<(&'static str, &'static [u8])> {
-    let name = path.to_str()?;
-    BUNDLED_MODELS
-        .iter()
-        .find(|(n, _)| *n == name)
-        .filter(|_| !path.exists())
-        .copied()
+    if path.exists() {
+        return None;
+    }
+    let name = match path.to_str()? {
+        AUTO_MODEL_NAME => BUNDLED_MODEL_NAME,
+        name => name,
+    };
+    BUNDLED_MODELS.iter().find(|(n, _)| *n == name).copied()
 }
 
 fn parse_bundled(name: &str, bytes: &[u8]) -> Result<(TensorFile, UNet2DConfig), ModelError> {
@@ -173,8 +207,8 @@ pub fn weights_file(path: &Path) -> std::path::PathBuf {
     }
 }
 
-/// Locate weights and config for `path` (file or diffusers directory) and parse the config. The names `default` and
-/// `small` (when no such file exists) are the bundled models ([`BUNDLED_MODELS`]).
+/// Locate weights and config for `path` (file or diffusers directory) and parse the config. The names `default`,
+/// `small` and `recording` (when no such file exists) are the bundled models ([`BUNDLED_MODELS`]).
 pub fn locate(path: &Path) -> Result<(TensorFile, UNet2DConfig), ModelError> {
     if let Some((name, bytes)) = bundled_name(path) {
         return parse_bundled(name, bytes);

@@ -102,6 +102,16 @@ pub fn resample_depth(image: &Image, width: usize, height: usize) -> Image {
     out
 }
 
+/// Whether a `width` x `height` frame of `camera` reaches the model resolution by area resampling (a native or
+/// cropped frame), which averages several camera pixels into one model pixel: such inputs are quieter than frames
+/// at the model resolution (`--model auto` picks its model by this).
+pub fn is_resampled(camera: &CameraConfig, width: usize, height: usize) -> bool {
+    matches!(
+        classify(camera, width, height),
+        Ok(InputSize::Native | InputSize::Cropped)
+    )
+}
+
 /// Bring a depth frame to the model resolution: crop if native, resample if not at the model size. Pixels without a
 /// value come out as 0 (missing) whatever way the frame marked them.
 pub fn to_model(camera: &CameraConfig, image: &Image) -> Result<Image, crate::error::InvalidInput> {
@@ -131,6 +141,20 @@ pub fn to_model(camera: &CameraConfig, image: &Image) -> Result<Image, crate::er
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    #[test]
+    fn native_and_cropped_frames_are_resampled_model_sized_ones_not() {
+        let camera = CameraConfig::default();
+        let (w, h) = camera.resolution;
+        assert!(!is_resampled(&camera, w, h));
+        assert!(is_resampled(&camera, 224, 171));
+        let (r, c) = (camera.crop_rows, camera.crop_cols);
+        assert!(is_resampled(&camera, c.1 - c.0, r.1 - r.0));
+        assert!(
+            !is_resampled(&camera, 13, 7),
+            "a size no stage has is not resampled"
+        );
+    }
 
     #[test]
     fn block_average_and_coverage_rule() {

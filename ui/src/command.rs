@@ -59,7 +59,7 @@ pub enum Command {
     PlacePairScene,
     /// Replace the de-rendering settings (sampler, samples, seed, input).
     SetDerender(DerenderSettings),
-    /// Choose the model checkpoint (`None`: the bundled default).
+    /// Choose the model checkpoint (`None`: the bundled model matched to the input).
     SetModel(ModelSettings),
     /// Sample the current input in the background.
     RunDerender,

@@ -20,21 +20,38 @@ use crate::worker::{JobKind, WorkerMsg};
 /// The bundled model, relative to the working directory (the repository root when run with `cargo run`).
 pub const DEFAULT_MODEL: &str = "assets/models/default.safetensors";
 
-/// The default model: `assets/models/default.safetensors` where it exists (working directory first, then the source
-/// checkout, so a freshly trained file is picked up without a rebuild), otherwise the copy compiled into the binary
-/// (the name `default`), so the workbench works from any directory.
-pub fn default_model_path() -> PathBuf {
-    let here = PathBuf::from(DEFAULT_MODEL);
+/// The bundled model `name` (`default`, `recording`): `assets/models/<name>.safetensors` where it exists (working
+/// directory first, then the source checkout, so a freshly trained file is picked up without a rebuild), otherwise
+/// the copy compiled into the binary (the name itself), so the workbench works from any directory.
+pub fn bundled_model_path(name: &str) -> PathBuf {
+    let file = format!("assets/models/{name}.safetensors");
+    let here = PathBuf::from(&file);
     if here.is_file() {
         return here;
     }
     // The workspace root without a `..` in the path the workbench shows.
     let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let built = manifest.parent().unwrap_or(manifest).join(DEFAULT_MODEL);
+    let built = manifest.parent().unwrap_or(manifest).join(&file);
     if built.is_file() {
         return built;
     }
-    PathBuf::from(tactile_derender::model::checkpoint::BUNDLED_MODEL_NAME)
+    PathBuf::from(name)
+}
+
+/// The default model ([`bundled_model_path`] of `default`).
+pub fn default_model_path() -> PathBuf {
+    bundled_model_path(tactile_derender::model::checkpoint::BUNDLED_MODEL_NAME)
+}
+
+/// The model a run uses when none is chosen, as `--model auto` picks it: the bundled recording model for frames
+/// area-resampled from a camera's larger frame (recordings, their frames, imported datasets), the default otherwise.
+pub fn matched_model_path(resampled: bool) -> PathBuf {
+    use tactile_derender::model::checkpoint::{BUNDLED_MODEL_NAME, BUNDLED_RECORDING_MODEL_NAME};
+    bundled_model_path(if resampled {
+        BUNDLED_RECORDING_MODEL_NAME
+    } else {
+        BUNDLED_MODEL_NAME
+    })
 }
 
 /// What pose estimation needs to know about an input (simulated scenes and dataset pairs).
@@ -89,6 +106,9 @@ pub struct RunInput {
     pub label: String,
     /// Object, true pose and camera, when known.
     pub pose: Option<PoseContext>,
+    /// Whether the frames were area-resampled from a camera's larger frame (which model a run without a chosen one
+    /// uses: [`matched_model_path`]).
+    pub resampled: bool,
 }
 
 /// Where a run's input comes from; files are read on the run's thread.
@@ -167,6 +187,11 @@ impl RecordingFrameInput {
                 (scene, None, label)
             }
         };
+        let resampled = tactile_derender::sensor::resample::is_resampled(
+            &self.sim.camera,
+            p.source_size[0],
+            p.source_size[1],
+        );
         Ok(RunInput {
             pose: Some(PoseContext {
                 object: self.object,
@@ -179,6 +204,7 @@ impl RecordingFrameInput {
             imprint,
             truth,
             label,
+            resampled,
         })
     }
 }
@@ -198,6 +224,7 @@ impl InputSource {
                     pose: Some(PoseContext::of_pair(&ds, &pair)?),
                     imprint: pair.imprint,
                     truth: Some(pair.target),
+                    resampled: ds.manifest().frames_resampled(),
                 })
             }
             InputSource::Npy { path, sim } => {
@@ -205,6 +232,11 @@ impl InputSource {
                 // model resolution, a model-size one taken as it is (pixels without a value: 0); another size is
                 // left for the model to refuse by name.
                 let read = tactile_derender::io::npy::read_metres_image(&path)?;
+                let resampled = tactile_derender::sensor::resample::is_resampled(
+                    &sim.camera,
+                    read.width,
+                    read.height,
+                );
                 let imprint = tactile_derender::sensor::resample::to_model(&sim.camera, &read)
                     .unwrap_or(read);
                 Ok(RunInput {
@@ -212,6 +244,7 @@ impl InputSource {
                     imprint,
                     truth: None,
                     pose: None,
+                    resampled,
                 })
             }
             InputSource::RecordingFrame(f) => f.resolve(),
@@ -222,10 +255,10 @@ impl InputSource {
 /// One requested run.
 pub struct RunRequest {
     pub generation: u64,
-    /// Checkpoint to use.
-    pub model_path: PathBuf,
-    /// The already loaded model, when it is the one at `model_path`.
-    pub cached: Option<Arc<DiffusionModel>>,
+    /// Checkpoint to use (`None`: the bundled one matched to the input, [`matched_model_path`]).
+    pub model_path: Option<PathBuf>,
+    /// The model loaded last, and from where: used when it is the one the run needs.
+    pub cached: Option<(PathBuf, Arc<DiffusionModel>)>,
     pub input: InputSource,
     /// Samples, sampler and seed.
     pub config: DerenderConfig,
@@ -265,10 +298,13 @@ pub fn run(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<RunResult> {
     let input = req.input.resolve()?;
+    let path = req
+        .model_path
+        .unwrap_or_else(|| matched_model_path(input.resampled));
     let model = match req.cached {
-        Some(m) => m,
-        None => Arc::new(DiffusionModel::load_on(
-            &req.model_path,
+        Some((p, m)) if p == path => m,
+        _ => Arc::new(DiffusionModel::load_on(
+            &path,
             &tactile_derender::model::device::open_device(&req.config.device)?,
         )?),
     };

@@ -273,6 +273,6 @@ impl Default for ViewState {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct ModelSettings {
-    /// Checkpoint directory or file; `None` uses the bundled trained model.
+    /// Checkpoint directory or file; `None` uses the bundled model matched to the input (`--model auto`).
     pub path: Option<PathBuf>,
 }

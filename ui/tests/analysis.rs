@@ -280,15 +280,16 @@ fn without_a_checkpoint_the_bundled_model_is_used() {
     state.view.tab = Tab::Derender;
     let mut h = harness(WorkbenchApp::with_state(state));
     h.run_ok();
-    let p = tnd_workbench::derender::default_model_path();
-    let shown = if p.as_os_str() == "default" {
-        "the bundled default model".to_string()
-    } else {
-        p.display().to_string()
-    };
+    // With none chosen, the bundled model matched to the input (as `--model auto`), and the panel says so.
     assert!(h
-        .query_by_label_contains(&format!("using {shown}"))
+        .query_by_label_contains("using the bundled model matched to the input")
         .is_some());
+    let (default, recording) = (
+        tnd_workbench::derender::matched_model_path(false),
+        tnd_workbench::derender::matched_model_path(true),
+    );
+    assert!(default.ends_with("default") || default.ends_with("default.safetensors"));
+    assert!(recording.ends_with("recording") || recording.ends_with("recording.safetensors"));
     // The bundled small model is one click away, and named as such.
     h.get_by_label("bundled small").click();
     h.run_ok();
@@ -299,7 +300,7 @@ fn without_a_checkpoint_the_bundled_model_is_used() {
     assert!(h
         .query_by_label_contains("using the bundled small model")
         .is_some());
-    h.get_by_label("bundled default").click();
+    h.get_by_label("bundled, matched to the input").click();
     h.run_ok();
     assert_eq!(h.state().state.model.path, None);
 }

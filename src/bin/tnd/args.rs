@@ -181,6 +181,21 @@ pub fn parse_figure_size(s: &str) -> Result<tactile_derender::io::figure::Figure
     })
 }
 
+/// `--model` with `auto` resolved for an input whose frames were (`resampled`) or were not area-resampled from a
+/// camera's larger frame ([`tactile_derender::model::checkpoint::matched_model`]), saying on stderr when that picks
+/// the recording model (`what` names the input).
+pub fn resolve_model(model: &str, resampled: bool, what: &str) -> String {
+    use tactile_derender::model::checkpoint::{matched_model, BUNDLED_RECORDING_MODEL_NAME};
+    let picked = matched_model(std::path::Path::new(model), resampled);
+    if picked.as_os_str() != model && picked.to_str() == Some(BUNDLED_RECORDING_MODEL_NAME) {
+        eprintln!(
+            "{what}: frames resampled from the camera's own size, so the bundled recording model (--model auto; \
+             --model default for the other)"
+        );
+    }
+    picked.display().to_string()
+}
+
 #[cfg(test)]
 mod tests {
     use super::{check_press, parse_pose};

@@ -29,9 +29,11 @@ use tactile_derender::uncertainty::analysis::{analyse, Signature};
 
 #[derive(Args, Debug)]
 pub struct EvalArgs {
-    /// The generator: a model checkpoint (default: the bundled model; `small`: the bundled small one, twice as fast),
-    /// or `ground-truth` (the true X0: tests everything but the model).
-    #[arg(long, default_value = "default")]
+    /// The generator: a model checkpoint, a bundled model (`auto`: `recording` for pairs whose frames were
+    /// resampled from a camera's larger frame — imported recordings, pairs generated through a depth camera —,
+    /// `default` for pairs at the model resolution; `small`: twice as fast), or `ground-truth` (the true X0: tests
+    /// everything but the model).
+    #[arg(long, default_value = "auto")]
     pub model: String,
     /// Dataset directory (`tnd dataset gen`).
     #[arg(long, required_unless_present = "tables_from")]
@@ -208,15 +210,21 @@ pub fn run(mut a: EvalArgs) -> Result<()> {
         .as_deref()
         .ok_or_else(|| anyhow!("--data DIR is needed (or --tables-from FILE)"))?;
     tactile_derender::io::lock::check_not_written(data)?;
-    let inputs = [data, Path::new(&a.model)];
+    let model_given = PathBuf::from(&a.model);
+    let inputs = [data, model_given.as_path()];
     let force = a.force.force;
     let (records, _folders) = claim_outputs(&a, &inputs)?;
     // Records go to the real file: a symbolic link stays a link.
     if let Some(r) = &records {
         a.records = Some(r.path().to_path_buf());
     }
-    let (gen, mapping) = generator(&a.model, &a.sampler, &a.guidance, &a.device)?;
     let dataset = Dataset::open(data)?;
+    a.model = crate::args::resolve_model(
+        &a.model,
+        dataset.manifest().frames_resampled(),
+        &data.display().to_string(),
+    );
+    let (gen, mapping) = generator(&a.model, &a.sampler, &a.guidance, &a.device)?;
     warn_if_the_model_does_not_fit(
         &a.model,
         mapping.as_ref(),

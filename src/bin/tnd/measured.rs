@@ -51,6 +51,9 @@ pub struct Measured {
     /// The sensor: as given, or calibrated from the reference frames.
     pub sim: SimConfig,
     pub calibration: Option<SensorCalibration>,
+    /// Whether the frames were brought to the model resolution by area resampling from a camera's larger frame
+    /// (what `--model auto` picks its model by).
+    pub resampled: bool,
 }
 
 /// An image file (.npy, metres) at the native, cropped or model resolution of `sim`'s camera, at the model resolution.
@@ -98,6 +101,9 @@ impl MeasuredArgs {
         for p in &self.reference {
             references.push(read_frame(p)?);
         }
+        // The frames' sizes as read, before any resampling.
+        let mut sizes: Vec<(usize, usize)> =
+            references.iter().map(|r| (r.width, r.height)).collect();
         let refit = !self.no_calibrate && (self.calibrate || !from_file);
         let calibration = if references.is_empty() || !refit {
             None
@@ -114,15 +120,21 @@ impl MeasuredArgs {
             .as_deref()
             .map(|p| {
                 let frame = read_frame(p)?;
+                sizes.push((frame.width, frame.height));
                 resample::to_model(&sim.camera, &frame).map_err(|e| anyhow!("{}: {e}", p.display()))
             })
             .transpose()?;
         let imprint = match (&self.imprint, &signature, references.is_empty()) {
             (Some(p), None, true) if imprint_any_size => {
                 let img = npy::read_metres_image(p)?;
+                sizes.push((img.width, img.height));
                 resample::to_model(&sim.camera, &img).unwrap_or(img)
             }
-            (Some(p), _, _) => read_model(p, &sim)?,
+            (Some(p), _, _) => {
+                let img = npy::read_metres_image(p)?;
+                sizes.push((img.width, img.height));
+                resample::to_model(&sim.camera, &img).map_err(|e| anyhow!("{}: {e}", p.display()))?
+            }
             (None, Some(s), false) => {
                 let model: Vec<Image> = references
                     .iter()
@@ -143,11 +155,15 @@ impl MeasuredArgs {
                 bail!("the signature and the imprint differ in size after resampling");
             }
         }
+        let resampled = sizes
+            .iter()
+            .any(|&(w, h)| resample::is_resampled(&sim.camera, w, h));
         Ok(Measured {
             imprint,
             signature,
             sim,
             calibration,
+            resampled,
         })
     }
 }

@@ -25,9 +25,10 @@ use super::progress;
 
 #[derive(Args, Debug)]
 pub struct PoseArgs {
-    /// The generator: a model checkpoint (default: the bundled model; `small`: the bundled small one, twice as fast),
-    /// or `ground-truth` (then --target is the "generated" X0).
-    #[arg(long, default_value = "default")]
+    /// The generator: a model checkpoint, a bundled model (`auto`: `recording` for frames resampled from a
+    /// camera's native or cropped size, `default` for frames at the model resolution; `small`: twice as fast), or
+    /// `ground-truth` (then --target is the "generated" X0).
+    #[arg(long, default_value = "auto")]
     pub model: String,
     #[command(flatten)]
     pub measured: crate::measured::MeasuredArgs,
@@ -78,7 +79,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
         .read(a.sensor.sim_config()?, a.sensor.sensor.is_some(), false)?;
     let sim = Simulator::new(measured.sim.clone())?;
     let rrd = a.rerun.open("tnd pose", a.force.force, &inputs)?;
-    let (imprint, signature) = (measured.imprint, measured.signature);
+    let (imprint, signature, resampled) =
+        (measured.imprint, measured.signature, measured.resampled);
     let input_name = a
         .measured
         .imprint
@@ -105,7 +107,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
         )
     } else {
         let device = tactile_derender::model::device::open_device(&a.derender.device)?;
-        let model = DiffusionModel::load_on(Path::new(&a.model), &device)?;
+        let model_path = crate::args::resolve_model(&a.model, resampled, &input_name);
+        let model = DiffusionModel::load_on(Path::new(&model_path), &device)?;
         let guidance = pipeline::imprint_guidance(&a.derender, &sim, &imprint, signature.as_ref())?;
         let mut bar = progress::bar("sampling", " steps", 0);
         let out = pipeline::derender(

@@ -18,9 +18,10 @@ use tactile_derender::pose::estimator::DEFAULT_CONSENSUS_PROBABILITY;
 
 #[derive(Args, Debug)]
 pub struct SampleArgs {
-    /// Model checkpoint (.safetensors with config, or a diffusers directory); default: the bundled model; `small`:
-    /// the bundled small one, twice as fast.
-    #[arg(long, default_value = "default")]
+    /// Model checkpoint (.safetensors with config, or a diffusers directory) or a bundled model (`auto`:
+    /// `recording` for frames resampled from a camera's native or cropped size, `default` for frames at the model
+    /// resolution; `small`: twice as fast).
+    #[arg(long, default_value = "auto")]
     pub model: PathBuf,
     /// The imprint, or the signature and its reference; with the signature the samples are guided towards the
     /// imprint on the sensor below (its membrane and tactile-shadow cloak); without it they are not.
@@ -49,11 +50,18 @@ pub fn run(a: SampleArgs) -> Result<()> {
     inputs.extend(a.sensor.inputs());
     inputs.push(&a.model);
     let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
-    let device = tactile_derender::model::device::open_device(&a.derender.device)?;
-    let model = DiffusionModel::load_on(&a.model, &device)?;
     let measured = a
         .measured
         .read(a.sensor.sim_config()?, a.sensor.sensor.is_some(), true)?;
+    let device = tactile_derender::model::device::open_device(&a.derender.device)?;
+    let what = a
+        .measured
+        .inputs()
+        .first()
+        .map_or_else(String::new, |p| p.display().to_string());
+    let model =
+        crate::args::resolve_model(&a.model.display().to_string(), measured.resampled, &what);
+    let model = DiffusionModel::load_on(Path::new(&model), &device)?;
     let imprint = measured.imprint;
     let rrd = a.rerun.open("tnd sample", a.force.force, &inputs)?;
     let mut bar = super::progress::bar("sampling", " steps", 0);

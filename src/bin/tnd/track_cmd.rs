@@ -37,8 +37,9 @@ pub struct TrackInputArgs {
     pub read: ReadConfig,
     #[command(flatten)]
     pub sensor: SensorArgs,
-    /// The generator: a model checkpoint (default: the bundled model; `small`: the bundled small one).
-    #[arg(long, default_value = "default")]
+    /// The generator: a model checkpoint or a bundled model (`auto`: `recording` for frames resampled from the
+    /// camera's native or cropped size, `default` for frames at the model resolution; `small`: twice as fast).
+    #[arg(long, default_value = "auto")]
     pub model: String,
     #[command(flatten)]
     pub derender: DerenderConfig,
@@ -253,6 +254,8 @@ pub(crate) struct Opened {
     pub object: tactile_derender::pipeline::LoadedObject,
     pub prepared: PreparedObject,
     pub model: DiffusionModel,
+    /// `--model` as resolved for the recording's frames (`auto` is a bundled model's name).
+    pub model_name: String,
     pub processed: ProcessedRecording,
 }
 
@@ -316,11 +319,6 @@ pub(crate) fn open(
     // A mis-scaled object registers to nothing sensible; say so before hours of tracking.
     object.check_scale("a track")?;
     let prepared = PreparedObject::new(object.mesh.clone())?;
-    let device = tactile_derender::model::device::open_device(&a.derender.device)?;
-    let model = DiffusionModel::load_on(Path::new(&a.model), &device)?;
-    a.derender
-        .validate(Some(model.config().tactile_derender.num_train_timesteps))?;
-
     let mut bar = progress::bar("reading", " frames", stream.messages);
     let processed = recording::process(
         &rec,
@@ -332,6 +330,14 @@ pub(crate) fn open(
     progress::finish(&mut bar);
     let processed = processed?;
     crate::calibrate_cmd::tell_drift(&a.recording, processed.drift_m(), &processed.stretches);
+    let [w, h] = processed.source_size;
+    let resampled = tactile_derender::sensor::resample::is_resampled(&sim_config.camera, w, h);
+    let model_name =
+        crate::args::resolve_model(&a.model, resampled, &a.recording.display().to_string());
+    let device = tactile_derender::model::device::open_device(&a.derender.device)?;
+    let model = DiffusionModel::load_on(Path::new(&model_name), &device)?;
+    a.derender
+        .validate(Some(model.config().tactile_derender.num_train_timesteps))?;
     let recorded = match &poses {
         Some(p) => frame_poses(&rec, &processed.stamps_ns, p, DEFAULT_MAX_POSE_GAP_S)?,
         None => vec![None; processed.len()],
@@ -345,6 +351,7 @@ pub(crate) fn open(
         object,
         prepared,
         model,
+        model_name,
         processed,
     })
 }
@@ -360,10 +367,14 @@ pub fn run(a: TrackArgs) -> Result<()> {
     ]);
     let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
     let sim_config = a.input.sensor.sim_config()?;
-    let settings = settings(&a, &sim_config);
-    // Refuse another run's folder before any long work; nothing is written until the track can start.
+    let mut settings = settings(&a, &sim_config);
+    // Refuse another run's folder before any long work; nothing is written until the track can start. `--model
+    // auto` is resolved by the recording's frames, so it is compared once they are read.
     let earlier = earlier_run(&a.out)?;
-    if let Some(e) = &earlier {
+    let same_settings = |settings: &Value| -> Result<()> {
+        let Some(e) = &earlier else {
+            return Ok(());
+        };
         // Pose settings are stored only when not the defaults; compared as the defaults where absent, so that a
         // difference is named setting by setting (`pose.posterior.fusion_weight: 1.0 -> 0.15`).
         let with_pose = |v: &Value| {
@@ -382,11 +393,22 @@ pub fn run(a: TrackArgs) -> Result<()> {
             &a.out,
             &e,
             "settings",
-            &with_pose(&settings),
+            &with_pose(settings),
             "other settings",
-        )?;
+        )
+    };
+    let mut early = settings.clone();
+    if let Some(then) = earlier.as_ref().and_then(|e| e["settings"].get("model")) {
+        if a.input.model == tactile_derender::model::checkpoint::AUTO_MODEL_NAME {
+            early["model"] = then.clone();
+        }
     }
+    same_settings(&early)?;
     let opened = open(&a.input, sim_config)?;
+    if a.input.model == tactile_derender::model::checkpoint::AUTO_MODEL_NAME {
+        settings["model"] = json!(opened.model_name);
+    }
+    same_settings(&settings)?;
     let (processed, recorded, object) = (&opened.processed, &opened.recorded, &opened.object);
     let frames = fingerprint(processed);
     if let Some(e) = &earlier {

@@ -140,6 +140,7 @@ impl WorkbenchApp {
             truth: Some(sel.pair.target.clone()),
             label: format!("{} pair {} ({})", m.split, m.split_index, m.object),
             pose: Some(pose),
+            resampled: b.dataset.manifest().frames_resampled(),
         });
         self.state.view.tab = Tab::Derender;
         Ok(())
@@ -162,15 +163,6 @@ impl WorkbenchApp {
         self.state.derender.input = DerenderInput::Scene;
         self.state.view.tab = Tab::Scene;
         Ok(())
-    }
-
-    /// The model checkpoint a run uses: the chosen one or the bundled default.
-    pub fn model_path(&self) -> PathBuf {
-        self.state
-            .model
-            .path
-            .clone()
-            .unwrap_or_else(derender::default_model_path)
     }
 
     fn derender_input(&self) -> Result<InputSource> {
@@ -197,6 +189,7 @@ impl WorkbenchApp {
                         self.state.scene.object.display_name(),
                         self.state.scene.press * 1e3
                     ),
+                    resampled: false,
                 }))
             }
             DerenderInput::DatasetPair { dir, split, index } => {
@@ -244,7 +237,7 @@ impl WorkbenchApp {
     /// Start a run with the current settings (cancelling a running one).
     pub(crate) fn run_derender(&mut self) -> Result<()> {
         self.state.derender.config.validate(None)?;
-        let model_path = self.model_path();
+        let model_path = self.state.model.path.clone();
         let input = self.derender_input()?;
         let w = self
             .worker
@@ -257,10 +250,8 @@ impl WorkbenchApp {
         let cached = view
             .model
             .as_ref()
-            .filter(|(p, device, _)| {
-                *p == model_path && *device == self.state.derender.config.device
-            })
-            .map(|(_, _, m)| m.clone());
+            .filter(|(_, device, _)| *device == self.state.derender.config.device)
+            .map(|(p, _, m)| (p.clone(), m.clone()));
         let req = RunRequest {
             generation: view.generation,
             model_path,

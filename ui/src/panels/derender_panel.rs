@@ -125,7 +125,16 @@ fn model_row(
     ui.horizontal(|ui| {
         ui.label("model");
         let bundled = app.state.model.path.is_none();
-        if ui.radio(bundled, "bundled default").clicked() && !bundled {
+        if ui
+            .radio(bundled, "bundled, matched to the input")
+            .on_hover_text(
+                "the default model for simulated frames and pairs at the model's resolution; the recording model \
+                 (fine-tuned on frames brought to the model's size as an import brings them) for a recording's \
+                 frames, imported datasets and native .npy frames — as tnd's --model auto",
+            )
+            .clicked()
+            && !bundled
+        {
             cmds.push(Command::SetModel(ModelSettings { path: None }));
         }
         let small_name = tactile_derender::model::checkpoint::BUNDLED_SMALL_MODEL_NAME;
@@ -158,25 +167,37 @@ fn model_row(
             cmds.push(Command::Browse(DialogPurpose::OpenCheckpoint));
         }
     });
-    let p = app.model_path();
+    let named = |p: &std::path::Path| match tactile_derender::model::checkpoint::bundled_name(p) {
+        Some((name, _)) => format!("the bundled {name} model"),
+        None => p.display().to_string(),
+    };
+    let chosen = app.state.model.path.as_deref();
+    // The model loaded last, described where it is the chosen one (or, with none chosen, whichever was matched).
     let loaded = app
         .analysis
         .derender
         .model
         .as_ref()
-        .filter(|(q, _, _)| *q == p)
-        .map(|(_, _, m)| {
+        .filter(|(q, _, _)| chosen.is_none_or(|p| q == p))
+        .map(|(q, _, m)| {
             let (w, h) = m.resolution();
             let predicts = match m.config().tactile_derender.prediction_type {
                 PredictionType::Epsilon => "ε",
                 PredictionType::VPrediction => "v",
             };
-            format!(" · loaded, {w}x{h} px, predicts {predicts}")
+            let which = if chosen.is_none() {
+                format!(" {}", named(q))
+            } else {
+                String::new()
+            };
+            format!(" · loaded{which}, {w}x{h} px, predicts {predicts}")
         })
         .unwrap_or_default();
-    let shown = match tactile_derender::model::checkpoint::bundled_name(&p) {
-        Some((name, _)) => format!("the bundled {name} model"),
-        None => p.display().to_string(),
+    let shown = match chosen {
+        Some(p) => named(p),
+        None => "the bundled model matched to the input (default; recording for frames resampled from a camera's \
+                 own size)"
+            .to_string(),
     };
     ui.weak(format!("using {shown}{loaded}"));
 }
