@@ -50,18 +50,33 @@ pub fn run(a: SampleArgs) -> Result<()> {
     inputs.extend(a.sensor.inputs());
     inputs.push(&a.model);
     let _out = crate::outputs::folder("--out", &a.out, a.force.force, &inputs)?;
+    let device = tactile_derender::model::device::open_device(&a.derender.device)?;
+    // A named model is checked before the input is read; `auto` is picked by the input.
+    let auto = a.model.as_os_str() == tactile_derender::model::checkpoint::AUTO_MODEL_NAME;
+    let named = if auto {
+        None
+    } else {
+        Some(DiffusionModel::load_on(&a.model, &device)?)
+    };
     let measured = a
         .measured
         .read(a.sensor.sim_config()?, a.sensor.sensor.is_some(), true)?;
-    let device = tactile_derender::model::device::open_device(&a.derender.device)?;
-    let what = a
-        .measured
-        .inputs()
-        .first()
-        .map_or_else(String::new, |p| p.display().to_string());
-    let model =
-        crate::args::resolve_model(&a.model.display().to_string(), measured.resampled, &what);
-    let model = DiffusionModel::load_on(Path::new(&model), &device)?;
+    let model = match named {
+        Some(m) => m,
+        None => {
+            let what = a
+                .measured
+                .inputs()
+                .first()
+                .map_or_else(String::new, |p| p.display().to_string());
+            let model = crate::args::resolve_model(
+                &a.model.display().to_string(),
+                measured.resampled,
+                &what,
+            );
+            DiffusionModel::load_on(Path::new(&model), &device)?
+        }
+    };
     let imprint = measured.imprint;
     let rrd = a.rerun.open("tnd sample", a.force.force, &inputs)?;
     let mut bar = super::progress::bar("sampling", " steps", 0);
