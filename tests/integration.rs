@@ -21,6 +21,7 @@ mod grad_accumulation;
 mod light_press;
 mod mesh_io;
 mod missing_returns;
+mod model_auto;
 mod model_cli;
 mod model_config_checks;
 mod model_schedule;
