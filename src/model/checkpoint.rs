@@ -79,11 +79,17 @@ pub fn matched_model(model: &Path, resampled: bool) -> PathBuf {
     if model.to_str() != Some(AUTO_MODEL_NAME) || model.exists() {
         return model.to_path_buf();
     }
-    PathBuf::from(if resampled {
+    PathBuf::from(matched_bundled_name(resampled))
+}
+
+/// The bundled model `auto` stands for: [`BUNDLED_RECORDING_MODEL_NAME`] for `resampled` frames,
+/// [`BUNDLED_MODEL_NAME`] otherwise ([`matched_model`]).
+pub fn matched_bundled_name(resampled: bool) -> &'static str {
+    if resampled {
         BUNDLED_RECORDING_MODEL_NAME
     } else {
         BUNDLED_MODEL_NAME
-    })
+    }
 }
 
 /// The bundled model that `path` names ([`BUNDLED_MODELS`]; `auto` where no input decides is the default): a bare

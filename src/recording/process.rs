@@ -185,6 +185,13 @@ impl ProcessedRecording {
         }
     }
 
+    /// Whether the frames reach `camera`'s model resolution by area resampling (native or cropped frames; what
+    /// `--model auto` picks its model by, [`crate::sensor::resample::is_resampled`]).
+    pub fn frames_resampled(&self, camera: &crate::sensor::CameraConfig) -> bool {
+        let [w, h] = self.source_size;
+        crate::sensor::resample::is_resampled(camera, w, h)
+    }
+
     /// The membrane's largest drift between no-contact stretches, metres ([`super::drift`]).
     pub fn drift_m(&self) -> f64 {
         super::drift::largest_drift(&self.stretches)

@@ -17,9 +17,6 @@ use tactile_derender::pose::estimator::DEFAULT_CONSENSUS_PROBABILITY;
 
 use crate::worker::{JobKind, WorkerMsg};
 
-/// The bundled model, relative to the working directory (the repository root when run with `cargo run`).
-pub const DEFAULT_MODEL: &str = "assets/models/default.safetensors";
-
 /// The bundled model `name` (`default`, `recording`): `assets/models/<name>.safetensors` where it exists (working
 /// directory first, then the source checkout, so a freshly trained file is picked up without a rebuild), otherwise
 /// the copy compiled into the binary (the name itself), so the workbench works from any directory.
@@ -38,20 +35,12 @@ pub fn bundled_model_path(name: &str) -> PathBuf {
     PathBuf::from(name)
 }
 
-/// The default model ([`bundled_model_path`] of `default`).
-pub fn default_model_path() -> PathBuf {
-    bundled_model_path(tactile_derender::model::checkpoint::BUNDLED_MODEL_NAME)
-}
-
 /// The model a run uses when none is chosen, as `--model auto` picks it: the bundled recording model for frames
 /// area-resampled from a camera's larger frame (recordings, their frames, imported datasets), the default otherwise.
 pub fn matched_model_path(resampled: bool) -> PathBuf {
-    use tactile_derender::model::checkpoint::{BUNDLED_MODEL_NAME, BUNDLED_RECORDING_MODEL_NAME};
-    bundled_model_path(if resampled {
-        BUNDLED_RECORDING_MODEL_NAME
-    } else {
-        BUNDLED_MODEL_NAME
-    })
+    bundled_model_path(tactile_derender::model::checkpoint::matched_bundled_name(
+        resampled,
+    ))
 }
 
 /// What pose estimation needs to know about an input (simulated scenes and dataset pairs).
@@ -187,11 +176,7 @@ impl RecordingFrameInput {
                 (scene, None, label)
             }
         };
-        let resampled = tactile_derender::sensor::resample::is_resampled(
-            &self.sim.camera,
-            p.source_size[0],
-            p.source_size[1],
-        );
+        let resampled = p.frames_resampled(&self.sim.camera);
         Ok(RunInput {
             pose: Some(PoseContext {
                 object: self.object,

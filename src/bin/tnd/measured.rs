@@ -125,15 +125,15 @@ impl MeasuredArgs {
             })
             .transpose()?;
         let imprint = match (&self.imprint, &signature, references.is_empty()) {
-            (Some(p), None, true) if imprint_any_size => {
-                let img = npy::read_metres_image(p)?;
-                sizes.push((img.width, img.height));
-                resample::to_model(&sim.camera, &img).unwrap_or(img)
-            }
             (Some(p), _, _) => {
                 let img = npy::read_metres_image(p)?;
                 sizes.push((img.width, img.height));
-                resample::to_model(&sim.camera, &img).map_err(|e| anyhow!("{}: {e}", p.display()))?
+                let model = resample::to_model(&sim.camera, &img);
+                if imprint_any_size && signature.is_none() && references.is_empty() {
+                    model.unwrap_or(img)
+                } else {
+                    model.map_err(|e| anyhow!("{}: {e}", p.display()))?
+                }
             }
             (None, Some(s), false) => {
                 let model: Vec<Image> = references

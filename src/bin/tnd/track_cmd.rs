@@ -330,10 +330,11 @@ pub(crate) fn open(
     progress::finish(&mut bar);
     let processed = processed?;
     crate::calibrate_cmd::tell_drift(&a.recording, processed.drift_m(), &processed.stretches);
-    let [w, h] = processed.source_size;
-    let resampled = tactile_derender::sensor::resample::is_resampled(&sim_config.camera, w, h);
-    let model_name =
-        crate::args::resolve_model(&a.model, resampled, &a.recording.display().to_string());
+    let model_name = crate::args::resolve_model(
+        &a.model,
+        processed.frames_resampled(&sim_config.camera),
+        &a.recording.display().to_string(),
+    );
     let device = tactile_derender::model::device::open_device(&a.derender.device)?;
     let model = DiffusionModel::load_on(Path::new(&model_name), &device)?;
     a.derender

@@ -221,13 +221,11 @@ impl WorkbenchApp {
             .as_ref()
             .ok_or_else(|| anyhow!("the workbench is still starting"))?;
         let (tx, ctx) = (w.sender(), w.context());
-        let [w, h] = loaded.processed.source_size;
-        let model =
-            self.state.model.path.clone().unwrap_or_else(|| {
-                crate::derender::matched_model_path(
-                    tactile_derender::sensor::resample::is_resampled(&self.state.sim.camera, w, h),
-                )
-            });
+        let model = self.state.model.path.clone().unwrap_or_else(|| {
+            crate::derender::matched_model_path(
+                loaded.processed.frames_resampled(&self.state.sim.camera),
+            )
+        });
         let view = &mut self.recording.track;
         crate::worker::raise_cancel(&mut view.cancel);
         view.generation += 1;
