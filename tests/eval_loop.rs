@@ -236,6 +236,7 @@ fn the_diffusion_model_is_a_generator() {
         objects: ObjectSet::builtin(),
         signature_model: None,
         unmeasured: None,
+        camera_path: None,
     };
     let imprint = Image::from_vec(8, 8, (0..64).map(|i| 0.0001 * i as f32).collect()).unwrap();
     let pair = EvalPair {
@@ -456,6 +457,7 @@ fn imprint_proposals_recover_the_pose_a_wrong_sample_misses() {
             signature: Some(&pair.signature),
             truth: Some(pair.object_pose),
             prior: None,
+            camera_path: None,
         },
     };
     let pose = |imprint_proposals: bool| {
@@ -508,6 +510,7 @@ fn pose_estimate_steps_are_counted_and_named() {
                 signature,
                 truth: Some(pair.object_pose),
                 prior: None,
+                camera_path: None,
             },
         };
         let mut seen = Vec::new();
@@ -639,6 +642,7 @@ fn the_eval_record_and_pose_json_hold_the_estimate_the_pose_use_case_gives() {
                 signature: Some(&pair.signature),
                 truth: Some(pair.object_pose),
                 prior: None,
+                camera_path: None,
             };
             let engine = Estimator::new(config.pose.clone());
             let placed = place_and_estimate(

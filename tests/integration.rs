@@ -9,6 +9,7 @@ mod dataset_common;
 mod fuzz_common;
 
 mod architecture;
+mod camera_path;
 mod dataset;
 mod dataset_camera;
 mod dataset_import;

@@ -62,6 +62,7 @@ fn check<'a>(
         signature,
         model: model(&s.sim),
         config,
+        camera_path: None,
     }
 }
 
@@ -204,6 +205,7 @@ fn the_press_is_found_from_the_contact_and_the_noisy_signature() {
             object: &object,
             prepared: &prepared,
             engine: &engine,
+            camera_path: None,
         };
         let samples = std::slice::from_ref(&s.out.target);
         let (sig, imprint) = (&s.out.signature, &s.out.imprint);

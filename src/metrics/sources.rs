@@ -4,6 +4,7 @@
 use super::evaluate::{EvalError, EvalPair, PairSource};
 use crate::dataset::{Dataset, SplitName};
 use crate::objects::ObjectSet;
+use crate::pose::camera_path::CameraPath;
 use crate::pose::SensorContext;
 use crate::sensor::{Scene, Se2};
 use crate::sim::{PreparedObject, SimConfig, Simulator};
@@ -33,12 +34,21 @@ impl<'a> DatasetSource<'a> {
             })?;
         let objects = dataset.object_set()?;
         let n = dataset.len(split);
+        let mut ctx = SensorContext::of_simulator(&sim, objects);
+        if dataset.manifest().frames_resampled() {
+            let path =
+                CameraPath::new(dataset.sim_config()).map_err(|source| EvalError::Sensor {
+                    dir: dataset.dir().to_path_buf(),
+                    source,
+                })?;
+            ctx.camera_path = Some(std::sync::Arc::new(path));
+        }
         Ok(Self {
             dataset,
             split,
             skip: 0,
             len: limit.map_or(n, |l| l.min(n)),
-            ctx: SensorContext::of_simulator(&sim, objects),
+            ctx,
             t_sensor_camera: sim.t_sensor_camera(),
         })
     }

@@ -257,6 +257,7 @@ impl Evaluator {
                 signature: Some(&pair.signature),
                 truth: Some(pair.object_pose),
                 prior: None,
+                camera_path: sensor.camera_path.as_ref(),
             },
         };
         match estimate_observation(

@@ -9,6 +9,7 @@ use super::{LoadedObject, PipelineError, Progress};
 use crate::image::Image;
 use crate::metrics::evaluate::EvalError;
 use crate::objects::ObjectSet;
+use crate::pose::camera_path::CameraPath;
 use crate::pose::posterior::PosePosterior;
 use crate::pose::signature_check::Rival;
 use crate::pose::{threshold_contact, Hypothesis};
@@ -127,6 +128,10 @@ pub struct Observation<'a> {
     /// What earlier frames of the same contact said (a track's), `None` for an observation on its own: the
     /// registrations start from its poses and the press search stays near its press.
     pub prior: Option<&'a PosePrior>,
+    /// The camera's native pixels when the frames reached the model's resolution by area resampling (a recording's
+    /// frames, imported pairs): the signature check then predicts them the same way
+    /// ([`crate::pose::camera_path`]). `None` for frames made at the model's resolution.
+    pub camera_path: Option<&'a std::sync::Arc<CameraPath>>,
 }
 
 /// A pose estimate with the sensor placement it was made at.
@@ -182,6 +187,7 @@ pub fn place_and_estimate(
                 object,
                 prepared,
                 engine,
+                camera_path: observation.camera_path,
             };
             let press = placement
                 .press(
@@ -221,7 +227,8 @@ pub fn estimate_pose(
     seed: u64,
     progress: Progress<'_>,
 ) -> Result<PoseEstimate, PipelineError> {
-    let sensor = SensorContext::of_simulator(sim, ObjectSet::builtin());
+    let mut sensor = SensorContext::of_simulator(sim, ObjectSet::builtin());
+    sensor.camera_path = input.camera_path.cloned();
     let model = estimator.object_from_mesh(&object.name, &object.mesh, object.symmetry)?;
     estimate_observation(
         estimator,

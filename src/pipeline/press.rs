@@ -78,6 +78,8 @@ pub struct SensorPlacement<'a> {
     pub prepared: &'a PreparedObject,
     /// The pose engine (its settings and prepared object models).
     pub engine: &'a Estimator,
+    /// The camera's native pixels for resampled frames ([`super::Observation::camera_path`]).
+    pub camera_path: Option<&'a std::sync::Arc<crate::pose::camera_path::CameraPath>>,
 }
 
 impl SensorPlacement<'_> {
@@ -183,7 +185,8 @@ fn search_inputs<'s>(
     else {
         return Ok(None);
     };
-    let sensor = SensorContext::of_simulator(at.sim, ObjectSet::builtin());
+    let mut sensor = SensorContext::of_simulator(at.sim, ObjectSet::builtin());
+    sensor.camera_path = at.camera_path.cloned();
     let seen = sensor.observing(Some(signature)).into_owned();
     let model = at
         .engine

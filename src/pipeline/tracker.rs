@@ -9,6 +9,7 @@ use super::track::{position_spread_mm, std_dev, FrameTrack, PressChoice};
 use super::{LoadedObject, PipelineError, Progress};
 use crate::model::DiffusionModel;
 use crate::objects::Symmetry;
+use crate::pose::camera_path::CameraPath;
 use crate::pose::{Estimator, PoseConfig, PosePrior};
 use crate::recording::process::LightPress;
 use crate::recording::ProcessedRecording;
@@ -195,6 +196,8 @@ pub struct Tracker<'a> {
     ctx: TrackContext<'a>,
     engine: Estimator,
     carry: Option<Carry>,
+    /// The sensor's camera at native pixels, built for the first recording whose frames were resampled.
+    camera_path: Option<std::sync::Arc<CameraPath>>,
 }
 
 impl<'a> Tracker<'a> {
@@ -205,6 +208,7 @@ impl<'a> Tracker<'a> {
             engine: Estimator::new(ctx.pose.clone()),
             ctx,
             carry: None,
+            camera_path: None,
         })
     }
 
@@ -218,6 +222,11 @@ impl<'a> Tracker<'a> {
         frame: usize,
         progress: Progress<'_>,
     ) -> Result<FrameTrack, PipelineError> {
+        let resampled = recording.frames_resampled(&self.ctx.sim.config().camera);
+        if resampled && self.camera_path.is_none() {
+            self.camera_path = Some(std::sync::Arc::new(CameraPath::new(self.ctx.sim.config())?));
+        }
+        let camera_path = self.camera_path.as_ref().filter(|_| resampled);
         let ctx = &self.ctx;
         let (Some(imprint), Some(signature)) = (
             recording.imprints.get(frame),
@@ -267,6 +276,7 @@ impl<'a> Tracker<'a> {
             signature: Some(signature),
             truth: None,
             prior: carry.as_ref().map(|c| &c.prior),
+            camera_path,
         };
         let placed = match super::place_and_estimate(
             ctx.object,

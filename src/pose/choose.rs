@@ -106,6 +106,11 @@ impl Estimator {
             signature,
             model,
             config: &self.config.signature_check,
+            camera_path: ctx
+                .camera_path
+                .as_deref()
+                .filter(|_| cfg.native)
+                .and_then(|path| path.for_membrane(&membrane)),
         };
         let poses: Vec<Se2> = hypotheses.iter().map(|h| h.pose).collect();
         let Some((checked, candidates)) = check.select_all(&poses)? else {

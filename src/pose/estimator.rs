@@ -162,6 +162,9 @@ pub struct SensorContext {
     /// Pixels of the measurement without a return ([`Self::observing`]): no free-space evidence there. `None`: every
     /// pixel measured.
     pub unmeasured: Option<std::sync::Arc<Vec<bool>>>,
+    /// The camera's native pixels, for frames that reached this resolution by area resampling (the signature
+    /// check then predicts them the same way, [`super::camera_path`]); `None`: frames made at this resolution.
+    pub camera_path: Option<std::sync::Arc<super::camera_path::CameraPath>>,
 }
 
 impl SensorContext {
@@ -173,6 +176,7 @@ impl SensorContext {
             objects,
             signature_model: Some(SignatureModel::of_simulator(sim)),
             unmeasured: None,
+            camera_path: None,
         }
     }
 }
@@ -491,6 +495,7 @@ mod tests {
             objects: ObjectSet::builtin(),
             signature_model: None,
             unmeasured: None,
+            camera_path: None,
         };
         // Every seen pixel measured (the unseen one is not the frame's to measure): nothing changes.
         let full = Image::from_vec(3, 1, vec![0.08, 0.09, 0.0]).unwrap();

@@ -8,6 +8,7 @@
 //! about the table normal, metres and radians.
 
 pub mod baseline;
+pub mod camera_path;
 pub mod choose;
 pub mod estimator;
 pub mod export;

@@ -14,6 +14,7 @@ use glam::DAffine3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::camera_path::MembranePath;
 use super::posterior::{same_pose, FrameNoise, Mat3, ModeEvidence, PosePosterior, PosteriorConfig};
 use super::register::wrap_angle;
 use super::sdf_register::RobustLoss;
@@ -65,6 +66,10 @@ pub struct SignatureCheckConfig {
     /// uses the nominal membrane (default 3).
     #[arg(skip = DEFAULT_SIGNATURE_CHECK.reference_radius_px)]
     pub reference_radius_px: usize,
+    /// Predict a frame resampled from the camera's native pixels at those pixels, resampled the same way
+    /// ([`super::camera_path`]); `false`: one ray per model pixel for every frame (default true).
+    #[arg(long = "check-native", default_value_t = DEFAULT_SIGNATURE_CHECK.native, action = clap::ArgAction::Set)]
+    pub native: bool,
 }
 
 /// The defaults (also the command line's).
@@ -77,6 +82,7 @@ const DEFAULT_SIGNATURE_CHECK: SignatureCheckConfig = SignatureCheckConfig {
     lever_m: 0.02,
     max_evaluations: 150,
     reference_radius_px: 3,
+    native: true,
 };
 
 impl Default for SignatureCheckConfig {
@@ -174,6 +180,9 @@ pub struct SignatureCheck<'a> {
     pub signature: &'a Image,
     pub model: SignatureModel,
     pub config: &'a SignatureCheckConfig,
+    /// Predict at the camera's native pixels and resample, as the measured frame was made
+    /// ([`super::camera_path`]); `None`: one ray per pixel at this resolution (frames made at it).
+    pub camera_path: Option<MembranePath<'a>>,
 }
 
 /// The outcome of [`SignatureCheck::select`].
@@ -254,22 +263,38 @@ impl SignatureCheck<'_> {
 
     /// Ŝ(q): the noise-free signature the sensor would measure with the object at `pose` (metres).
     pub fn predict(&self, pose: Se2) -> Image {
-        self.render(pose).1
+        match &self.camera_path {
+            Some(path) => path.predict(
+                self.caster,
+                &self.t_world_camera,
+                pose,
+                self.membrane,
+                self.model.shadow_px,
+            ),
+            None => self.per_pixel(&self.object_depth(pose)),
+        }
     }
 
-    /// The object's depth at `pose` ([`Self::object_depth`]) and the signature it predicts from it
-    /// ([`Self::predict`]), rendered once.
+    /// The object's depth at `pose` ([`Self::object_depth`]) and the signature it predicts ([`Self::predict`]).
     fn render(&self, pose: Se2) -> (Image, Image) {
         let depth = self.object_depth(pose);
+        let predicted = match self.camera_path {
+            Some(_) => self.predict(pose),
+            None => self.per_pixel(&depth),
+        };
+        (depth, predicted)
+    }
+
+    /// The signature the object's `depth` predicts with one ray per pixel of this resolution.
+    fn per_pixel(&self, depth: &Image) -> Image {
         let mask = depth.zip_map(self.membrane, |d, e| f32::from(u8::from(in_contact(d, e))));
-        let predicted = tactile_signature(
-            &depth,
+        tactile_signature(
+            depth,
             self.membrane,
             &mask,
             self.model.shadow_px,
             self.model.spacing,
-        );
-        (depth, predicted)
+        )
     }
 
     /// The robust mean residual between the measured signature and [`Self::predict`] (metres²; lower is better).

@@ -75,7 +75,7 @@ pub enum Command {
     HighlightSample(Option<usize>),
     /// Replace the pose engine's settings (the Pose tab's check boxes: the signature check, imprint proposals);
     /// they apply to the next registration and the track.
-    SetPose(tactile_derender::pose::PoseConfig),
+    SetPose(Box<tactile_derender::pose::PoseConfig>),
     /// Undo the last scene, sensor or elastomer edit.
     Undo,
     /// Redo the last undone edit.

@@ -60,6 +60,9 @@ pub struct PoseContext {
     /// samples and the signature (`pipeline::press`, as `tnd recording track`) and places the sensor there, over
     /// the object at the origin, instead of `t_world_camera`.
     pub find_press: bool,
+    /// The signature was brought to the model's resolution from the camera's native pixels (a recording's frame,
+    /// an imported pair): the signature check predicts it the same way (`pose::camera_path`).
+    pub resampled: bool,
 }
 
 impl PoseContext {
@@ -80,6 +83,7 @@ impl PoseContext {
             signature: pair.signature.clone(),
             sim,
             find_press: false,
+            resampled: ds.manifest().frames_resampled(),
         })
     }
 }
@@ -185,6 +189,7 @@ impl RecordingFrameInput {
                 signature,
                 sim: self.sim,
                 find_press: truth.is_none(),
+                resampled,
             }),
             imprint,
             truth,

@@ -11,6 +11,7 @@ use anyhow::{Context, Result};
 use tactile_derender::image::Image;
 use tactile_derender::pipeline::press::PressChoice;
 use tactile_derender::pipeline::{self, Observation, Placement};
+use tactile_derender::pose::camera_path::CameraPath;
 use tactile_derender::pose::PoseConfig;
 use tactile_derender::sim::Simulator;
 
@@ -48,12 +49,20 @@ pub fn run(
     } else {
         Placement::Camera(c.t_world_camera)
     };
+    // A frame brought down from the camera's native pixels is predicted the same way by the signature check.
+    let camera_path = c
+        .resampled
+        .then(|| CameraPath::new(&c.sim))
+        .transpose()
+        .context("sensor configuration")?
+        .map(Arc::new);
     let observation = Observation {
         samples: &req.samples,
         imprint: &req.imprint,
         signature: Some(&c.signature),
         truth: c.truth,
         prior: None,
+        camera_path: camera_path.as_ref(),
     };
     let placed = pipeline::place_and_estimate(
         &object,

@@ -263,4 +263,13 @@ fn registering_ground_truth_like_samples_recovers_the_pose_and_fits_the_kdes() {
     let r = h.state().analysis.pose.result.as_ref().unwrap();
     assert!(r.checked.is_some() && !r.checked_from_imprint);
     assert!(h.query_by_label_contains("the sample's proposal").is_some());
+
+    // The native-pixel check is the session's too (`tnd pose --check-native false`), on by default.
+    assert!(h.state().state.pose.signature_check.native);
+    h.get_by_label("native-pixel check").click();
+    h.run_ok();
+    assert_eq!(
+        serde_json::to_value(&h.state().state).unwrap()["pose"]["signature_check"]["native"],
+        false
+    );
 }

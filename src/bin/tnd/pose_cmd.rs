@@ -131,12 +131,18 @@ pub fn run(a: PoseArgs) -> Result<()> {
             Some(out.contact_probability),
         )
     };
+    // A frame brought down from the camera's native pixels is predicted the same way by the signature check.
+    let camera_path = resampled
+        .then(|| tactile_derender::pose::camera_path::CameraPath::new(sim.config()))
+        .transpose()?
+        .map(std::sync::Arc::new);
     let observation = pipeline::Observation {
         samples: &samples,
         imprint: &imprint,
         signature: signature.as_ref(),
         truth,
         prior: None,
+        camera_path: camera_path.as_ref(),
     };
     let mut bar = progress::bar("registering", " fits", 0);
     let placed = match pipeline::place_and_estimate(

@@ -181,6 +181,7 @@ impl WorkbenchApp {
                         signature: out.signature.clone(),
                         sim: self.state.sim.clone(),
                         find_press: false,
+                        resampled: false,
                     }),
                     imprint: out.imprint.clone(),
                     truth: Some(out.target.clone()),
@@ -362,6 +363,7 @@ impl WorkbenchApp {
                 signature: Some(&c.signature),
                 truth: c.truth,
                 prior: None,
+                camera_path: None,
             },
         };
         let files = tactile_derender::pipeline::write_pose_geometry(

@@ -98,7 +98,7 @@ impl WorkbenchApp {
                 self.report("export", r);
             }
             Command::HighlightSample(k) => self.analysis.pose.highlight = k,
-            Command::SetPose(pose) => self.state.pose = pose,
+            Command::SetPose(pose) => self.state.pose = *pose,
             Command::ZoomImage(target) => self.analysis.zoom = target,
             // Recording tab.
             Command::OpenRecording(path) => self.open_recording(path),

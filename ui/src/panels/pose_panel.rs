@@ -69,8 +69,18 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
                      hypotheses beside the sample's (on small or shallow contacts the imprint can say more than \
                      one sample); off: only the sample's. Applies to the next registration.",
                 );
+            ui.add_enabled(
+                check,
+                egui::Checkbox::new(&mut settings.signature_check.native, "native-pixel check"),
+            )
+            .on_hover_text(
+                "for a frame brought down from the camera's native pixels (a recording's frame, an imported pair, a \
+                 native .npy), predict its signature at native pixels and resample it as the frame was: more \
+                 accurate, about twice as slow; off: one ray per model pixel. Frames made at the model's \
+                 resolution always use one ray per pixel. Applies to the next registration.",
+            );
             if settings != app.state.pose {
-                cmds.push(Command::SetPose(settings));
+                cmds.push(Command::SetPose(Box::new(settings)));
             }
         }
         if pose.result.is_some()

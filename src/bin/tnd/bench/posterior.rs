@@ -19,7 +19,9 @@ use tactile_derender::model::sampler::SamplerConfig;
 use tactile_derender::model::DiffusionModel;
 use tactile_derender::pipeline::press::PressChoice;
 use tactile_derender::pipeline::{self, DerenderConfig, ObjectSpec, Observation, Placement};
+use tactile_derender::pose::camera_path::CameraPath;
 use tactile_derender::pose::PoseConfig;
+use tactile_derender::sensor::resample::to_model;
 use tactile_derender::sensor::{Scene, Se2};
 use tactile_derender::sim::{PreparedObject, SimConfig, Simulator};
 use tactile_derender::uncertainty::SampleError;
@@ -57,6 +59,11 @@ pub struct PosteriorBenchArgs {
     /// Seed of the simulated noise and of the first run's samples.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Make the contact at the camera's native pixels and bring it down as `tnd dataset import` does (crop, area
+    /// resampling), then time each sample count twice: the signature check predicting it at native pixels
+    /// (`--check-native true`, what `tnd pose` does with such a frame) and with one ray per model pixel.
+    #[arg(long)]
+    pub native: bool,
 }
 
 /// One timed run's stages (seconds) and what it estimated.
@@ -81,14 +88,37 @@ pub fn run(a: &PosteriorBenchArgs) -> Result<()> {
     let prepared = PreparedObject::new(object.mesh.clone())?;
     let truth = Se2::parse(&a.pose).map_err(|e| anyhow!("--pose: {e}"))?;
     let sensor = sim.pressing_pose(&prepared, 0.0, 0.0, 0.0, a.press);
-    let contact = sim.simulate(
-        &prepared,
-        &Scene {
-            object: truth,
-            sensor,
-        },
-        a.seed,
-    );
+    let scene = Scene {
+        object: truth,
+        sensor,
+    };
+    let contact = if a.native {
+        let camera = &sim.config().camera;
+        let mut out = Simulator::native(sim.config().clone())?.simulate(&prepared, &scene, a.seed);
+        out.signature = to_model(camera, &out.signature)?;
+        out.reference = to_model(camera, &out.reference)?;
+        out.imprint = tactile_derender::sim::signature::imprint(&out.reference, &out.signature);
+        for image in [
+            &mut out.depth,
+            &mut out.elastomer,
+            &mut out.mask,
+            &mut out.target,
+        ] {
+            *image = tactile_derender::sensor::resample::resample_depth(
+                image,
+                camera.resolution.0,
+                camera.resolution.1,
+            );
+        }
+        out
+    } else {
+        sim.simulate(&prepared, &scene, a.seed)
+    };
+    let camera_path = a
+        .native
+        .then(|| CameraPath::new(sim.config()))
+        .transpose()?
+        .map(std::sync::Arc::new);
     if contact.contact_pixels == 0 {
         return Err(anyhow!(
             "{} at {} pressed {} m leaves no contact; choose another --pose or --press",
@@ -101,6 +131,7 @@ pub fn run(a: &PosteriorBenchArgs) -> Result<()> {
     super::emit(
         json!({"bench": "posterior_info", "host": super::host(), "model": model.source(),
         "object": a.object, "truth": truth, "press_m": a.press, "contact_px": contact.contact_pixels,
+        "native_frames": a.native,
         "sampler": a.sampler, "guidance": a.guidance}),
     );
     for &n in &a.samples {
@@ -111,25 +142,40 @@ pub fn run(a: &PosteriorBenchArgs) -> Result<()> {
             device: "cpu".into(),
             guidance: a.guidance,
         };
-        let mut records: Vec<RunRecord> = Vec::new();
-        for r in 0..a.runs.max(1) {
-            let config = DerenderConfig {
-                seed: a.seed + r as u64,
-                ..config.clone()
+        // With --native: the camera path, then one ray per model pixel (the peer of the same run).
+        let settings: &[bool] = if a.native { &[true, false] } else { &[false] };
+        for &native in settings {
+            let mut engine = a.engine.clone();
+            engine.signature_check.native = native;
+            let mut records: Vec<RunRecord> = Vec::new();
+            for r in 0..a.runs.max(1) {
+                let config = DerenderConfig {
+                    seed: a.seed + r as u64,
+                    ..config.clone()
+                };
+                records.push(time_run(
+                    &model,
+                    &sim,
+                    &object,
+                    &prepared,
+                    &contact,
+                    truth,
+                    &config,
+                    &engine,
+                    camera_path.as_ref(),
+                )?);
+            }
+            let median = |f: &dyn Fn(&RunRecord) -> f64| {
+                let mut v: Vec<f64> = records.iter().map(f).collect();
+                v.sort_by(f64::total_cmp);
+                v[v.len() / 2]
             };
-            records.push(time_run(
-                &model, &sim, &object, &prepared, &contact, truth, &config, &a.engine,
-            )?);
-        }
-        let median = |f: &dyn Fn(&RunRecord) -> f64| {
-            let mut v: Vec<f64> = records.iter().map(f).collect();
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        };
-        let each =
-            |f: &dyn Fn(&RunRecord) -> serde_json::Value| records.iter().map(f).collect::<Vec<_>>();
-        super::emit(
-            json!({"bench": "posterior", "samples": n, "runs": records.len(),
+            let each = |f: &dyn Fn(&RunRecord) -> serde_json::Value| {
+                records.iter().map(f).collect::<Vec<_>>()
+            };
+            super::emit(
+                json!({"bench": "posterior", "samples": n, "runs": records.len(),
+            "check_native": camera_path.is_some() && engine.signature_check.native,
             "sampler": config.sampler,
             "guided": config.guidance.enabled, "guidance_iterations": config.guidance.iterations,
             "guidance_from": config.guidance.from_fraction,
@@ -140,7 +186,8 @@ pub fn run(a: &PosteriorBenchArgs) -> Result<()> {
             "samples_position_mm_median": each(&|r| json!(r.samples_position_mm)),
             "top_weight": each(&|r| json!(r.top_weight)), "modes": each(&|r| json!(r.modes)),
             "truth_region": each(&|r| json!(r.truth_region))}),
-        );
+            );
+        }
     }
     Ok(())
 }
@@ -156,6 +203,7 @@ fn time_run(
     truth: Se2,
     config: &DerenderConfig,
     eval: &PoseConfig,
+    camera_path: Option<&std::sync::Arc<CameraPath>>,
 ) -> Result<RunRecord> {
     let t0 = Instant::now();
     let guidance =
@@ -175,6 +223,7 @@ fn time_run(
         signature: Some(&contact.signature),
         truth: Some(truth),
         prior: None,
+        camera_path,
     };
     // The first progress call comes once the press, the first registration, the check and the posterior are done;
     // the rest, one per registered sample.

@@ -1,0 +1,171 @@
+//! The **camera path** of the signature check's forward model: for frames that reached the model's resolution by
+//! area resampling (a recording's native or cropped frames, imported), the predicted signature is rendered the way
+//! the frame was made — at the camera's native pixels over the crop, with the shadow cloak in native pixels — and
+//! area-resampled as `tnd dataset import` resamples ([`crate::sensor::resample::resample_depth`]).
+//!
+//! Rendered at the model's resolution instead, one ray per model pixel, the prediction is sharper than the measured
+//! frame at every edge of the contact and its shadow; on imported validation recordings that model error was larger
+//! than what tells two near-symmetric poses apart, and the check preferred a wrong pose to the true one in most
+//! pairs it got wrong (docs/experiments/2026-11-30-camera-path-check.md).
+
+use glam::DAffine3;
+
+use crate::image::Image;
+use crate::mesh::RayCaster;
+use crate::sensor::resample::{crop, resample_depth};
+use crate::sensor::{CameraConfig, Intrinsics, Se2};
+use crate::sim::render::render_depth;
+use crate::sim::shadows::tactile_signature;
+use crate::sim::{SimConfig, SimError, Simulator};
+
+/// A sensor's camera at native resolution over its crop, for predictions of resampled frames.
+#[derive(Clone, Debug)]
+pub struct CameraPath {
+    /// The native camera over the crop (native pixel size).
+    crop: Intrinsics,
+    /// The camera at the model's resolution.
+    model: Intrinsics,
+    /// The undeformed membrane's depth over the crop, native pixels (metres, 0 where not seen).
+    membrane: Image,
+    /// The model's resolution (width, height).
+    resolution: (usize, usize),
+}
+
+impl CameraPath {
+    /// The camera path of `config`'s sensor (renders its membrane at native resolution once).
+    pub fn new(config: &SimConfig) -> Result<Self, SimError> {
+        let native = Simulator::native(config.clone())?;
+        Ok(Self::of_camera(&config.camera, native.nominal_depth()))
+    }
+
+    /// The path of `camera`, whose undeformed membrane at native resolution is `native_membrane` (the whole frame).
+    pub fn of_camera(camera: &CameraConfig, native_membrane: &Image) -> Self {
+        Self {
+            crop: camera.crop(),
+            model: camera.intrinsics(),
+            membrane: crop(native_membrane, camera.crop_rows, camera.crop_cols),
+            resolution: camera.resolution,
+        }
+    }
+
+    /// The model's resolution this path resamples to.
+    pub fn resolution(&self) -> (usize, usize) {
+        self.resolution
+    }
+
+    /// The path for one measurement whose membrane at the model's resolution is `membrane` (the nominal one, or the
+    /// measured one of [`super::signature_check::measured_membrane`]): the native membrane moved by the same offset
+    /// from nominal, so that a drifted inflation is predicted at native resolution too. `None` when `membrane` is not
+    /// at this path's resolution.
+    pub fn for_membrane(&self, membrane: &Image) -> Option<MembranePath<'_>> {
+        let (w, h) = self.resolution;
+        if (membrane.width, membrane.height) != (w, h) {
+            return None;
+        }
+        let nominal = resample_depth(&self.membrane, w, h);
+        let (cw, ch) = (self.membrane.width, self.membrane.height);
+        let mut native = self.membrane.clone();
+        for y in 0..ch {
+            let v = (y * h / ch).min(h - 1);
+            for x in 0..cw {
+                let u = (x * w / cw).min(w - 1);
+                let (e, n) = (membrane.get(u, v), nominal.get(u, v));
+                let px = native.get_mut(x, y);
+                if *px > 0.0 && e > 0.0 && n > 0.0 {
+                    *px += e - n;
+                }
+            }
+        }
+        let resampled = resample_depth(&native, w, h);
+        Some(MembranePath {
+            path: self,
+            native,
+            resampled,
+        })
+    }
+}
+
+/// [`CameraPath`] for one measurement's membrane.
+pub struct MembranePath<'a> {
+    path: &'a CameraPath,
+    /// The membrane at native resolution over the crop (metres).
+    native: Image,
+    /// `native` area-resampled to the model's resolution.
+    resampled: Image,
+}
+
+impl MembranePath<'_> {
+    /// The noise-free signature at the model's resolution with the object (ray caster in its own frame) at `pose`,
+    /// seen from `t_world_camera`: rendered over the crop at native pixels, the contact where the object lies in
+    /// front of the membrane, the cloak of `shadow_px` native pixels, area-resampled; then placed on `membrane` (the
+    /// model-resolution membrane this path was made for) as the resampled deformation. 0 where `membrane` is 0.
+    ///
+    /// Only the window where the signature can differ from the membrane is rendered natively: the model pixels
+    /// where the object comes within [`NEAR_M`] of the membrane (one ray each), grown by the cloak and two model
+    /// pixels; elsewhere the signature is the membrane.
+    pub fn predict(
+        &self,
+        caster: &RayCaster,
+        t_world_camera: &DAffine3,
+        pose: Se2,
+        membrane: &Image,
+        shadow_px: f64,
+    ) -> Image {
+        let t_object_camera = pose.to_affine().inverse() * *t_world_camera;
+        let (w, h) = self.path.resolution;
+        let coarse = render_depth(caster, &self.path.model, &t_object_camera);
+        let mut near: Option<(usize, usize, usize, usize)> = None;
+        for v in 0..h {
+            for u in 0..w {
+                let (d, e) = (coarse.get(u, v), membrane.get(u, v));
+                if d > 0.0 && e > 0.0 && d < e + NEAR_M {
+                    near = Some(near.map_or((u, u, v, v), |(u0, u1, v0, v1)| {
+                        (u0.min(u), u1.max(u), v0.min(v), v1.max(v))
+                    }));
+                }
+            }
+        }
+        let Some((u0, u1, v0, v1)) = near else {
+            return membrane.clone();
+        };
+        let (cw, ch) = (self.native.width, self.native.height);
+        let (sx, sy) = (cw as f64 / w as f64, ch as f64 / h as f64);
+        let grow = shadow_px.max(0.0) + 2.0 * sx.max(sy);
+        let span = |lo: usize, hi: usize, s: f64, n: usize| {
+            let a = (lo as f64 * s - grow).floor().max(0.0) as usize;
+            let b = (((hi + 1) as f64 * s + grow).ceil() as usize).min(n);
+            (a.min(b), b)
+        };
+        let (cols, rows) = (span(u0, u1, sx, cw), span(v0, v1, sy, ch));
+        let window = self.path.crop.cropped(rows, cols);
+        let depth = render_depth(caster, &window, &t_object_camera);
+        let membrane_window = crop(&self.native, rows, cols);
+        let mask = depth.zip_map(&membrane_window, |d, e| {
+            f32::from(u8::from(d > 0.0 && e > 0.0 && d < e))
+        });
+        let cloaked = tactile_signature(&depth, &membrane_window, &mask, shadow_px, (1.0, 1.0));
+        let mut signature = self.native.clone();
+        for (y, row) in cloaked.data.chunks(cloaked.width.max(1)).enumerate() {
+            let start = (rows.0 + y) * cw + cols.0;
+            signature.data[start..start + row.len()].copy_from_slice(row);
+        }
+        let resampled = resample_depth(&signature, w, h);
+        let mut out = membrane.clone();
+        for ((p, &s), &e) in out
+            .data
+            .iter_mut()
+            .zip(&resampled.data)
+            .zip(&self.resampled.data)
+        {
+            if *p > 0.0 && s > 0.0 && e > 0.0 {
+                *p -= e - s;
+            }
+        }
+        out
+    }
+}
+
+/// How far behind the membrane (metres) the object's depth at a model pixel's centre ray may lie for
+/// [`MembranePath::predict`] to render that pixel's surroundings natively: between the model's rays it may reach the
+/// membrane.
+pub const NEAR_M: f32 = 0.002;
