@@ -66,9 +66,10 @@ pub struct SignatureCheckConfig {
     /// uses the nominal membrane (default 3).
     #[arg(skip = DEFAULT_SIGNATURE_CHECK.reference_radius_px)]
     pub reference_radius_px: usize,
-    /// Predict a frame resampled from the camera's native pixels at those pixels, resampled the same way
-    /// ([`super::camera_path`]); `false`: one ray per model pixel for every frame (default true).
-    #[arg(long = "check-native", default_value_t = DEFAULT_SIGNATURE_CHECK.native, action = clap::ArgAction::Set)]
+    /// Predict a frame brought down from the camera's native pixels at those pixels, resampled as the frame was
+    /// (`pose::camera_path`); false: one ray per model pixel for every frame (default true).
+    #[arg(id = "check_native", long = "check-native", value_name = "BOOL", action = clap::ArgAction::Set,
+          default_value_t = DEFAULT_SIGNATURE_CHECK.native)]
     pub native: bool,
 }
 

@@ -116,6 +116,28 @@ fn main() -> std::process::ExitCode {
 mod tests {
     use clap::CommandFactory;
 
+    /// No command has two arguments with one id (a flattened settings struct's field meeting a command's own flag of
+    /// the same name, which clap's parser then confuses), and `tnd bench posterior --native` parses.
+    #[test]
+    fn argument_ids_are_unique_in_every_command() {
+        fn walk(cmd: &clap::Command, path: &str, clashes: &mut Vec<String>) {
+            let mut seen = std::collections::HashSet::new();
+            for a in cmd.get_arguments() {
+                if !seen.insert(a.get_id().as_str().to_string()) {
+                    clashes.push(format!("{path}: {}", a.get_id()));
+                }
+            }
+            for s in cmd.get_subcommands() {
+                walk(s, &format!("{path} {}", s.get_name()), clashes);
+            }
+        }
+        let mut clashes = Vec::new();
+        walk(&super::Cli::command(), "tnd", &mut clashes);
+        assert!(clashes.is_empty(), "{clashes:#?}");
+        use clap::Parser;
+        assert!(super::Cli::try_parse_from(["tnd", "bench", "posterior", "--native"]).is_ok());
+    }
+
     /// Every subcommand says what it does and every flag what it means (clap's `--help`).
     #[test]
     fn every_command_and_flag_has_help_text() {

@@ -76,7 +76,7 @@ pub fn show(app: &WorkbenchApp, ui: &mut egui::Ui, cmds: &mut Vec<Command>) {
             .on_hover_text(
                 "for a frame brought down from the camera's native pixels (a recording's frame, an imported pair, a \
                  native .npy), predict its signature at native pixels and resample it as the frame was: more \
-                 accurate, about twice as slow; off: one ray per model pixel. Frames made at the model's \
+                 accurate, up to twice as slow; off: one ray per model pixel. Frames made at the model's \
                  resolution always use one ray per pixel. Applies to the next registration.",
             );
             if settings != app.state.pose {

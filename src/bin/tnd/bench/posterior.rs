@@ -110,6 +110,8 @@ pub fn run(a: &PosteriorBenchArgs) -> Result<()> {
                 camera.resolution.1,
             );
         }
+        // The contact at the model's resolution: the model pixels the resampling gives a value from native contact.
+        out.contact_pixels = out.mask.data.iter().filter(|&&m| m > 0.5).count();
         out
     } else {
         sim.simulate(&prepared, &scene, a.seed)
