@@ -64,11 +64,18 @@ fn full_crop_prediction(n: &Native, scene: &Scene) -> Image {
 fn path_prediction(n: &Native, sensor: &SensorPose, pose: Se2, membrane: &Image) -> Image {
     let path = CameraPath::new(&n.config).unwrap();
     let on = path.for_membrane(membrane).expect("the model's resolution");
+    let t_world_camera = n.sim.t_world_camera(sensor);
+    // The object's depth at the model's resolution, one ray per pixel (what the check renders).
+    let coarse = render_depth(
+        &n.caster,
+        n.sim.intrinsics(),
+        &(pose.to_affine().inverse() * t_world_camera),
+    );
     on.predict(
         &n.caster,
-        &n.sim.t_world_camera(sensor),
+        &t_world_camera,
         pose,
-        membrane,
+        &coarse,
         n.config.signature.shadow_px,
     )
 }

@@ -17,6 +17,7 @@ mod dataset_objects;
 mod dataset_training;
 mod eval_loop;
 mod eval_metrics;
+mod eval_pose_stage;
 mod fuzz_loaders;
 mod grad_accumulation;
 mod light_press;

@@ -35,14 +35,12 @@ impl<'a> DatasetSource<'a> {
         let objects = dataset.object_set()?;
         let n = dataset.len(split);
         let mut ctx = SensorContext::of_simulator(&sim, objects);
-        if dataset.manifest().frames_resampled() {
-            let path =
-                CameraPath::new(dataset.sim_config()).map_err(|source| EvalError::Sensor {
+        ctx.camera_path =
+            CameraPath::for_frames(dataset.sim_config(), dataset.manifest().frames_resampled())
+                .map_err(|source| EvalError::Sensor {
                     dir: dataset.dir().to_path_buf(),
                     source,
                 })?;
-            ctx.camera_path = Some(std::sync::Arc::new(path));
-        }
         Ok(Self {
             dataset,
             split,

@@ -224,7 +224,7 @@ impl<'a> Tracker<'a> {
     ) -> Result<FrameTrack, PipelineError> {
         let resampled = recording.frames_resampled(&self.ctx.sim.config().camera);
         if resampled && self.camera_path.is_none() {
-            self.camera_path = Some(std::sync::Arc::new(CameraPath::new(self.ctx.sim.config())?));
+            self.camera_path = CameraPath::for_frames(self.ctx.sim.config(), true)?;
         }
         let camera_path = self.camera_path.as_ref().filter(|_| resampled);
         let ctx = &self.ctx;

@@ -8,12 +8,14 @@
 //! than what tells two near-symmetric poses apart, and the check preferred a wrong pose to the true one in most
 //! pairs it got wrong (docs/experiments/2026-11-30-camera-path-check.md).
 
+use std::sync::Arc;
+
 use glam::DAffine3;
 
 use crate::image::Image;
 use crate::mesh::RayCaster;
 use crate::sensor::resample::{crop, resample_depth};
-use crate::sensor::{CameraConfig, Intrinsics, Se2};
+use crate::sensor::{Intrinsics, Se2};
 use crate::sim::render::render_depth;
 use crate::sim::shadows::tactile_signature;
 use crate::sim::{SimConfig, SimError, Simulator};
@@ -23,8 +25,6 @@ use crate::sim::{SimConfig, SimError, Simulator};
 pub struct CameraPath {
     /// The native camera over the crop (native pixel size).
     crop: Intrinsics,
-    /// The camera at the model's resolution.
-    model: Intrinsics,
     /// The undeformed membrane's depth over the crop, native pixels (metres, 0 where not seen).
     membrane: Image,
     /// The model's resolution (width, height).
@@ -35,29 +35,27 @@ impl CameraPath {
     /// The camera path of `config`'s sensor (renders its membrane at native resolution once).
     pub fn new(config: &SimConfig) -> Result<Self, SimError> {
         let native = Simulator::native(config.clone())?;
-        Ok(Self::of_camera(&config.camera, native.nominal_depth()))
-    }
-
-    /// The path of `camera`, whose undeformed membrane at native resolution is `native_membrane` (the whole frame).
-    pub fn of_camera(camera: &CameraConfig, native_membrane: &Image) -> Self {
-        Self {
+        let camera = &config.camera;
+        Ok(Self {
             crop: camera.crop(),
-            model: camera.intrinsics(),
-            membrane: crop(native_membrane, camera.crop_rows, camera.crop_cols),
+            membrane: crop(native.nominal_depth(), camera.crop_rows, camera.crop_cols),
             resolution: camera.resolution,
-        }
+        })
     }
 
-    /// The model's resolution this path resamples to.
-    pub fn resolution(&self) -> (usize, usize) {
-        self.resolution
+    /// The path shared by an observation's frames: [`Self::new`] where they were `resampled` from the camera's
+    /// native pixels, `None` for frames made at the model's resolution.
+    pub fn for_frames(config: &SimConfig, resampled: bool) -> Result<Option<Arc<Self>>, SimError> {
+        resampled
+            .then(|| Self::new(config).map(Arc::new))
+            .transpose()
     }
 
     /// The path for one measurement whose membrane at the model's resolution is `membrane` (the nominal one, or the
     /// measured one of [`super::signature_check::measured_membrane`]): the native membrane moved by the same offset
     /// from nominal, so that a drifted inflation is predicted at native resolution too. `None` when `membrane` is not
     /// at this path's resolution.
-    pub fn for_membrane(&self, membrane: &Image) -> Option<MembranePath<'_>> {
+    pub fn for_membrane<'a>(&'a self, membrane: &'a Image) -> Option<MembranePath<'a>> {
         let (w, h) = self.resolution;
         if (membrane.width, membrane.height) != (w, h) {
             return None;
@@ -79,6 +77,7 @@ impl CameraPath {
         let resampled = resample_depth(&native, w, h);
         Some(MembranePath {
             path: self,
+            membrane,
             native,
             resampled,
         })
@@ -88,6 +87,8 @@ impl CameraPath {
 /// [`CameraPath`] for one measurement's membrane.
 pub struct MembranePath<'a> {
     path: &'a CameraPath,
+    /// The membrane at the model's resolution the path was made for (metres).
+    membrane: &'a Image,
     /// The membrane at native resolution over the crop (metres).
     native: Image,
     /// `native` area-resampled to the model's resolution.
@@ -97,23 +98,24 @@ pub struct MembranePath<'a> {
 impl MembranePath<'_> {
     /// The noise-free signature at the model's resolution with the object (ray caster in its own frame) at `pose`,
     /// seen from `t_world_camera`: rendered over the crop at native pixels, the contact where the object lies in
-    /// front of the membrane, the cloak of `shadow_px` native pixels, area-resampled; then placed on `membrane` (the
-    /// model-resolution membrane this path was made for) as the resampled deformation. 0 where `membrane` is 0.
+    /// front of the membrane, the cloak of `shadow_px` native pixels, area-resampled; then placed on the membrane
+    /// this path was made for as the resampled deformation. 0 where that membrane is 0.
     ///
     /// Only the window where the signature can differ from the membrane is rendered natively: the model pixels
-    /// where the object comes within [`NEAR_M`] of the membrane (one ray each), grown by the cloak and two model
-    /// pixels; elsewhere the signature is the membrane.
+    /// where the object's depth at the model's resolution, `coarse` (one ray per pixel, which the check renders
+    /// anyway), comes within [`NEAR_M`] of the membrane, grown by the cloak and two model pixels; elsewhere the
+    /// signature is the membrane.
     pub fn predict(
         &self,
         caster: &RayCaster,
         t_world_camera: &DAffine3,
         pose: Se2,
-        membrane: &Image,
+        coarse: &Image,
         shadow_px: f64,
     ) -> Image {
         let t_object_camera = pose.to_affine().inverse() * *t_world_camera;
         let (w, h) = self.path.resolution;
-        let coarse = render_depth(caster, &self.path.model, &t_object_camera);
+        let membrane = self.membrane;
         let mut near: Option<(usize, usize, usize, usize)> = None;
         for v in 0..h {
             for u in 0..w {

@@ -264,38 +264,35 @@ impl SignatureCheck<'_> {
 
     /// Ŝ(q): the noise-free signature the sensor would measure with the object at `pose` (metres).
     pub fn predict(&self, pose: Se2) -> Image {
-        match &self.camera_path {
+        self.render(pose).1
+    }
+
+    /// The object's depth at `pose` ([`Self::object_depth`]) and the signature it predicts ([`Self::predict`]):
+    /// one ray per pixel of this resolution, or at the camera's native pixels where it reaches the membrane
+    /// ([`Self::camera_path`]).
+    fn render(&self, pose: Se2) -> (Image, Image) {
+        let depth = self.object_depth(pose);
+        let predicted = match &self.camera_path {
             Some(path) => path.predict(
                 self.caster,
                 &self.t_world_camera,
                 pose,
-                self.membrane,
+                &depth,
                 self.model.shadow_px,
             ),
-            None => self.per_pixel(&self.object_depth(pose)),
-        }
-    }
-
-    /// The object's depth at `pose` ([`Self::object_depth`]) and the signature it predicts ([`Self::predict`]).
-    fn render(&self, pose: Se2) -> (Image, Image) {
-        let depth = self.object_depth(pose);
-        let predicted = match self.camera_path {
-            Some(_) => self.predict(pose),
-            None => self.per_pixel(&depth),
+            None => {
+                let mask =
+                    depth.zip_map(self.membrane, |d, e| f32::from(u8::from(in_contact(d, e))));
+                tactile_signature(
+                    &depth,
+                    self.membrane,
+                    &mask,
+                    self.model.shadow_px,
+                    self.model.spacing,
+                )
+            }
         };
         (depth, predicted)
-    }
-
-    /// The signature the object's `depth` predicts with one ray per pixel of this resolution.
-    fn per_pixel(&self, depth: &Image) -> Image {
-        let mask = depth.zip_map(self.membrane, |d, e| f32::from(u8::from(in_contact(d, e))));
-        tactile_signature(
-            depth,
-            self.membrane,
-            &mask,
-            self.model.shadow_px,
-            self.model.spacing,
-        )
     }
 
     /// The robust mean residual between the measured signature and [`Self::predict`] (metres²; lower is better).

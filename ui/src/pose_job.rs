@@ -50,12 +50,8 @@ pub fn run(
         Placement::Camera(c.t_world_camera)
     };
     // A frame brought down from the camera's native pixels is predicted the same way by the signature check.
-    let camera_path = c
-        .resampled
-        .then(|| CameraPath::new(&c.sim))
-        .transpose()
-        .context("sensor configuration")?
-        .map(Arc::new);
+    let camera_path =
+        CameraPath::for_frames(&c.sim, c.resampled).context("sensor configuration")?;
     let observation = Observation {
         samples: &req.samples,
         imprint: &req.imprint,

@@ -132,10 +132,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
         )
     };
     // A frame brought down from the camera's native pixels is predicted the same way by the signature check.
-    let camera_path = resampled
-        .then(|| tactile_derender::pose::camera_path::CameraPath::new(sim.config()))
-        .transpose()?
-        .map(std::sync::Arc::new);
+    let camera_path =
+        tactile_derender::pose::camera_path::CameraPath::for_frames(sim.config(), resampled)?;
     let observation = pipeline::Observation {
         samples: &samples,
         imprint: &imprint,

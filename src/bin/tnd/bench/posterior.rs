@@ -98,29 +98,15 @@ pub fn run(a: &PosteriorBenchArgs) -> Result<()> {
         out.signature = to_model(camera, &out.signature)?;
         out.reference = to_model(camera, &out.reference)?;
         out.imprint = tactile_derender::sim::signature::imprint(&out.reference, &out.signature);
-        for image in [
-            &mut out.depth,
-            &mut out.elastomer,
-            &mut out.mask,
-            &mut out.target,
-        ] {
-            *image = tactile_derender::sensor::resample::resample_depth(
-                image,
-                camera.resolution.0,
-                camera.resolution.1,
-            );
-        }
-        // The contact at the model's resolution: the model pixels the resampling gives a value from native contact.
-        out.contact_pixels = out.mask.data.iter().filter(|&&m| m > 0.5).count();
+        // The contact at the model's resolution: the model pixels the import's crop and resampling give a value
+        // from native contact (only the signature, reference and imprint go on to the pipeline).
+        let mask = to_model(camera, &out.mask)?;
+        out.contact_pixels = mask.data.iter().filter(|&&m| m > 0.5).count();
         out
     } else {
         sim.simulate(&prepared, &scene, a.seed)
     };
-    let camera_path = a
-        .native
-        .then(|| CameraPath::new(sim.config()))
-        .transpose()?
-        .map(std::sync::Arc::new);
+    let camera_path = CameraPath::for_frames(sim.config(), a.native)?;
     if contact.contact_pixels == 0 {
         return Err(anyhow!(
             "{} at {} pressed {} m leaves no contact; choose another --pose or --press",
