@@ -14,9 +14,9 @@ use glam::DAffine3;
 
 use crate::image::Image;
 use crate::mesh::RayCaster;
-use crate::sensor::resample::{crop, resample_depth};
+use crate::sensor::resample::{crop, resample_depth, resampled_pixel};
 use crate::sensor::{Intrinsics, Se2};
-use crate::sim::render::render_depth;
+use crate::sim::render::render_depth_where;
 use crate::sim::shadows::tactile_signature;
 use crate::sim::{SimConfig, SimError, Simulator};
 
@@ -101,10 +101,11 @@ impl MembranePath<'_> {
     /// front of the membrane, the cloak of `shadow_px` native pixels, area-resampled; then placed on the membrane
     /// this path was made for as the resampled deformation. 0 where that membrane is 0.
     ///
-    /// Only the window where the signature can differ from the membrane is rendered natively: the model pixels
-    /// where the object's depth at the model's resolution, `coarse` (one ray per pixel, which the check renders
-    /// anyway), comes within [`NEAR_M`] of the membrane, grown by the cloak and two model pixels; elsewhere the
-    /// signature is the membrane.
+    /// Only where the signature can differ from the membrane is any of that done: rays are cast at the native
+    /// pixels of the model pixels within [`REACH_PX`] of one where the object's depth at the model's resolution,
+    /// `coarse` (one ray per pixel, which the check renders anyway), comes within [`NEAR_M`] of the membrane; the
+    /// cloak is computed in that region's box grown by the cloak, and only the model pixels that box touches are
+    /// resampled again. Elsewhere the signature is the membrane.
     pub fn predict(
         &self,
         caster: &RayCaster,
@@ -116,56 +117,96 @@ impl MembranePath<'_> {
         let t_object_camera = pose.to_affine().inverse() * *t_world_camera;
         let (w, h) = self.path.resolution;
         let membrane = self.membrane;
-        let mut near: Option<(usize, usize, usize, usize)> = None;
-        for v in 0..h {
-            for u in 0..w {
-                let (d, e) = (coarse.get(u, v), membrane.get(u, v));
-                if d > 0.0 && e > 0.0 && d < e + NEAR_M {
-                    near = Some(near.map_or((u, u, v, v), |(u0, u1, v0, v1)| {
-                        (u0.min(u), u1.max(u), v0.min(v), v1.max(v))
-                    }));
-                }
-            }
+        let near: Vec<bool> = coarse
+            .data
+            .iter()
+            .zip(&membrane.data)
+            .map(|(&d, &e)| d > 0.0 && e > 0.0 && d < e + NEAR_M)
+            .collect();
+        let reach = dilate(&near, w, h, REACH_PX);
+        let mut reached: Option<(usize, usize, usize, usize)> = None;
+        for (i, _) in reach.iter().enumerate().filter(|(_, &r)| r) {
+            let (u, v) = (i % w, i / w);
+            reached = Some(reached.map_or((u, u, v, v), |(u0, u1, v0, v1)| {
+                (u0.min(u), u1.max(u), v0.min(v), v1.max(v))
+            }));
         }
-        let Some((u0, u1, v0, v1)) = near else {
+        let Some((u0, u1, v0, v1)) = reached else {
             return membrane.clone();
         };
         let (cw, ch) = (self.native.width, self.native.height);
         let (sx, sy) = (cw as f64 / w as f64, ch as f64 / h as f64);
-        let grow = shadow_px.max(0.0) + 2.0 * sx.max(sy);
+        // The native pixels of the reached model pixels' box, grown by the cloak.
+        let cloak = shadow_px.max(0.0).ceil() as usize;
         let span = |lo: usize, hi: usize, s: f64, n: usize| {
-            let a = (lo as f64 * s - grow).floor().max(0.0) as usize;
-            let b = (((hi + 1) as f64 * s + grow).ceil() as usize).min(n);
+            let a = ((lo as f64 * s).floor() as usize).saturating_sub(cloak);
+            let b = ((((hi + 1) as f64 * s).ceil() as usize) + cloak).min(n);
             (a.min(b), b)
         };
         let (cols, rows) = (span(u0, u1, sx, cw), span(v0, v1, sy, ch));
         let window = self.path.crop.cropped(rows, cols);
-        let depth = render_depth(caster, &window, &t_object_camera);
+        let model_pixel = |x: usize, s: f64, n: usize| (((x as f64 + 0.5) / s) as usize).min(n - 1);
+        let depth = render_depth_where(caster, &window, &t_object_camera, |x, y| {
+            reach[model_pixel(rows.0 + y, sy, h) * w + model_pixel(cols.0 + x, sx, w)]
+        });
         let membrane_window = crop(&self.native, rows, cols);
         let mask = depth.zip_map(&membrane_window, |d, e| {
             f32::from(u8::from(d > 0.0 && e > 0.0 && d < e))
         });
         let cloaked = tactile_signature(&depth, &membrane_window, &mask, shadow_px, (1.0, 1.0));
-        let mut signature = self.native.clone();
-        for (y, row) in cloaked.data.chunks(cloaked.width.max(1)).enumerate() {
-            let start = (rows.0 + y) * cw + cols.0;
-            signature.data[start..start + row.len()].copy_from_slice(row);
-        }
-        let resampled = resample_depth(&signature, w, h);
+        let signature = |x: usize, y: usize| {
+            if (cols.0..cols.1).contains(&x) && (rows.0..rows.1).contains(&y) {
+                cloaked.get(x - cols.0, y - rows.0)
+            } else {
+                self.native.get(x, y)
+            }
+        };
+        // Model pixels whose area meets the window; the others resample the membrane, as before.
+        let touched = |(a, b): (usize, usize), s: f64, n: usize| {
+            (
+                (a as f64 / s).floor() as usize,
+                ((b as f64 / s).ceil() as usize).min(n),
+            )
+        };
+        let (us, vs) = (touched(cols, sx, w), touched(rows, sy, h));
         let mut out = membrane.clone();
-        for ((p, &s), &e) in out
-            .data
-            .iter_mut()
-            .zip(&resampled.data)
-            .zip(&self.resampled.data)
-        {
-            if *p > 0.0 && s > 0.0 && e > 0.0 {
-                *p -= e - s;
+        for v in vs.0..vs.1 {
+            for u in us.0..us.1 {
+                let s = resampled_pixel(&signature, (cw, ch), (w, h), u, v);
+                let e = self.resampled.get(u, v);
+                let p = out.get_mut(u, v);
+                if *p > 0.0 && s > 0.0 && e > 0.0 {
+                    *p -= e - s;
+                }
             }
         }
         out
     }
 }
+
+/// `mask` grown by `radius` pixels in every direction (a square structuring element).
+fn dilate(mask: &[bool], width: usize, height: usize, radius: usize) -> Vec<bool> {
+    let mut rows = vec![false; mask.len()];
+    for y in 0..height {
+        for x in 0..width {
+            let lo = x.saturating_sub(radius);
+            let hi = (x + radius).min(width - 1);
+            rows[y * width + x] = mask[y * width + lo..=y * width + hi].iter().any(|&m| m);
+        }
+    }
+    let mut out = vec![false; mask.len()];
+    for y in 0..height {
+        let (lo, hi) = (y.saturating_sub(radius), (y + radius).min(height - 1));
+        for x in 0..width {
+            out[y * width + x] = (lo..=hi).any(|yy| rows[yy * width + x]);
+        }
+    }
+    out
+}
+
+/// How many model pixels beyond those whose centre ray comes near the membrane ([`NEAR_M`]) the object may reach it
+/// between rays: their native pixels are rendered too.
+pub const REACH_PX: usize = 2;
 
 /// How far behind the membrane (metres) the object's depth at a model pixel's centre ray may lie for
 /// [`MembranePath::predict`] to render that pixel's surroundings natively: between the model's rays it may reach the

@@ -73,33 +73,50 @@ fn has_value(d: f32) -> bool {
 
 /// Area-resample a depth image (0, NaN, ±inf or out of range = missing) to `width x height`.
 pub fn resample_depth(image: &Image, width: usize, height: usize) -> Image {
-    let sx = image.width as f64 / width as f64;
-    let sy = image.height as f64 / height as f64;
     let mut out = Image::filled(width, height, 0.0);
+    let all = |x: usize, y: usize| image.get(x, y);
     for v in 0..height {
-        let (y0, y1) = (v as f64 * sy, (v + 1) as f64 * sy);
         for u in 0..width {
-            let (x0, x1) = (u as f64 * sx, (u + 1) as f64 * sx);
-            let (mut sum, mut valid, mut area) = (0.0f64, 0.0f64, 0.0f64);
-            for iy in (y0.floor() as usize)..(y1.ceil() as usize).min(image.height) {
-                let wy = (y1.min(iy as f64 + 1.0) - y0.max(iy as f64)).max(0.0);
-                for ix in (x0.floor() as usize)..(x1.ceil() as usize).min(image.width) {
-                    let wx = (x1.min(ix as f64 + 1.0) - x0.max(ix as f64)).max(0.0);
-                    let a = wx * wy;
-                    area += a;
-                    let d = image.get(ix, iy);
-                    if has_value(d) {
-                        sum += a * f64::from(d);
-                        valid += a;
-                    }
-                }
-            }
-            if area > 0.0 && valid / area >= MIN_VALID_COVERAGE {
-                *out.get_mut(u, v) = (sum / valid) as f32;
-            }
+            *out.get_mut(u, v) =
+                resampled_pixel(&all, (image.width, image.height), (width, height), u, v);
         }
     }
     out
+}
+
+/// Pixel `(u, v)` of [`resample_depth`]'s `out.0 x out.1` output for a `size.0 x size.1` image whose pixel `(x, y)`
+/// is `get(x, y)`: for resampling only the part of an image that changed, without assembling it. 0 where less than
+/// [`MIN_VALID_COVERAGE`] of the pixel's area holds values.
+pub fn resampled_pixel(
+    get: &impl Fn(usize, usize) -> f32,
+    size: (usize, usize),
+    out: (usize, usize),
+    u: usize,
+    v: usize,
+) -> f32 {
+    let sx = size.0 as f64 / out.0 as f64;
+    let sy = size.1 as f64 / out.1 as f64;
+    let (y0, y1) = (v as f64 * sy, (v + 1) as f64 * sy);
+    let (x0, x1) = (u as f64 * sx, (u + 1) as f64 * sx);
+    let (mut sum, mut valid, mut area) = (0.0f64, 0.0f64, 0.0f64);
+    for iy in (y0.floor() as usize)..(y1.ceil() as usize).min(size.1) {
+        let wy = (y1.min(iy as f64 + 1.0) - y0.max(iy as f64)).max(0.0);
+        for ix in (x0.floor() as usize)..(x1.ceil() as usize).min(size.0) {
+            let wx = (x1.min(ix as f64 + 1.0) - x0.max(ix as f64)).max(0.0);
+            let a = wx * wy;
+            area += a;
+            let d = get(ix, iy);
+            if has_value(d) {
+                sum += a * f64::from(d);
+                valid += a;
+            }
+        }
+    }
+    if area > 0.0 && valid / area >= MIN_VALID_COVERAGE {
+        (sum / valid) as f32
+    } else {
+        0.0
+    }
 }
 
 /// Whether a `width` x `height` frame of `camera` reaches the model resolution by area resampling (a native or

@@ -19,6 +19,16 @@ pub fn render_depth(
     intrinsics: &Intrinsics,
     t_mesh_camera: &DAffine3,
 ) -> Image {
+    render_depth_where(caster, intrinsics, t_mesh_camera, |_, _| true)
+}
+
+/// [`render_depth`] at the pixels `(u, v)` where `cast(u, v)`; the others are 0 (no ray cast).
+pub fn render_depth_where(
+    caster: &RayCaster,
+    intrinsics: &Intrinsics,
+    t_mesh_camera: &DAffine3,
+    cast: impl Fn(usize, usize) -> bool + Sync,
+) -> Image {
     let (w, h) = (intrinsics.width, intrinsics.height);
     let mut image = Image::filled(w, h, 0.0);
     let origin = t_mesh_camera.translation.as_vec3();
@@ -29,6 +39,9 @@ pub fn render_depth(
         .enumerate()
         .for_each(|(v, row)| {
             for (u, px) in row.iter_mut().enumerate() {
+                if !cast(u, v) {
+                    continue;
+                }
                 // Rigid motion keeps |dir|, and dir has unit camera z, so the ray parameter is the z-depth.
                 let dir = (rot * intrinsics.ray_dir(u as f64, v as f64)).as_vec3();
                 if let Some(t) = caster.cast(origin, dir, MAX_RANGE_M) {
