@@ -11,6 +11,7 @@ use std::path::Path;
 
 use tactile_derender::image::Image;
 use tactile_derender::objects::ObjectSet;
+use tactile_derender::pose::posterior::PosteriorConfig;
 use tactile_derender::recording::frames_out::write_frames;
 use tactile_derender::recording::synth::{write_press_recording, DepthEncoding, PressSequence};
 use tactile_derender::recording::{process, FolderOptions, ProcessConfig, Recording};
@@ -313,7 +314,7 @@ fn nan_frames_go_through_frames_import_pose_and_track_from_the_cli() {
     }
     // README's single-frame step on the exported frames, as written (the sensor calibrated from the reference).
     let frame = format!("frames/frame_{peak:06}.npy");
-    let pose_out = ok(&[
+    let readme_step = [
         "pose",
         "--signature",
         &frame,
@@ -327,9 +328,8 @@ fn nan_frames_go_through_frames_import_pose_and_track_from_the_cli() {
         "3",
         "--truth",
         pose,
-        "--out",
-        "pose",
-    ]);
+    ];
+    let pose_out = ok(&[&readme_step[..], &["--out", "pose"]].concat());
     let err = pose_out["estimate_error"]["position_mm"].as_f64();
     assert!(err.is_some_and(f64::is_finite), "{pose_out}");
     // Native frames are resampled to the model's size: `--model auto` (the default) takes the recording model.
@@ -342,6 +342,30 @@ fn nan_frames_go_through_frames_import_pose_and_track_from_the_cli() {
     assert!(
         pose_out["calibration"].is_object(),
         "calibrated from the reference"
+    );
+    // Such frames get the bundled posterior calibration for resampled frames: given as a file it changes nothing,
+    // while the one for frames made at the model's resolution gives another posterior.
+    let calibration = |name: &str, c: &PosteriorConfig| {
+        std::fs::write(d.join(name), serde_json::to_string(c).unwrap()).unwrap();
+    };
+    calibration(
+        "resampled.json",
+        &PosteriorConfig::resampled_frames_bundled(),
+    );
+    let model_resolution = PosteriorConfig {
+        resampled_frames: None,
+        ..PosteriorConfig::default()
+    };
+    calibration("model_resolution.json", &model_resolution);
+    let posterior_with = |file: &str| {
+        let out = format!("pose_{file}");
+        ok(&[&readme_step[..], &["--posterior", file, "--out", &out]].concat())["posterior"].clone()
+    };
+    assert!(pose_out["posterior"].is_object(), "{pose_out}");
+    assert_eq!(posterior_with("resampled.json"), pose_out["posterior"]);
+    assert_ne!(
+        posterior_with("model_resolution.json"),
+        pose_out["posterior"]
     );
     // A sensor file is used as it is, unless --calibrate asks for the re-fit from one frame.
     let calibrated = tnd_in(

@@ -287,8 +287,14 @@ pub struct Fit {
 
 /// The calibration fitted to `scored` (module docs): `base`'s other settings kept, its fitted ones the first start;
 /// where the records keep the contact the best mode predicts, fitted with each contact count, and where they keep
-/// the frames' noise, with and without [`PosteriorConfig::frame_noise`]; the best fit kept.
+/// the frames' noise, with and without [`PosteriorConfig::frame_noise`]; the best fit kept. One calibration for
+/// every frame: `base`'s [`PosteriorConfig::resampled_frames`] is dropped.
 pub fn fit_posterior(scored: &[Scored<'_>], base: &PosteriorConfig) -> Fit {
+    // One calibration for the frames fitted to, whatever kind they are.
+    let base = &PosteriorConfig {
+        resampled_frames: None,
+        ..base.clone()
+    };
     // What the records allow is tried both ways; the rest as `base` has it.
     let both_if = |kept: bool, given: bool| if kept { vec![false, true] } else { vec![given] };
     let counts = both_if(

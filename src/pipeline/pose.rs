@@ -326,7 +326,7 @@ pub fn estimate_observation(
                 p,
                 before,
                 &model.symmetry,
-                config.posterior.fusion_weight,
+                config.posterior_for(ctx).fusion_weight,
             );
             let top = fused.top().map(|m| m.pose());
             posterior = Some(fused);

@@ -117,7 +117,13 @@ impl Estimator {
             return Ok(None);
         };
         let posterior = posterior
-            .then(|| check.posterior(&candidates, &object.symmetry, &self.config.posterior))
+            .then(|| {
+                check.posterior(
+                    &candidates,
+                    &object.symmetry,
+                    self.config.posterior_for(ctx),
+                )
+            })
             .transpose()?;
         Ok(Some((checked, posterior)))
     }

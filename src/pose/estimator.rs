@@ -118,6 +118,14 @@ impl Default for PoseConfig {
 pub const MAX_INITS: usize = 10_000;
 
 impl PoseConfig {
+    /// The posterior calibration for frames of the sensor in `ctx`: the one for resampled frames
+    /// ([`PosteriorConfig::resampled_frames`]) where they reached the model's resolution from the camera's native
+    /// pixels and the check predicts them there, else [`Self::posterior`].
+    pub fn posterior_for(&self, ctx: &SensorContext) -> &PosteriorConfig {
+        self.posterior
+            .for_frames(ctx.camera_path.is_some() && self.signature_check.native)
+    }
+
     /// Every setting in range (a session or config file can hold any number); the error names the first that is
     /// not.
     pub fn validate(&self) -> Result<(), PoseError> {

@@ -23,6 +23,8 @@ pub fn read(path: &Path) -> Result<State> {
     }
     validate(&state).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let mut state = state;
+    // Saved before the bundled posterior calibration had one for resampled frames: the bundled one it held.
+    state.pose.posterior = state.pose.posterior.upgraded();
     if let Some(dir) = path.parent() {
         resolve_beside(&mut state, dir);
     }
@@ -214,6 +216,26 @@ mod tests {
     fn write_example_session() {
         let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sessions/example.json");
         write(&p, &State::default()).unwrap();
+    }
+
+    #[test]
+    fn a_session_saved_before_the_resampled_frames_calibration_gets_the_bundled_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("old.json");
+        let mut old = serde_json::to_value(State::default()).unwrap();
+        let posterior = &mut old["pose"]["posterior"];
+        assert!(posterior["resampled_frames"].is_object());
+        posterior
+            .as_object_mut()
+            .unwrap()
+            .remove("resampled_frames");
+        std::fs::write(&p, old.to_string()).unwrap();
+        assert_eq!(read(&p).unwrap(), State::default());
+        // A calibration of the user's own stays one calibration for every frame.
+        old["pose"]["posterior"]["temperature"] = serde_json::json!(2.5);
+        std::fs::write(&p, old.to_string()).unwrap();
+        let mine = read(&p).unwrap().pose.posterior;
+        assert!(mine.resampled_frames.is_none() && mine.temperature == 2.5);
     }
 
     #[test]

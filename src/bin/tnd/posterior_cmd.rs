@@ -351,10 +351,11 @@ fn write_fit(
         .with_context(|| format!("{}: cannot write", path.display()))?;
     if !json_only {
         let c = &f.config;
-        let bundled = PosteriorConfig::default().fusion_weight;
+        // Tracks are of recordings, whose frames the bundled calibration for resampled frames covers.
+        let bundled = PosteriorConfig::default().for_frames(true).fusion_weight;
         let fusion = if track_frames > 0 {
             format!(
-                "fusion weight {:.2} (fitted to {track_frames} tracked frames; the bundled calibration's {bundled})",
+                "fusion weight {:.2} (fitted to {track_frames} tracked frames; the bundled calibration's for recordings {bundled})",
                 c.fusion_weight
             )
         } else {
