@@ -393,3 +393,57 @@ fn the_cli_tracks_a_press_sequence_and_resumes_where_it_stopped() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_recording_that_never_touches_the_object_is_refused_with_a_reason() {
+    // The object 200 mm beside the sensor, through a time-of-flight camera: `recording simulate` warns, and
+    // `recording track` refuses in one line (no frame to track) instead of tracking the noise.
+    let dir = tempfile::tempdir().unwrap();
+    let sim = tnd_in(
+        dir.path(),
+        &[
+            "recording",
+            "simulate",
+            "far.mcap",
+            "--object",
+            OBJECT,
+            "--pose",
+            "0.2,0,0",
+            "--rest",
+            "1",
+            "--ramp",
+            "2",
+            "--tof",
+        ],
+    );
+    let warned = String::from_utf8_lossy(&sim.stderr).to_string();
+    assert!(sim.status.success(), "{warned}");
+    assert!(
+        warned.contains("warning: no contact in any frame"),
+        "{warned}"
+    );
+    let track = tnd_in(
+        dir.path(),
+        &[
+            "recording",
+            "track",
+            "far.mcap",
+            "--object",
+            OBJECT,
+            "--samples",
+            "2",
+            "--steps",
+            "2",
+            "--out",
+            "trk",
+        ],
+    );
+    let err = String::from_utf8_lossy(&track.stderr).to_string();
+    assert!(!track.status.success(), "{err}");
+    let last = err.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("error: far.mcap: no frame shows contact") && last.contains("never touch"),
+        "{err}"
+    );
+    assert!(!dir.path().join("trk/track.csv").exists());
+}

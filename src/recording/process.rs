@@ -233,10 +233,21 @@ impl ProcessedRecording {
         Some(1.4826 * f64::from(*median))
     }
 
+    /// Whether frame `k` was found to touch nothing: a frame the reference was made of, or one of a run of
+    /// no-contact frames ([`Self::stretches`]).
+    pub fn is_no_contact(&self, k: usize) -> bool {
+        self.reference_frames.contains(&k)
+            || self
+                .stretches
+                .iter()
+                .any(|s| (s.first..=s.last).contains(&k))
+    }
+
     /// The light-press threshold of this recording ([`LightPress`]): [`LIGHT_PRESS_SIGMAS`] times
     /// [`Self::imprint_noise_m`], at least [`LIGHT_PRESS_MIN_M`], with each frame's contact pixels over it (as
-    /// [`Self::contact_px`] at that threshold); `None` where the noise cannot be measured or the threshold would not
-    /// be below `contact_threshold_m`.
+    /// [`Self::contact_px`] at that threshold; 0 for the no-contact frames, [`Self::is_no_contact`]: the noise's
+    /// tail can put a few pixels of a frame that touches nothing over a threshold set by the noise); `None` where
+    /// the noise cannot be measured or the threshold would not be below `contact_threshold_m`.
     pub fn light_press(&self, contact_threshold_m: f64) -> Option<(LightPress, Vec<usize>)> {
         let noise_m = self.imprint_noise_m()?;
         let threshold_m = (LIGHT_PRESS_SIGMAS * noise_m).max(LIGHT_PRESS_MIN_M);
@@ -246,7 +257,14 @@ impl ProcessedRecording {
         let counts = self
             .imprints
             .iter()
-            .map(|y| contact_pixels(y, threshold_m))
+            .enumerate()
+            .map(|(k, y)| {
+                if self.is_no_contact(k) {
+                    0
+                } else {
+                    contact_pixels(y, threshold_m)
+                }
+            })
             .collect();
         Some((
             LightPress {

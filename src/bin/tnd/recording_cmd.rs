@@ -9,7 +9,8 @@ use serde_json::json;
 use tactile_derender::pipeline::ObjectSpec;
 use tactile_derender::recording::synth::{self, DepthEncoding, PressSequence};
 use tactile_derender::recording::{self, ReadConfig, Recording};
-use tactile_derender::sim::PreparedObject;
+use tactile_derender::sensor::Scene;
+use tactile_derender::sim::{PreparedObject, Simulator};
 
 use crate::args::SensorArgs;
 use crate::progress;
@@ -216,6 +217,20 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         &inputs,
         &synth::written_by_tnd,
     )?;
+    // A sequence that never touches the object is a recording of the membrane alone: say so, as `tnd sim` does.
+    let deepest = seq
+        .presses
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
+    let sim = Simulator::new(config.clone())?;
+    let scene = Scene {
+        object: pose,
+        sensor: sim.pressing_pose(&object, 0.0, 0.0, 0.0, deepest),
+    };
+    if sim.simulate(&object, &scene, seq.seed).contact_pixels == 0 {
+        crate::sim_cmd::warn_no_contact(" in any frame", &sim, &object, &scene);
+    }
     let frames = synth::write_press_recording(out.path(), &config, &object, &seq)?;
     println!(
         "{}",

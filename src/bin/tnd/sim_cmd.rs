@@ -89,16 +89,7 @@ pub fn run(a: SimArgs) -> Result<()> {
     };
     let (out, elapsed_s) = sim.simulate_timed(&object, &scene, a.seed);
     if out.contact_pixels == 0 {
-        let hint = sim.contact_hint(&object, &scene);
-        let c = hint.centred;
-        eprintln!(
-            "warning: no contact: {hint}{}",
-            if hint.press_m > 0.0 {
-                format!(" (--pose {:.4},{:.4},{:.4})", c.x, c.y, c.theta)
-            } else {
-                String::new()
-            }
-        );
+        warn_no_contact("", &sim, &object, &scene);
     }
 
     for (file, title) in OUTPUTS {
@@ -197,4 +188,19 @@ pub fn preview_style(file: &str, title: &str) -> preview::PanelStyle {
             ..Default::default()
         },
     }
+}
+
+/// Says on stderr that `scene` touches nothing (`what`: where, e.g. "in any frame"), with where the object lies from
+/// the membrane and the `--pose` that would centre it.
+pub fn warn_no_contact(what: &str, sim: &Simulator, object: &PreparedObject, scene: &Scene) {
+    let hint = sim.contact_hint(object, scene);
+    let c = hint.centred;
+    eprintln!(
+        "warning: no contact{what}: {hint}{}",
+        if hint.press_m > 0.0 {
+            format!(" (--pose {:.4},{:.4},{:.4})", c.x, c.y, c.theta)
+        } else {
+            String::new()
+        }
+    );
 }

@@ -435,6 +435,14 @@ pub fn run(a: TrackArgs) -> Result<()> {
             .map(|k| (k, processed.contact_px[k]))
             .max_by_key(|p| p.1)
             .unwrap_or((0, 0));
+        if px == 0 {
+            bail!(
+                "{}: no frame shows contact (imprint over {} mm) to track: the object may never touch the membrane \
+                 (or check --reference and the sensor options)",
+                a.input.recording.display(),
+                a.input.read.contact_threshold_m * 1e3
+            );
+        }
         bail!(
             "{}: no frame has {} contact pixels (imprint over {} mm) to track; the most is {px} at frame {peak} \
              (lower --min-contact-px or --contact-threshold, or check --reference and the sensor options)",
