@@ -198,6 +198,9 @@ pub struct Tracker<'a> {
     carry: Option<Carry>,
     /// The sensor's camera at native pixels, built for the first recording whose frames were resampled.
     camera_path: Option<std::sync::Arc<CameraPath>>,
+    /// θ of the last estimate reported, radians: each frame's poses are reported as the symmetric equivalents
+    /// nearest it, so that a 4-fold object does not jump by 90° between frames that agree.
+    reported_theta: Option<f64>,
 }
 
 impl<'a> Tracker<'a> {
@@ -209,6 +212,7 @@ impl<'a> Tracker<'a> {
             ctx,
             carry: None,
             camera_path: None,
+            reported_theta: None,
         })
     }
 
@@ -293,6 +297,8 @@ impl<'a> Tracker<'a> {
             Err(e) => return Err(e),
         };
         fill_row(&mut row, &placed, &ctx.object.symmetry);
+        align_theta(&mut row, self.reported_theta, &ctx.object.symmetry);
+        self.reported_theta = row.estimate.map(|e| e.theta).or(self.reported_theta);
         self.carry = row.estimate.map(|estimate| Carry {
             frame,
             prior: PosePrior {
@@ -318,6 +324,7 @@ impl<'a> Tracker<'a> {
 
     /// Go on from a saved [`Self::carry`] (a resumed track).
     pub fn resume(&mut self, carry: Carry) {
+        self.reported_theta = carry.prior.poses.first().map(|p| p.theta);
         self.carry = Some(carry);
     }
 
@@ -388,6 +395,35 @@ fn carried_poses(
     poses
 }
 
+/// The equivalent of `pose` under the object's rotation symmetry (a full turn for an object without one) whose θ
+/// is nearest `reference`; `pose` itself where θ is free.
+pub fn nearest_equivalent(pose: Se2, reference: f64, symmetry: &Symmetry) -> Se2 {
+    match symmetry.rotation.period_rad() {
+        Some(period) if reference.is_finite() && pose.theta.is_finite() => {
+            let turns = ((reference - pose.theta) / period).round();
+            Se2::new(pose.x, pose.y, pose.theta + turns * period)
+        }
+        _ => pose,
+    }
+}
+
+/// `row`'s poses as the equivalents nearest the last reported θ (the estimate; the others nearest the estimate):
+/// the same poses, reported without jumps between a symmetric object's equivalent angles.
+fn align_theta(row: &mut FrameTrack, reported_theta: Option<f64>, symmetry: &Symmetry) {
+    if let (Some(e), Some(t)) = (row.estimate.as_mut(), reported_theta) {
+        *e = nearest_equivalent(*e, t, symmetry);
+    }
+    let Some(theta) = row.estimate.map(|e| e.theta) else {
+        return;
+    };
+    for pose in [row.multi_sample.as_mut(), row.baseline.as_mut()]
+        .into_iter()
+        .flatten()
+    {
+        *pose = nearest_equivalent(*pose, theta, symmetry);
+    }
+}
+
 /// `row` with what `placed` estimated: press, poses, spreads and posterior.
 fn fill_row(row: &mut FrameTrack, placed: &super::PlacedEstimate, symmetry: &Symmetry) {
     row.press_m = placed.press_m;
@@ -426,6 +462,51 @@ fn fill_row(row: &mut FrameTrack, placed: &super::PlacedEstimate, symmetry: &Sym
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reported_poses_are_the_symmetric_equivalents_nearest_the_last() {
+        use crate::objects::RotationSymmetry;
+        use std::f64::consts::{FRAC_PI_2, PI, TAU};
+        let four = Symmetry {
+            rotation: RotationSymmetry::NFold(4),
+            ..Symmetry::default()
+        };
+        // Invariants: the same pose (θ moved by whole periods, x and y kept) and within half a period of the
+        // reference, for every reference and θ.
+        for (period, symmetry) in [(FRAC_PI_2, four), (TAU, Symmetry::default())] {
+            for i in 0..40 {
+                let theta = -7.0 + 0.37 * f64::from(i);
+                let reference = 3.0 - 0.21 * f64::from(i);
+                let p = nearest_equivalent(Se2::new(0.001, -0.002, theta), reference, &symmetry);
+                let turns = (p.theta - theta) / period;
+                assert!((turns - turns.round()).abs() < 1e-9, "{p:?}");
+                assert!((p.theta - reference).abs() <= period / 2.0 + 1e-9, "{p:?}");
+                assert_eq!((p.x, p.y), (0.001, -0.002));
+            }
+        }
+        // A 4-fold cross tracked: -2.745, -1.178, 1.973, 1.968, 0.412 rad on consecutive frames are one angle (within
+        // 0.02 rad), reported as such.
+        let mut last = None;
+        for theta in [-2.745, -1.178, 1.973, 1.968, 0.412] {
+            let mut row = FrameTrack::new(0, 0, 100, 4);
+            row.estimate = Some(Se2::new(0.0, 0.0, theta));
+            row.multi_sample = Some(Se2::new(0.0, 0.0, theta + PI));
+            align_theta(&mut row, last, &four);
+            let (e, m) = (row.estimate.unwrap(), row.multi_sample.unwrap());
+            assert!((e.theta - (-2.745)).abs() < 0.03, "{e:?}");
+            assert!((m.theta - e.theta).abs() < 1e-9, "{m:?}");
+            last = Some(e.theta);
+        }
+        // θ free (a cylinder): unchanged.
+        let free = Symmetry {
+            rotation: RotationSymmetry::Continuous,
+            ..Symmetry::default()
+        };
+        assert_eq!(
+            nearest_equivalent(Se2::new(0.0, 0.0, 2.0), -1.0, &free).theta,
+            2.0
+        );
+    }
 
     #[test]
     fn tracking_options_are_the_config_defaults_and_are_checked() {
