@@ -47,7 +47,14 @@ pub fn read(
         .unwrap_or_default();
     let (img, scale) = match ext.as_str() {
         "npy" => (
-            npy::read_image(&path).map_err(|e| bad(e.to_string()))?,
+            // The .npy error names the file already; the message is what follows it.
+            npy::read_image(&path).map_err(|e| {
+                let e = e.to_string();
+                let named = format!("{}: ", path.display());
+                bad(e
+                    .strip_prefix(&named)
+                    .map_or_else(|| e.clone(), str::to_owned))
+            })?,
             npy_scale,
         ),
         "npz" => (read_npz_image(&path, member)?, npy_scale),
@@ -124,4 +131,20 @@ fn read_npz_image(path: &Path, member: Option<&str>) -> Result<Image, DepthFileE
         .map(|x| if x.is_finite() { x } else { 0.0 })
         .collect();
     Image::from_vec(w, h, data).ok_or_else(|| bad(format!("array '{name}': size mismatch")))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    #[test]
+    fn a_damaged_npy_frame_is_named_once() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("frame.npy"), b"\x93NUMPY\x01\x00").unwrap();
+        let e = super::read(dir.path(), "frame.npy", 1.0, 0.001)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e.matches("frame.npy").count(), 1, "{e}");
+        assert!(e.contains("not a valid .npy file"), "{e}");
+    }
 }

@@ -3,7 +3,8 @@
 //! the no-contact reference the recording's processing chose as `reference.npy` (the per-pixel median of its
 //! frames, native; with a drifting membrane also each no-contact stretch's, [`super::drift`], and for a frame between
 //! two stretches their blend at its time, `reference_for_<frame>.npy`), and `frames.csv` with each frame's time
-//! stamp, contact area, measured pixels and the reference file its imprint is against.
+//! stamp, contact area (model pixels, as [`ProcessedRecording::contact_px`]), the native frame's measured pixels and
+//! the reference file its imprint is against.
 
 use std::path::{Path, PathBuf};
 

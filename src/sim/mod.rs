@@ -43,6 +43,9 @@ pub enum SimError {
     Signature(#[source] crate::error::InvalidSetting),
     #[error("sensor setting {}: {}", .0.setting, .0.message)]
     Bounds(#[source] crate::error::InvalidSetting),
+    /// A depth camera setting out of range (its message names the `depth_camera.` setting).
+    #[error("{0}")]
+    DepthCamera(#[source] crate::error::InvalidSetting),
     #[error(transparent)]
     Elastomer(#[from] ElastomerError),
     #[error(transparent)]
@@ -185,7 +188,7 @@ impl Simulator {
         config
             .depth_camera
             .validate()
-            .map_err(SimError::Signature)?;
+            .map_err(SimError::DepthCamera)?;
         let t_sensor_camera = config.mount.t_sensor_camera();
         let elastomer_mesh = config.elastomer.build()?;
         let caster = RayCaster::new(&elastomer_mesh)?;

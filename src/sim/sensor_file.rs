@@ -75,7 +75,15 @@ pub fn load(path: &Path) -> Result<SimConfig, SensorFileError> {
         .camera
         .validate()
         .and_then(|()| super::bounds::check_settings(&config))
-        .map_err(|e| format(format!("{}: {}", e.setting, e.message)))?;
+        .and_then(|()| config.signature.validate())
+        .and_then(|()| config.depth_camera.validate())
+        .map_err(|e| {
+            format(if e.message.starts_with(e.setting) {
+                e.message
+            } else {
+                format!("{}: {}", e.setting, e.message)
+            })
+        })?;
     if let Some(mesh) = &config.elastomer.mesh_file {
         if mesh.is_relative() {
             let dir = path.parent().unwrap_or(Path::new(""));
@@ -138,6 +146,17 @@ mod tests {
         let l = load(&p).unwrap();
         assert_eq!(l.elastomer.mesh_file, Some(dir.join("bubble.obj")));
         assert_eq!(l.camera, SimConfig::default().camera);
+        // A depth camera setting out of range is named with the file, once, as every other setting is.
+        std::fs::write(&p, r#"{"depth_camera": {"dropout": -0.5}}"#).unwrap();
+        let e = load(&p).unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!(
+                "{}: not a sensor file: depth_camera.dropout must be",
+                p.display()
+            )),
+            "{e}"
+        );
+        assert_eq!(e.matches("depth_camera.dropout").count(), 1, "{e}");
         std::fs::write(&p, "[1, 2]").unwrap();
         assert!(load(&p).unwrap_err().to_string().contains("JSON object"));
         assert!(load(&dir.join("missing.json"))
