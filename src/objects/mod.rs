@@ -26,6 +26,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use crate::mesh::MeshError;
+use crate::sensor::Se2;
 
 /// Version written to and accepted in `objects.json`.
 pub const MANIFEST_VERSION: u32 = 1;
@@ -223,6 +224,21 @@ pub struct Symmetry {
     /// axis is excluded from the position error; `None` means the full 2D position error counts.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub translation_axis: Option<[f64; 2]>,
+}
+
+impl Symmetry {
+    /// The equivalent of `pose` under the rotation symmetry (a full turn for an object without one) whose θ is
+    /// nearest `reference_theta` (radians): the same pose, reported without a jump to another equivalent angle;
+    /// `pose` itself where θ is free.
+    pub fn nearest_equivalent(&self, pose: Se2, reference_theta: f64) -> Se2 {
+        match self.rotation.period_rad() {
+            Some(period) if reference_theta.is_finite() && pose.theta.is_finite() => {
+                let turns = ((reference_theta - pose.theta) / period).round();
+                Se2::new(pose.x, pose.y, pose.theta + turns * period)
+            }
+            _ => pose,
+        }
+    }
 }
 
 /// One record of an `objects.json` manifest: an object's mesh file, units, resting pose and metadata. Unknown keys

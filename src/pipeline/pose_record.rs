@@ -137,6 +137,17 @@ impl PoseRecord {
             Some(l) => (Some(l.transform), Some(l.ros)),
             None => (None, None),
         };
+        // The other estimates as the symmetric equivalents nearest the estimate (the same poses; no 90° jump
+        // between a 4-fold object's estimate and its multi-sample estimate).
+        let beside = |e: Option<SampleError>| {
+            e.map(|mut e| {
+                if let Some(b) = best {
+                    e.pose = symmetry.nearest_equivalent(e.pose, b.theta);
+                }
+                e
+            })
+        };
+        let (multi_sample, baseline) = (beside(report.multi_sample), beside(report.baseline));
         Self {
             object: estimate.object.clone(),
             generator: source.generator,
@@ -158,10 +169,10 @@ impl PoseRecord {
             hypotheses: estimate.hypotheses.clone(),
             imprint_hypotheses: estimate.imprint_hypotheses.clone(),
             registered_sample: estimate.registered_sample,
-            estimate_multi_sample: report.multi_sample.map(|m| m.pose),
+            estimate_multi_sample: multi_sample.map(|m| m.pose),
             truth,
-            baseline: report.baseline,
-            multi_sample: report.multi_sample,
+            baseline,
+            multi_sample,
             failed: report.failed.clone(),
             geometry: source.geometry,
             ambiguous: report.ambiguous() || estimate.signature_ambiguous(),

@@ -395,23 +395,11 @@ fn carried_poses(
     poses
 }
 
-/// The equivalent of `pose` under the object's rotation symmetry (a full turn for an object without one) whose θ
-/// is nearest `reference`; `pose` itself where θ is free.
-pub fn nearest_equivalent(pose: Se2, reference: f64, symmetry: &Symmetry) -> Se2 {
-    match symmetry.rotation.period_rad() {
-        Some(period) if reference.is_finite() && pose.theta.is_finite() => {
-            let turns = ((reference - pose.theta) / period).round();
-            Se2::new(pose.x, pose.y, pose.theta + turns * period)
-        }
-        _ => pose,
-    }
-}
-
 /// `row`'s poses as the equivalents nearest the last reported θ (the estimate; the others nearest the estimate):
 /// the same poses, reported without jumps between a symmetric object's equivalent angles.
 fn align_theta(row: &mut FrameTrack, reported_theta: Option<f64>, symmetry: &Symmetry) {
     if let (Some(e), Some(t)) = (row.estimate.as_mut(), reported_theta) {
-        *e = nearest_equivalent(*e, t, symmetry);
+        *e = symmetry.nearest_equivalent(*e, t);
     }
     let Some(theta) = row.estimate.map(|e| e.theta) else {
         return;
@@ -420,7 +408,7 @@ fn align_theta(row: &mut FrameTrack, reported_theta: Option<f64>, symmetry: &Sym
         .into_iter()
         .flatten()
     {
-        *pose = nearest_equivalent(*pose, theta, symmetry);
+        *pose = symmetry.nearest_equivalent(*pose, theta);
     }
 }
 
@@ -477,7 +465,7 @@ mod tests {
             for i in 0..40 {
                 let theta = -7.0 + 0.37 * f64::from(i);
                 let reference = 3.0 - 0.21 * f64::from(i);
-                let p = nearest_equivalent(Se2::new(0.001, -0.002, theta), reference, &symmetry);
+                let p = symmetry.nearest_equivalent(Se2::new(0.001, -0.002, theta), reference);
                 let turns = (p.theta - theta) / period;
                 assert!((turns - turns.round()).abs() < 1e-9, "{p:?}");
                 assert!((p.theta - reference).abs() <= period / 2.0 + 1e-9, "{p:?}");
@@ -503,7 +491,7 @@ mod tests {
             ..Symmetry::default()
         };
         assert_eq!(
-            nearest_equivalent(Se2::new(0.0, 0.0, 2.0), -1.0, &free).theta,
+            free.nearest_equivalent(Se2::new(0.0, 0.0, 2.0), -1.0).theta,
             2.0
         );
     }
