@@ -7,7 +7,7 @@ use tactile_derender::dataset::npz::NpzIndex;
 use tactile_derender::recording::{FolderOptions, Recording};
 use tactile_derender::sim::SimConfig;
 
-use crate::cli_common::{tnd_in, tnd_json};
+use crate::cli_common::{stderr, tnd_in, tnd_json};
 use crate::recording::OBJECT;
 
 #[test]
@@ -416,7 +416,7 @@ fn a_recording_that_never_touches_the_object_is_refused_with_a_reason() {
             "--tof",
         ],
     );
-    let warned = String::from_utf8_lossy(&sim.stderr).to_string();
+    let warned = stderr(&sim);
     assert!(sim.status.success(), "{warned}");
     assert!(
         warned.contains("warning: no contact in any frame"),
@@ -438,7 +438,7 @@ fn a_recording_that_never_touches_the_object_is_refused_with_a_reason() {
             "trk",
         ],
     );
-    let err = String::from_utf8_lossy(&track.stderr).to_string();
+    let err = stderr(&track);
     assert!(!track.status.success(), "{err}");
     let last = err.lines().last().unwrap_or_default();
     assert!(
